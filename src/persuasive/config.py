@@ -1,0 +1,467 @@
+"""One validated, frozen configuration for the method, the scenario and the simulation.
+
+Every concern has its own frozen dataclass; :class:`Config` groups them. Defaults are the
+paper's values (spec sections 1-8). Units are in the field names (``_m``, ``_mps``, ``_mps2``,
+``_s``) and in each field's comment. Validation happens once, at construction, and raises
+:class:`ConfigError` with a one-line message naming the field, its value and the allowed range.
+
+Two execution modes exist (spec section 9): ``"paper"`` keeps the reference implementation's
+quirks Q1..Q7, ``"corrected"`` fixes Q1, Q2, Q3 and Q5. Each quirk can also be switched on its
+own in :class:`Quirks` (``None`` means "as the mode says").
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import MISSING, asdict, dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Literal, get_args
+
+Role = Literal["leader", "follower"]
+Mode = Literal["paper", "corrected"]
+AVKind = Literal["mpc", "lfg"]
+NoiseKind = Literal["none", "uniform", "gaussian"]
+
+ROLES: tuple[str, ...] = get_args(Role)
+MODES: tuple[str, ...] = get_args(Mode)
+AV_KINDS: tuple[str, ...] = get_args(AVKind)
+NOISE_KINDS: tuple[str, ...] = get_args(NoiseKind)
+
+
+class ConfigError(ValueError):
+    """An out-of-range or inconsistent parameter; the message is one line."""
+
+
+def _fail(name: str, value: Any, allowed: str) -> None:
+    raise ConfigError(f"{name} = {value!r} is out of range; allowed: {allowed}")
+
+
+def _number(name: str, value: Any, *, integer: bool = False) -> float:
+    """Return ``value`` if it is a finite real number (an int when ``integer``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        kind = "an integer" if integer else "a finite number"
+        raise ConfigError(f"{name} = {value!r} is not {kind}")
+    if integer and not isinstance(value, int):
+        raise ConfigError(f"{name} = {value!r} is not an integer")
+    if not math.isfinite(value):
+        _fail(name, value, "a finite number")
+    return value
+
+
+def _in_range(
+    name: str,
+    value: Any,
+    lo: float = -math.inf,
+    hi: float = math.inf,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    integer: bool = False,
+) -> None:
+    _number(name, value, integer=integer)
+    too_low = value <= lo if lo_open else value < lo
+    too_high = value >= hi if hi_open else value > hi
+    if too_low or too_high:
+        left = "(" if lo_open else "["
+        right = ")" if hi_open else "]"
+        _fail(name, value, f"{left}{lo:g}, {hi:g}{right}")
+
+
+def _choice(name: str, value: Any, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        _fail(name, value, " | ".join(allowed))
+
+
+def _flag(name: str, value: Any) -> None:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{name} = {value!r} is not a boolean (true | false)")
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Vehicle geometry and actuation limits (spec section 1)."""
+
+    length_m: float = 5.0  #: vehicle length [m]
+    width_m: float = 2.5  #: vehicle width [m]
+    lane_width_m: float = 4.0  #: lane width [m]
+    safety_factor: float = 1.5  #: safe set ``d >= safety_factor * length_m`` [-]
+    v_min_mps: float = 0.0  #: lowest speed [m/s]
+    v_max_mps: float = 10.0  #: highest speed [m/s]
+    u_min_mps2: float = -2.0  #: strongest braking [m/s^2], negative
+    u_max_mps2: float = 1.0  #: strongest acceleration [m/s^2], positive
+
+    def __post_init__(self) -> None:
+        p = "vehicle."
+        _in_range(p + "length_m", self.length_m, 0.0, lo_open=True)
+        _in_range(p + "width_m", self.width_m, 0.0, lo_open=True)
+        _in_range(p + "lane_width_m", self.lane_width_m, 0.0, lo_open=True)
+        _in_range(p + "safety_factor", self.safety_factor, 0.0, lo_open=True)
+        _in_range(p + "v_min_mps", self.v_min_mps, 0.0)
+        _in_range(p + "v_max_mps", self.v_max_mps, self.v_min_mps, lo_open=True)
+        _in_range(p + "u_min_mps2", self.u_min_mps2, hi=0.0, hi_open=True)
+        _in_range(p + "u_max_mps2", self.u_max_mps2, 0.0, lo_open=True)
+
+    @property
+    def stop_distance_m(self) -> float:
+        """Distance of the crossing line before the conflict point [m] (6.5 m)."""
+        return self.lane_width_m + self.length_m / 2
+
+    @property
+    def min_dist_m(self) -> float:
+        """Safety distance between the vehicles [m] (7.5 m)."""
+        return self.safety_factor * self.length_m
+
+    @property
+    def collision_half_extent_m(self) -> float:
+        """Footprints overlap when both ``|s| <= (length + width) / 2`` [m] (3.75 m)."""
+        return (self.length_m + self.width_m) / 2
+
+
+@dataclass(frozen=True)
+class LibraryParams:
+    """The OVM trajectory library, the action set U (spec section 2)."""
+
+    n_samples: int = 50  #: samples per trajectory [-]
+    sample_dt_s: float = 0.1  #: time between samples [s]
+    n_mesh: int = 10  #: target speeds in the mesh; the library holds n_mesh + 1 trajectories
+    alpha: float = 0.4  #: OVM headway gain [1/s]
+    beta: float = 0.5  #: OVM speed-difference gain [1/s]
+    kappa: float = 0.6  #: OVM speed per metre of headway [1/s]
+    h_st_m: float = 5.0  #: standstill headway [m]
+
+    def __post_init__(self) -> None:
+        p = "library."
+        _in_range(p + "n_samples", self.n_samples, 3, 10_000, integer=True)
+        _in_range(p + "sample_dt_s", self.sample_dt_s, 0.0, 10.0, lo_open=True)
+        _in_range(p + "n_mesh", self.n_mesh, 2, 1000, integer=True)
+        _in_range(p + "alpha", self.alpha, 0.0)
+        _in_range(p + "beta", self.beta, 0.0)
+        _in_range(p + "kappa", self.kappa, 0.0, lo_open=True)
+        _in_range(p + "h_st_m", self.h_st_m, 0.0)
+
+    @property
+    def horizon_s(self) -> float:
+        """Trajectory length ``T = n_samples * sample_dt_s`` [s] (5 s)."""
+        return self.n_samples * self.sample_dt_s
+
+    @property
+    def n_traj(self) -> int:
+        """Number of candidate trajectories ``|U| = n_mesh + 1``."""
+        return self.n_mesh + 1
+
+
+@dataclass(frozen=True)
+class RewardParams:
+    """Step rewards and discounting (spec section 3)."""
+
+    w_c: float = 100.0  #: weight of the collision term [-]
+    w_u: float = 0.1  #: weight of the acceleration effort [s^2]
+    discount: float = 0.99  #: discount ``lambda`` per sample [-]
+
+    def __post_init__(self) -> None:
+        _in_range("reward.w_c", self.w_c, 0.0)
+        _in_range("reward.w_u", self.w_u, 0.0)
+        _in_range("reward.discount", self.discount, 0.0, 1.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class RoleParams:
+    """Role adaptation of an LFG player (spec section 5)."""
+
+    p_a: float = 1.0  #: the human's willingness to change role [-], in [0, 1]
+    adapt_role: bool = True  #: False fixes every LFG player's role
+    prior_leader: float = 0.5  #: initial belief that the other leads [-]
+    w_s_m2: float = 0.03  #: residual variance of the position, ``W[0, 0]`` [m^2]
+    w_v_m2ps2: float = 0.01  #: residual variance of the speed, ``W[1, 1]`` [m^2/s^2]
+
+    def __post_init__(self) -> None:
+        _in_range("roles.p_a", self.p_a, 0.0, 1.0)
+        _flag("roles.adapt_role", self.adapt_role)
+        _in_range("roles.prior_leader", self.prior_leader, 0.0, 1.0, lo_open=True, hi_open=True)
+        _in_range("roles.w_s_m2", self.w_s_m2, 0.0, lo_open=True)
+        _in_range("roles.w_v_m2ps2", self.w_v_m2ps2, 0.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class MPCParams:
+    """The persuasive branch MPC of the AV (spec section 6)."""
+
+    epsilon: float = 0.02  #: chance-constraint level: P(safe) > 1 - epsilon at every sample [-]
+    p_a_hat: float | None = None  #: the AV's estimate of p_a [-]; None means equal to roles.p_a
+
+    def __post_init__(self) -> None:
+        _in_range("mpc.epsilon", self.epsilon, 0.0, 1.0, lo_open=True, hi_open=True)
+        if self.p_a_hat is not None:
+            _in_range("mpc.p_a_hat", self.p_a_hat, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class ScenarioParams:
+    """The two-vehicle intersection and its initial-state sampling (spec sections 1, 8).
+
+    The initial state is the nominal one plus ``U(-w, w)`` per entry; only the listed entries
+    can have a non-zero half-width (the lateral entries of the 8-dim state are always exact).
+    """
+
+    av_s0_m: float = -20.0  #: AV nominal initial position along its road [m]
+    av_v0_mps: float = 4.0  #: AV nominal initial speed [m/s]
+    hv_s0_m: float = -20.0  #: HV nominal initial position along its road [m]
+    hv_v0_mps: float = 4.0  #: HV nominal initial speed [m/s]
+    av_s0_halfwidth_m: float = 0.0  #: half-width of the AV position disturbance [m]
+    av_v0_halfwidth_mps: float = 0.0  #: half-width of the AV speed disturbance [m/s]
+    hv_s0_halfwidth_m: float = 5.0  #: half-width of the HV position disturbance [m]
+    hv_v0_halfwidth_mps: float = 1.0  #: half-width of the HV speed disturbance [m/s]
+    max_init_draws: int = 100  #: draws of the disturbance before giving up [-]
+
+    def __post_init__(self) -> None:
+        p = "scenario."
+        for name in ("av_s0_m", "hv_s0_m"):
+            _in_range(p + name, getattr(self, name), hi=0.0, hi_open=True)
+        for name in ("av_v0_mps", "hv_v0_mps"):
+            _in_range(p + name, getattr(self, name), 0.0)
+        for name in (
+            "av_s0_halfwidth_m",
+            "av_v0_halfwidth_mps",
+            "hv_s0_halfwidth_m",
+            "hv_v0_halfwidth_mps",
+        ):
+            _in_range(p + name, getattr(self, name), 0.0)
+        for veh in ("av", "hv"):
+            s0, hw = getattr(self, f"{veh}_s0_m"), getattr(self, f"{veh}_s0_halfwidth_m")
+            if s0 + hw >= 0.0:
+                _fail(
+                    f"{p}{veh}_s0_m + {veh}_s0_halfwidth_m",
+                    s0 + hw,
+                    "< 0 (every initial state must be before the conflict point)",
+                )
+        _in_range(p + "max_init_draws", self.max_init_draws, 1, 1_000_000, integer=True)
+
+
+@dataclass(frozen=True)
+class SimulationParams:
+    """The closed loop (spec section 7)."""
+
+    dt_s: float = 0.1  #: simulation step [s]; must equal library.sample_dt_s
+    n_steps: int = 61  #: decision steps per run [-]
+    av: AVKind = "mpc"  #: the AV's planner: persuasive branch MPC, or the LFG (2-LFG case)
+    hv_role: Role = "leader"  #: the HV's initial role; an LFG AV starts in the other role
+    measurement_noise: NoiseKind = "none"  #: distribution of the measurement noise
+    noise_s_m: float = 0.0  #: position noise: half-width (uniform) or std (gaussian) [m]
+    noise_v_mps: float = 0.0  #: speed noise: half-width (uniform) or std (gaussian) [m/s]
+    accel_noise_mps2: float = 0.0  #: half-width of the uniform acceleration error [m/s^2]
+
+    def __post_init__(self) -> None:
+        p = "simulation."
+        _in_range(p + "dt_s", self.dt_s, 0.0, 10.0, lo_open=True)
+        _in_range(p + "n_steps", self.n_steps, 1, 100_000, integer=True)
+        _choice(p + "av", self.av, AV_KINDS)
+        _choice(p + "hv_role", self.hv_role, ROLES)
+        _choice(p + "measurement_noise", self.measurement_noise, NOISE_KINDS)
+        _in_range(p + "noise_s_m", self.noise_s_m, 0.0)
+        _in_range(p + "noise_v_mps", self.noise_v_mps, 0.0)
+        _in_range(p + "accel_noise_mps2", self.accel_noise_mps2, 0.0)
+
+
+#: Quirk values of each mode (spec section 9). Q4, Q6 and Q7 are kept in both modes.
+_MODE_QUIRKS: dict[str, dict[str, Any]] = {
+    "paper": dict(
+        q1_branch_time_offset=True,
+        q2_belief_offset=True,
+        q3_tie_break_leak=True,
+        q4_undiscounted_collision=True,
+        q5_leader_agg_max=True,
+        q6_time_like_stop_test=True,
+        q7_arrival_tolerance_m=0.2,
+    ),
+    "corrected": dict(
+        q1_branch_time_offset=False,
+        q2_belief_offset=False,
+        q3_tie_break_leak=False,
+        q4_undiscounted_collision=True,
+        q5_leader_agg_max=False,
+        q6_time_like_stop_test=True,
+        q7_arrival_tolerance_m=0.2,
+    ),
+}
+
+
+@dataclass(frozen=True)
+class Quirks:
+    """Reference-implementation quirks Q1..Q7 (spec section 9); ``None`` follows the mode."""
+
+    q1_branch_time_offset: bool | None = None  #: Q1: the MPC's HV branches lag by one sample
+    q2_belief_offset: bool | None = None  #: Q2: the human's belief at T1 compares shifted samples
+    q3_tie_break_leak: bool | None = None  #: Q3: belief ties read the HV's true/initial role
+    q4_undiscounted_collision: bool | None = None  #: Q4: MPC collision term not discounted
+    q5_leader_agg_max: bool | None = None  #: Q5: the leader aggregates tied followers with max
+    q6_time_like_stop_test: bool | None = None  #: Q6: stop offered if s0 + v0/|u_min| < -stop
+    q7_arrival_tolerance_m: float | None = None  #: Q7: crossing-line arrival tolerance [m]
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is None:
+                continue
+            if f.name == "q7_arrival_tolerance_m":
+                _in_range("quirks." + f.name, value, 0.0)
+            else:
+                _flag("quirks." + f.name, value)
+
+    def resolved(self, mode: str) -> Quirks:
+        """Every quirk set: the explicit ones as given, the others as ``mode`` says."""
+        base = _MODE_QUIRKS[mode]
+        return Quirks(**{k: (v if (v := getattr(self, k)) is not None else base[k]) for k in base})
+
+
+@dataclass(frozen=True)
+class Config:
+    """All parameters of one closed-loop run, the paper's values by default."""
+
+    mode: Mode = "paper"
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
+    library: LibraryParams = field(default_factory=LibraryParams)
+    reward: RewardParams = field(default_factory=RewardParams)
+    roles: RoleParams = field(default_factory=RoleParams)
+    mpc: MPCParams = field(default_factory=MPCParams)
+    scenario: ScenarioParams = field(default_factory=ScenarioParams)
+    simulation: SimulationParams = field(default_factory=SimulationParams)
+    quirks: Quirks = field(default_factory=Quirks)
+
+    def __post_init__(self) -> None:
+        _choice("mode", self.mode, MODES)
+        for name, section_cls in _SECTIONS.items():
+            if not isinstance(getattr(self, name), section_cls):
+                raise ConfigError(f"{name} is not a {section_cls.__name__}")
+        if self.simulation.dt_s != self.library.sample_dt_s:
+            _fail(
+                "simulation.dt_s",
+                self.simulation.dt_s,
+                f"equal to library.sample_dt_s = {self.library.sample_dt_s!r} "
+                "(predictions are one sample ahead)",
+            )
+        v = self.vehicle
+        s = self.scenario
+        for name in ("av_v0_mps", "hv_v0_mps"):
+            v0, hw = getattr(s, name), getattr(s, name.replace("_mps", "_halfwidth_mps"))
+            if v0 - hw < v.v_min_mps or v0 + hw > v.v_max_mps:
+                _fail(
+                    f"scenario.{name}",
+                    v0,
+                    f"[{v.v_min_mps:g}, {v.v_max_mps:g}] with its half-width {hw:g} "
+                    "(vehicle.v_min_mps, vehicle.v_max_mps)",
+                )
+
+    # -- derived -----------------------------------------------------------------------------
+
+    @property
+    def effective_quirks(self) -> Quirks:
+        """The quirks in force: the mode's, with any explicit switch applied."""
+        return self.quirks.resolved(self.mode)
+
+    @property
+    def p_a_hat(self) -> float:
+        """The AV's estimate of ``p_a`` (``mpc.p_a_hat``, or ``roles.p_a`` when unset)."""
+        return self.roles.p_a if self.mpc.p_a_hat is None else self.mpc.p_a_hat
+
+    # -- building ----------------------------------------------------------------------------
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict (TOML/JSON friendly); unset optional values are left out."""
+        out: dict[str, Any] = {"mode": self.mode}
+        for name in _SECTIONS:
+            out[name] = {k: v for k, v in asdict(getattr(self, name)).items() if v is not None}
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Config:
+        """Build from a nested dict as written in a TOML file; unknown keys are errors."""
+        if not isinstance(data, dict):
+            raise ConfigError("configuration must be a table of sections")
+        kwargs: dict[str, Any] = {}
+        for key, value in data.items():
+            if key == "mode":
+                kwargs["mode"] = value
+                continue
+            if key not in _SECTIONS:
+                _fail(key, value if not isinstance(value, dict) else "{...}", _known([*_SECTIONS, "mode"]))
+            section_cls = _SECTIONS[key]
+            if not isinstance(value, dict):
+                raise ConfigError(f"[{key}] must be a table of parameters")
+            known = {f.name for f in fields(section_cls)}
+            for name in value:
+                if name not in known:
+                    _fail(f"{key}.{name}", value[name], _known(known))
+            kwargs[key] = section_cls(**_coerce(section_cls, key, value))
+        return cls(**kwargs)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Config:
+        """Read a TOML file (sections as in :meth:`to_dict`)."""
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ConfigError(f"config file {str(path)!r} cannot be read: {exc.strerror}") from None
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"config file {str(path)!r} is not valid TOML: {exc}") from None
+        return cls.from_dict(data)
+
+    def with_overrides(self, overrides: dict[str, Any]) -> Config:
+        """A copy with ``{"section.field": value}`` (or ``{"mode": ...}``) applied."""
+        data = self.to_dict()
+        # Quirks left to the mode must stay unset, so that a new mode sets them.
+        data["quirks"] = {k: v for k, v in asdict(self.quirks).items() if v is not None}
+        for dotted, value in overrides.items():
+            if dotted == "mode":
+                data["mode"] = value
+                continue
+            section, _, name = dotted.partition(".")
+            if not name or section not in data or section == "mode":
+                _fail(dotted, value, "section.field, e.g. mpc.epsilon")
+            data[section][name] = value
+        return Config.from_dict(data)
+
+
+def _known(names: Any) -> str:
+    return "one of " + ", ".join(sorted(names))
+
+
+def _coerce(section_cls: type, section: str, values: dict[str, Any]) -> dict[str, Any]:
+    """Accept TOML integers for float fields (``epsilon = 1`` means 1.0)."""
+    out = dict(values)
+    for f in fields(section_cls):
+        if f.name in out and isinstance(out[f.name], int) and not isinstance(out[f.name], bool):
+            default = f.default if f.default is not MISSING else None
+            if isinstance(default, float) or "float" in str(f.type):
+                out[f.name] = float(out[f.name])
+    return out
+
+
+#: The sections of :class:`Config`, by name.
+_SECTIONS: dict[str, type] = {
+    "vehicle": VehicleParams,
+    "library": LibraryParams,
+    "reward": RewardParams,
+    "roles": RoleParams,
+    "mpc": MPCParams,
+    "scenario": ScenarioParams,
+    "simulation": SimulationParams,
+    "quirks": Quirks,
+}
+
+
+__all__ = [
+    "Config",
+    "ConfigError",
+    "LibraryParams",
+    "MPCParams",
+    "Quirks",
+    "RewardParams",
+    "RoleParams",
+    "ScenarioParams",
+    "SimulationParams",
+    "VehicleParams",
+]

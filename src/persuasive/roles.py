@@ -1,0 +1,102 @@
+"""Role adaptation: Bayesian belief on the other's role, plausible role, transition (spec section 5).
+
+A belief is the pair ``b = (P(other = L), P(other = F))``, kept as two numbers (its sum may
+differ from 1 by rounding; ties are tested on the two numbers exactly).
+
+- **Bayes update** (roles assumed constant): posterior ``∝ prior * N(e; 0, W)`` per role of the
+  other, with ``e = (e_s, e_v)`` the absolute residuals of the stored prediction of the other
+  for that role and ``W = diag(w_s, w_v)``.
+- **Plausible role** (maximum likelihood, complementary): ``F`` if ``b_L > b_F``, ``L`` if
+  ``b_L < b_F``, the player's own current role if exactly equal. Returned as
+  ``P(plausible = L)``, which is 0 or 1.
+- **Transition matrix** (columns: current role L, F; rows: next role L, F)::
+
+      Pi = P(pl=L) [[1, p_a], [0, 1 - p_a]] + P(pl=F) [[1 - p_a, 0], [p_a, 1]]
+
+  A leader becomes follower if a uniform draw ``r > Pi[L, L]``; a follower becomes leader if
+  ``r > Pi[F, F]``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+LEADER, FOLLOWER = 0, 1
+
+
+@njit(cache=True)
+def gaussian_density(e_s: float, e_v: float, w_s: float, w_v: float) -> float:
+    """Bivariate normal density ``N((e_s, e_v); 0, diag(w_s, w_v))``."""
+    return math.exp(-0.5 * (e_s * e_s / w_s + e_v * e_v / w_v)) / (
+        2.0 * math.pi * math.sqrt(w_s * w_v)
+    )
+
+
+@njit(cache=True)
+def bayes_update(b_l: float, b_f: float, e_ls: float, e_lv: float, e_fs: float, e_fv: float,
+                 w_s: float, w_v: float) -> tuple[float, float]:
+    """Posterior ``(P(L), P(F))`` from the prior ``(b_l, b_f)`` and the residuals per role.
+
+    ``e_ls, e_lv``: residuals [m, m/s] of the prediction made for the other as leader;
+    ``e_fs, e_fv``: as follower. If both products underflow to zero, the posterior is
+    computed from log-likelihoods instead (never NaN).
+    """
+    pl = b_l * gaussian_density(e_ls, e_lv, w_s, w_v)
+    pf = b_f * gaussian_density(e_fs, e_fv, w_s, w_v)
+    z = pl + pf
+    if z > 0.0:
+        return pl / z, pf / z
+    # Both underflow: compare in log space (a zero prior stays zero).
+    ll = (math.log(b_l) if b_l > 0.0 else -math.inf) - 0.5 * (e_ls * e_ls / w_s + e_lv * e_lv / w_v)
+    lf = (math.log(b_f) if b_f > 0.0 else -math.inf) - 0.5 * (e_fs * e_fs / w_s + e_fv * e_fv / w_v)
+    m = max(ll, lf)
+    pl, pf = math.exp(ll - m), math.exp(lf - m)
+    z = pl + pf
+    return pl / z, pf / z
+
+
+@njit(cache=True)
+def plausible_leader(b_l: float, b_f: float, own_role: int) -> float:
+    """``P(plausible role = L)``: 0 if ``b_l > b_f``, 1 if ``b_l < b_f``, own role on a tie."""
+    if b_l > b_f:
+        return 0.0
+    if b_l < b_f:
+        return 1.0
+    return 1.0 if own_role == LEADER else 0.0
+
+
+@njit(cache=True)
+def transition_into(p_plausible_l: float, p_a: float, out: np.ndarray) -> None:
+    """Write ``Pi(p_a)`` for ``P(plausible = L) = p_plausible_l`` into ``out`` (2, 2)."""
+    pf = 1.0 - p_plausible_l
+    out[0, 0] = p_plausible_l * 1.0 + pf * (1.0 - p_a)
+    out[0, 1] = p_plausible_l * p_a + pf * 0.0
+    out[1, 0] = p_plausible_l * 0.0 + pf * p_a
+    out[1, 1] = p_plausible_l * (1.0 - p_a) + pf * 1.0
+
+
+def transition_matrix(p_plausible_l: float, p_a: float) -> np.ndarray:
+    """The role transition matrix ``Pi`` (2, 2), column-stochastic."""
+    out = np.empty((2, 2))
+    transition_into(float(p_plausible_l), float(p_a), out)
+    return out
+
+
+@njit(cache=True)
+def next_role(role: int, r: float, Pi: np.ndarray) -> int:
+    """The role after a draw ``r`` in (0, 1): a leader leaves if ``r > Pi[L, L]``, etc."""
+    if role == LEADER:
+        return FOLLOWER if r > Pi[0, 0] else LEADER
+    return LEADER if r > Pi[1, 1] else FOLLOWER
+
+
+def role_index(role: str) -> int:
+    """0 for "leader", 1 for "follower"."""
+    return LEADER if role == "leader" else FOLLOWER
+
+
+def role_name(index: int) -> str:
+    return "leader" if index == LEADER else "follower"
