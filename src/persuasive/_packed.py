@@ -7,6 +7,8 @@ Boolean quirks are stored as 0.0 / 1.0.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .config import Config
@@ -21,7 +23,24 @@ W_C, W_U = range(16, 18)
 W_S, W_V, PRIOR_L, EPSILON = range(18, 22)
 # Quirks (spec section 9)
 Q1, Q2, Q4, Q5, Q6 = range(22, 27)
-N_SLOTS = 27
+# ``sqrt(x) < min_dist`` exactly when ``x < MIN_DIST_SQ`` (see :func:`sqrt_threshold`)
+MIN_DIST_SQ = 27
+N_SLOTS = 28
+
+
+def sqrt_threshold(c: float) -> float:
+    """The smallest double ``x`` with ``sqrt(x) >= c``, for ``c > 0``.
+
+    IEEE ``sqrt`` is correctly rounded, hence monotone, so ``sqrt(x) < c`` holds exactly when
+    ``x < sqrt_threshold(c)``: distance tests can compare squares and still agree, bit for bit,
+    with the spec's ``d = sqrt(s^2 + s'^2) < min_dist``.
+    """
+    x = c * c
+    while math.sqrt(x) < c:
+        x = math.nextafter(x, math.inf)
+    while math.sqrt(math.nextafter(x, -math.inf)) >= c:
+        x = math.nextafter(x, -math.inf)
+    return x
 
 
 def pack(config: Config) -> np.ndarray:
@@ -43,6 +62,7 @@ def pack(config: Config) -> np.ndarray:
     p[W_C], p[W_U] = rw.w_c, rw.w_u
     p[W_S], p[W_V], p[PRIOR_L] = roles.w_s_m2, roles.w_v_m2ps2, roles.prior_leader
     p[EPSILON] = config.mpc.epsilon
+    p[MIN_DIST_SQ] = sqrt_threshold(v.min_dist_m)
     p[Q1], p[Q2] = q.q1_branch_time_offset, q.q2_belief_offset
     p[Q4], p[Q5], p[Q6] = q.q4_undiscounted_collision, q.q5_leader_agg_max, q.q6_time_like_stop_test
     return p

@@ -28,8 +28,8 @@ import numpy as np
 from numba import njit
 
 from . import _packed as K
-from .library import Library, fill_library, trajectory_library
-from .rewards import base_rewards, reward_matrix, reward_matrix_of, zone_windows
+from .library import Lib, Library, fill_library, trajectory_library
+from .rewards import reward_matrix, reward_matrix_of, reward_terms
 
 # Indices into the 4-vector returned by a full prediction.
 EGO_LEADER, EGO_FOLLOWER, OTHER_LEADER, OTHER_FOLLOWER = 0, 1, 2, 3
@@ -84,41 +84,38 @@ def solve_both(M_e: np.ndarray, M_o: np.ndarray, agg_max: bool, out: np.ndarray,
 
 
 @njit(cache=True)
-def predict_into(s_e: float, v_e: float, s_o: float, v_o: float, P: np.ndarray,
-                 disc: np.ndarray, build_ego: bool, build_other: bool,
-                 Se: np.ndarray, Ve: np.ndarray, Ae: np.ndarray,
-                 So: np.ndarray, Vo: np.ndarray, Ao: np.ndarray,
-                 work: np.ndarray, iwork: np.ndarray, out: np.ndarray) -> None:
-    """Full prediction at the joint state into preallocated arrays.
+def build(s0: float, v0: float, P: np.ndarray, disc: np.ndarray, L: Lib) -> None:
+    """Fill ``L`` with the library of a vehicle at ``(s0, v0)`` and its reward parts."""
+    fill_library(s0, v0, P, L.S, L.V, L.A)
+    reward_terms(L.S, L.V, L.A, s0, disc, P[K.W_U], P[K.MIN_DIST_SQ], L.base, L.coll, L.sq,
+                 L.win)
 
-    The libraries are built into ``Se..Ao`` unless ``build_ego``/``build_other`` is False (the
-    caller already holds them for that state). ``work``: ``(2 * n_traj + 2 n_traj + 4, n_traj)``
-    float scratch (rows: ``M_e``, ``M_o``, bases, Q-values); ``iwork``: ``(2, n_traj, 2)``.
+
+@njit(cache=True)
+def solve_libs(Le: Lib, Lo: Lib, w_c: float, min_dist_sq: float, agg_max: bool,
+               M_e: np.ndarray, M_o: np.ndarray, C: np.ndarray, Q: np.ndarray,
+               out: np.ndarray) -> None:
+    """Both reward matrices of two built libraries (ego, other), then both solves into ``out``.
+
+    ``M_e, M_o, C``: ``(n_traj, n_traj)`` scratch; ``Q``: ``(4, n_traj)`` (see
+    :func:`solve_both`).
     """
-    n_traj = Se.shape[0]
-    if build_ego:
-        fill_library(s_e, v_e, P, Se, Ve, Ae)
-    if build_other:
-        fill_library(s_o, v_o, P, So, Vo, Ao)
-    M_e = work[0:n_traj]
-    M_o = work[n_traj:2 * n_traj]
-    base_e = work[2 * n_traj]
-    base_o = work[2 * n_traj + 1]
-    Q = work[2 * n_traj + 2:2 * n_traj + 6]
-    win_e, win_o = iwork[0], iwork[1]
-    min_dist = P[K.MIN_DIST]
-    base_rewards(Se, Ae, s_e, disc, P, base_e)
-    base_rewards(So, Ao, s_o, disc, P, base_o)
-    zone_windows(Se, min_dist, win_e)
-    zone_windows(So, min_dist, win_o)
-    reward_matrix(Se, Ve, Ae, s_e, base_e, win_e, So, win_o, disc, P, M_e)
-    reward_matrix(So, Vo, Ao, s_o, base_o, win_o, Se, win_e, disc, P, M_o)
-    solve_both(M_e, M_o, P[K.Q5] != 0.0, out, Q)
+    reward_matrix(Le.base, Le.coll, Le.sq, Le.win, Lo.sq, Lo.win, w_c, min_dist_sq, C, M_e)
+    reward_matrix(Lo.base, Lo.coll, Lo.sq, Lo.win, Le.sq, Le.win, w_c, min_dist_sq, C, M_o)
+    solve_both(M_e, M_o, agg_max, out, Q)
 
 
-def work_shape(n_traj: int) -> tuple[int, int]:
-    """Shape of the float scratch of :func:`predict_into`."""
-    return (2 * n_traj + 6, n_traj)
+@njit(cache=True)
+def predict_into(s_e: float, v_e: float, s_o: float, v_o: float, P: np.ndarray,
+                 disc: np.ndarray, Le: Lib, Lo: Lib, out: np.ndarray) -> None:
+    """Full prediction at the joint state: both libraries built into ``Le, Lo``, indices
+    (ego-L, ego-F, other-L, other-F) into ``out``."""
+    n_traj = Le.S.shape[1]
+    build(s_e, v_e, P, disc, Le)
+    build(s_o, v_o, P, disc, Lo)
+    M_e, M_o, C = np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj))
+    solve_libs(Le, Lo, P[K.W_C], P[K.MIN_DIST_SQ], P[K.Q5] != 0.0, M_e, M_o, C,
+               np.empty((4, n_traj)), out)
 
 
 @dataclass(frozen=True)
@@ -182,6 +179,7 @@ class Prediction:
 
 
 def _state_at(lib: Library, idx: int, k: int) -> tuple[float, float]:
+    """State of trajectory ``idx`` of ``lib`` at sample ``k`` (0 = the initial state)."""
     if k == 0:
         return lib.s0, lib.v0
     return float(lib.s[idx, k - 1]), float(lib.v[idx, k - 1])
@@ -209,5 +207,6 @@ __all__ = [
     "leader_follower",
     "predict_into",
     "solve_game",
-    "fill_library",
+    "build",
+    "solve_libs",
 ]

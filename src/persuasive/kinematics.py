@@ -37,3 +37,4 @@ def saturated_step(
         ds = (v_min * v_min - v * v) / (2.0 * a) + v_min * (dt - t1)
         return s + ds, v_min
     return s + (v * dt + a * dt * dt / 2.0), v_new
+

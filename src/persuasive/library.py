@@ -21,14 +21,16 @@ with ``v_mesh = linspace(v_lo, v_hi, n_mesh)``, ``v_hi = min(v_max, v0 + u_max T
 ``s0 + v0 / |u_min| < -stop_distance`` (quirk Q6; with Q6 off the test uses the stopping
 distance ``v0^2 / (2 |u_min|)``).
 
-Arrays: ``S, V, A`` of shape ``(n_traj, n_samples)`` hold position [m], speed [m/s] and the
-acceleration [m/s^2] used to reach each sample; sample ``k`` is at time ``t + (k + 1) dt``
-(the initial state is not stored).
+Arrays: the kernels store ``S, V, A`` sample-major, shape ``(n_samples, n_traj)``: position
+[m], speed [m/s] and the acceleration [m/s^2] used to reach each sample; sample ``k`` is at time
+``t + (k + 1) dt`` (the initial state is not stored). Sample-major lets the trajectories advance
+side by side in vector registers. :class:`Library` shows them trajectory-major.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -38,12 +40,20 @@ from .kinematics import saturated_step
 
 
 @njit(cache=True, inline="always")
-def ovm_acceleration(h: float, v: float, v1: float, P: np.ndarray) -> float:
+def ovm(h: float, v: float, v1: float, alpha: float, beta: float, kappa: float, h_st: float,
+        h_go: float, v_max: float, u_min: float, u_max: float) -> float:
     """OVM acceleration [m/s^2] for headway ``h`` [m], own speed ``v`` and leader speed ``v1``."""
-    h_c = min(max(h, P[K.H_ST]), P[K.H_GO])
-    v1_c = min(max(v1, 0.0), P[K.V_MAX])
-    a = P[K.ALPHA] * (P[K.KAPPA] * (h_c - P[K.H_ST]) - v) + P[K.BETA] * (v1_c - v)
-    return min(max(a, P[K.U_MIN]), P[K.U_MAX])
+    h_c = min(max(h, h_st), h_go)
+    v1_c = min(max(v1, 0.0), v_max)
+    a = alpha * (kappa * (h_c - h_st) - v) + beta * (v1_c - v)
+    return min(max(a, u_min), u_max)
+
+
+@njit(cache=True)
+def ovm_acceleration(h: float, v: float, v1: float, P: np.ndarray) -> float:
+    """:func:`ovm` with the parameters of ``P`` (from :func:`persuasive.pack`)."""
+    return ovm(h, v, v1, P[K.ALPHA], P[K.BETA], P[K.KAPPA], P[K.H_ST], P[K.H_GO], P[K.V_MAX],
+               P[K.U_MIN], P[K.U_MAX])
 
 
 @njit(cache=True)
@@ -71,37 +81,73 @@ def fill_library(
 ) -> None:
     """Write the library of a vehicle at ``(s0 [m], v0 [m/s])`` into ``S, V, A``.
 
-    ``S, V, A``: ``(n_mesh + 1, n_samples)`` float64 arrays, overwritten.
+    ``S, V, A``: ``(n_samples, n_mesh + 1)`` float64 arrays (sample-major), overwritten.
     """
     n = int(P[K.N_SAMPLES])
-    n_mesh = int(P[K.N_MESH])
+    n_traj = int(P[K.N_MESH]) + 1
     dt = P[K.SAMPLE_DT]
     v_min, v_max = P[K.V_MIN], P[K.V_MAX]
+    u_min, u_max = P[K.U_MIN], P[K.U_MAX]
+    alpha, beta, kappa, h_st, h_go = P[K.ALPHA], P[K.BETA], P[K.KAPPA], P[K.H_ST], P[K.H_GO]
     length = P[K.LENGTH]
-    v_hi = min(v_max, v0 + P[K.U_MAX] * P[K.HORIZON])
-    v_lo = max(v_min, v0 + P[K.U_MIN] * P[K.HORIZON])
-    stop = offers_stop(s0, v0, P)
-    stop_leader = -P[K.STOP_DIST] + P[K.H_ST] + length
-    for m in range(n_mesh + 1):
-        v_t = v0 if m == 0 else mesh_speed(v_lo, v_hi, m - 1, n_mesh)
-        standing = m == 1 and stop
-        gap = v_t / P[K.KAPPA] + P[K.H_ST] + length
-        s, v = s0, v0
-        for k in range(n):
-            if standing:
-                h = stop_leader - s - length
-            else:
-                h = (s + gap) - s - length
-            a = ovm_acceleration(h, v, v_t, P)
-            s, v = saturated_step(s, v, a, dt, v_min, v_max)
-            S[m, k] = s
-            V[m, k] = v
-            A[m, k] = a
+    v_hi = min(v_max, v0 + u_max * P[K.HORIZON])
+    v_lo = max(v_min, v0 + u_min * P[K.HORIZON])
+    stop_leader = -P[K.STOP_DIST] + h_st + length
+    v_t = np.empty(n_traj)
+    gap = np.empty(n_traj)
+    standing = np.zeros(n_traj, np.bool_)
+    standing[1] = offers_stop(s0, v0, P)
+    s = np.empty(n_traj)
+    v = np.empty(n_traj)
+    for m in range(n_traj):
+        v_t[m] = v0 if m == 0 else mesh_speed(v_lo, v_hi, m - 1, n_traj - 1)
+        gap[m] = v_t[m] / kappa + h_st + length
+        s[m] = s0
+        v[m] = v0
+    for k in range(n):
+        for m in range(n_traj):
+            sm = s[m]
+            h = (stop_leader - sm - length) if standing[m] else ((sm + gap[m]) - sm - length)
+            a = ovm(h, v[m], v_t[m], alpha, beta, kappa, h_st, h_go, v_max, u_min, u_max)
+            sm, vm = saturated_step(sm, v[m], a, dt, v_min, v_max)
+            s[m] = sm
+            v[m] = vm
+            S[k, m] = sm
+            V[k, m] = vm
+            A[k, m] = a
+
+
+class Lib(NamedTuple):
+    """A library in kernel form, with its reward parts (filled by ``persuasive.game.build``).
+
+    Sample-major trajectories ``S, V, A`` ``(n, n_traj)``; reward parts of
+    ``persuasive.rewards``: ``base`` ``(n_traj,)``, ``coll`` and ``sq`` ``(n, n_traj)``,
+    ``win`` ``(n_traj, 2)`` int64.
+    """
+
+    S: np.ndarray
+    V: np.ndarray
+    A: np.ndarray
+    base: np.ndarray
+    coll: np.ndarray
+    sq: np.ndarray
+    win: np.ndarray
+
+
+@njit(cache=True)
+def new_lib(n: int, n_traj: int) -> Lib:
+    """Uninitialised kernel arrays for a library of ``n_traj`` trajectories of ``n`` samples."""
+    return Lib(np.empty((n, n_traj)), np.empty((n, n_traj)), np.empty((n, n_traj)),
+               np.empty(n_traj), np.empty((n, n_traj)), np.empty((n, n_traj)),
+               np.empty((n_traj, 2), np.int64))
 
 
 @dataclass(frozen=True)
 class Library:
-    """The candidate trajectories of one vehicle; arrays ``(n_traj, n_samples)``."""
+    """The candidate trajectories of one vehicle; arrays ``(n_traj, n_samples)``.
+
+    ``s, v, a`` are trajectory-major views of the kernels' sample-major arrays.
+    """
 
     s: np.ndarray  #: positions [m]
     v: np.ndarray  #: speeds [m/s]
@@ -118,6 +164,7 @@ class Library:
 def trajectory_library(s0: float, v0: float, P: np.ndarray) -> Library:
     """The library of a vehicle at ``(s0 [m], v0 [m/s])``; ``P`` from :func:`persuasive.pack`."""
     n_traj, n = int(P[K.N_MESH]) + 1, int(P[K.N_SAMPLES])
-    S, V, A = np.empty((n_traj, n)), np.empty((n_traj, n)), np.empty((n_traj, n))
+    S, V, A = np.empty((n, n_traj)), np.empty((n, n_traj)), np.empty((n, n_traj))
     fill_library(float(s0), float(v0), P, S, V, A)
-    return Library(S, V, A, float(s0), float(v0), bool(offers_stop(float(s0), float(v0), P)))
+    return Library(S.T, V.T, A.T, float(s0), float(v0),
+                   bool(offers_stop(float(s0), float(v0), P)))

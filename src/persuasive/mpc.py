@@ -23,7 +23,9 @@ c. four branches ``(i, j)``, HV role ``i`` until ``T1`` and ``j`` after, probabi
    role-``i`` state, samples 3.. = the re-solve's first samples);
 d. safety ``d >= min_dist`` per branch and sample, step reward
    ``lambda^(k-1) ((s_k - s_0) - w_u |u_k|) - w_c [unsafe] (1 + v_k)`` (quirk Q4; with Q4 off
-   the collision term is discounted too);
+   the collision term is discounted too), summed as ``R_b = B - w_c C_b`` with ``B`` the
+   candidate's collision-free reward and ``C_b`` the sum of its collision weights over the
+   branch's unsafe samples (``persuasive.rewards``);
 e. expected reward ``sum_b P_b R_b`` and chance constraint ``sum_b P_b [safe] > 1 - epsilon``
    at every sample.
 
@@ -42,9 +44,8 @@ import numpy as np
 from numba import njit
 
 from . import _packed as K
-from .game import EGO_FOLLOWER, EGO_LEADER, OTHER_FOLLOWER, OTHER_LEADER, solve_both
-from .library import fill_library
-from .rewards import base_rewards, reward_matrix, zone_windows
+from .game import EGO_FOLLOWER, EGO_LEADER, OTHER_FOLLOWER, OTHER_LEADER, build, solve_libs
+from .library import Lib, new_lib
 from .roles import bayes_update, plausible_leader, transition_into
 
 # Columns of the per-candidate diagnostics written by :func:`decide`.
@@ -54,27 +55,44 @@ N_DIAG = 10
 
 
 @njit(cache=True)
-def decide(s_R: float, v_R: float, s_H: float, v_H: float,
-           SH: np.ndarray, VH: np.ndarray, AH: np.ndarray,
-           SR: np.ndarray, VR: np.ndarray, AR: np.ndarray, idx: np.ndarray,
+def any_unsafe(LR: Lib, c: int, LH: Lib, off: int, thr: float) -> bool:
+    """Whether candidate ``c`` of ``LR`` is unsafe at some sample ``m >= off`` against some
+    trajectory of the HV library ``LH`` at its sample ``m - off``."""
+    n, n_traj = LH.sq.shape
+    lo_h, hi_h = n, 0
+    for h in range(n_traj):
+        lo_h = min(lo_h, LH.win[h, 0])
+        hi_h = max(hi_h, LH.win[h, 1])
+    for m in range(max(LR.win[c, 0], off + lo_h), min(LR.win[c, 1], off + hi_h)):
+        own = LR.sq[m, c]
+        for h in range(n_traj):
+            if own + LH.sq[m - off, h] < thr:
+                return True
+    return False
+
+
+@njit(cache=True)
+def decide(s_R: float, v_R: float, s_H: float, v_H: float, LH: Lib, LR: Lib, idx: np.ndarray,
            q_l: float, q_f: float, tie_leader: bool, p_a_hat: float,
            P: np.ndarray, disc: np.ndarray, diag: np.ndarray) -> tuple[int, bool]:
     """One branch-MPC decision; returns ``(chosen candidate, feasible)``.
 
-    ``SH, VH, AH`` / ``SR, VR, AR``: the HV's and AV's libraries at ``x_H`` / ``x_R``
-    ``(n_traj, n)``; ``idx``: the human-view full prediction at ``z`` (``persuasive.game``
-    order: HV-L, HV-F, AV-L, AV-F). ``tie_leader``: the human model's own role is L.
+    ``LH`` / ``LR``: the HV's and AV's libraries at ``x_H`` / ``x_R`` with their reward parts,
+    and ``idx`` (HV-L, HV-F, AV-L, AV-F): the full prediction of ``z`` from the human's view
+    (``persuasive.game.predict_into``). ``tie_leader``: the human model's own role is L.
     ``diag`` ``(n_traj, N_DIAG)`` receives per-candidate diagnostics (expected reward, min and
     max of P(safe) over the samples, the human's belief on the AV, P(plausible = L), the four
-    branch probabilities).
+    branch probabilities). Index names: ``c`` candidate, ``m`` sample, ``b`` branch.
     """
-    n_traj, n = SR.shape
+    SR, VR = LR.S, LR.V
+    SH, VH = LH.S, LH.V
+    n, n_traj = SR.shape
     paper_q1 = P[K.Q1] != 0.0
     paper_q2 = P[K.Q2] != 0.0
     undiscounted = P[K.Q4] != 0.0
     agg_max = P[K.Q5] != 0.0
     w_s, w_v = P[K.W_S], P[K.W_V]
-    w_c, w_u, min_dist = P[K.W_C], P[K.W_U], P[K.MIN_DIST]
+    w_c, thr = P[K.W_C], P[K.MIN_DIST_SQ]
     prior_l = P[K.PRIOR_L]
     threshold = 1.0 - P[K.EPSILON]
 
@@ -83,140 +101,116 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float,
     probs = np.empty((n_traj, 4))
     exp_idx = (idx[OTHER_LEADER], idx[OTHER_FOLLOWER])
     e = np.empty((2, 2))  # residuals: (role of the AV, component)
-    for k in range(n_traj):
+    for c in range(n_traj):
         for r in range(2):
             x = exp_idx[r]
             if paper_q2:
                 # Q2: candidate (t+0.1, t+0.2) against expected (t, t+0.1).
-                e[r, 0] = (abs(SR[k, 0] - s_R) + abs(SR[k, 1] - SR[x, 0])) / 2.0
-                e[r, 1] = (abs(VR[k, 0] - v_R) + abs(VR[k, 1] - VR[x, 0])) / 2.0
+                e[r, 0] = (abs(SR[0, c] - s_R) + abs(SR[1, c] - SR[0, x])) / 2.0
+                e[r, 1] = (abs(VR[0, c] - v_R) + abs(VR[1, c] - VR[0, x])) / 2.0
             else:
-                e[r, 0] = (abs(s_R - s_R) + abs(SR[k, 0] - SR[x, 0])) / 2.0
-                e[r, 1] = (abs(v_R - v_R) + abs(VR[k, 0] - VR[x, 0])) / 2.0
+                e[r, 0] = (abs(s_R - s_R) + abs(SR[0, c] - SR[0, x])) / 2.0
+                e[r, 1] = (abs(v_R - v_R) + abs(VR[0, c] - VR[0, x])) / 2.0
         b_l, b_f = bayes_update(prior_l, 1.0 - prior_l, e[0, 0], e[0, 1], e[1, 0], e[1, 1],
                                 w_s, w_v)
         pl = plausible_leader(b_l, b_f, 0 if tie_leader else 1)
         transition_into(pl, p_a_hat, Pi)
-        probs[k, 0] = Pi[0, 0] * q_l  # (i, j) = (L, L)
-        probs[k, 1] = Pi[1, 0] * q_l  # (L, F)
-        probs[k, 2] = Pi[0, 1] * q_f  # (F, L)
-        probs[k, 3] = Pi[1, 1] * q_f  # (F, F)
-        diag[k, D_BELIEF_L] = b_l
-        diag[k, D_BELIEF_F] = b_f
-        diag[k, D_PLAUSIBLE_L] = pl
+        probs[c, 0] = Pi[0, 0] * q_l  # (i, j) = (L, L)
+        probs[c, 1] = Pi[1, 0] * q_l  # (L, F)
+        probs[c, 2] = Pi[0, 1] * q_f  # (F, L)
+        probs[c, 3] = Pi[1, 1] * q_f  # (F, F)
+        diag[c, D_BELIEF_L] = b_l
+        diag[c, D_BELIEF_F] = b_f
+        diag[c, D_PLAUSIBLE_L] = pl
         for b in range(4):
-            diag[k, D_P_LL + b] = probs[k, b]
+            diag[c, D_P_LL + b] = probs[c, b]
 
     # c. Re-solves at T1, deduplicated by exact state.
     hv_traj = (idx[EGO_LEADER], idx[EGO_FOLLOWER])
     hv_src = np.empty(2, np.int64)  # which HV library serves HV role i
     hv_src[0] = 0
-    hv_src[1] = 0 if (SH[hv_traj[1], 0] == SH[hv_traj[0], 0]
-                      and VH[hv_traj[1], 0] == VH[hv_traj[0], 0]) else 1
+    hv_src[1] = 0 if (SH[0, hv_traj[1]] == SH[0, hv_traj[0]]
+                      and VH[0, hv_traj[1]] == VH[0, hv_traj[0]]) else 1
     start = 1 if paper_q1 else 0  # the AV candidate sample the re-solve starts from
     av_src = np.empty(n_traj, np.int64)
-    for k in range(n_traj):
-        av_src[k] = k
-        for k2 in range(k):
-            if SR[k2, start] == SR[k, start] and VR[k2, start] == VR[k, start]:
-                av_src[k] = av_src[k2]
+    for c in range(n_traj):
+        av_src[c] = c
+        for c2 in range(c):
+            if SR[start, c2] == SR[start, c] and VR[start, c2] == VR[start, c]:
+                av_src[c] = av_src[c2]
                 break
-
-    LS = np.empty((2, n_traj, n))
-    LV = np.empty((2, n_traj, n))
-    LA = np.empty((2, n_traj, n))
-    hb = np.empty((2, n_traj))
-    hw = np.empty((2, n_traj, 2), np.int64)
+    # The HV's libraries at T1.
+    LH1 = (new_lib(n, n_traj), new_lib(n, n_traj))
     for i in range(2):
         if hv_src[i] == i:
-            s0, v0 = SH[hv_traj[i], 0], VH[hv_traj[i], 0]
-            fill_library(s0, v0, P, LS[i], LV[i], LA[i])
-            base_rewards(LS[i], LA[i], s0, disc, P, hb[i])
-            zone_windows(LS[i], min_dist, hw[i])
-    RS = np.empty((n_traj, n_traj, n))
-    RV = np.empty((n_traj, n_traj, n))
-    RA = np.empty((n_traj, n_traj, n))
-    rb = np.empty((n_traj, n_traj))
-    rw = np.empty((n_traj, n_traj, 2), np.int64)
-    M_e = np.empty((n_traj, n_traj))
-    M_o = np.empty((n_traj, n_traj))
+            build(SH[0, hv_traj[i]], VH[0, hv_traj[i]], P, disc, LH1[i])
+    # A re-solve only matters if some HV trajectory it could return is unsafe against a
+    # candidate sharing its start: otherwise every branch is safe after T1 whatever the
+    # answer, and skipping the solve changes nothing (exactly).
+    off = 2 if paper_q1 else 1  # branch sample m holds the re-solve's sample m - off
+    need = np.zeros((2, n_traj), np.bool_)  # per (HV source, AV source)
+    for c in range(n_traj):
+        for i in range(2):
+            if hv_src[i] == i and not need[i, av_src[c]]:
+                need[i, av_src[c]] = any_unsafe(LR, c, LH1[i], off, thr)
+    # The AV's library from each distinct start that matters, and the solves.
+    L1 = new_lib(n, n_traj)
+    M_e, M_o, Cm = np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj))
     Q = np.empty((4, n_traj))
     sol = np.empty(4, np.int64)
-    answer = np.empty((2, n_traj, 2), np.int64)  # HV role-j trajectory, per (i, AV source)
-    for k in range(n_traj):
-        if av_src[k] != k:
+    answer = np.zeros((2, n_traj, 2), np.int64)  # HV role-j trajectory, per (i, AV source)
+    for c in range(n_traj):
+        if av_src[c] != c or not (need[0, c] or need[1, c]):
             continue
-        s0, v0 = SR[k, start], VR[k, start]
-        fill_library(s0, v0, P, RS[k], RV[k], RA[k])
-        base_rewards(RS[k], RA[k], s0, disc, P, rb[k])
-        zone_windows(RS[k], min_dist, rw[k])
+        build(SR[start, c], VR[start, c], P, disc, L1)
         for i in range(2):
-            if hv_src[i] != i:
-                continue
-            hs0 = SH[hv_traj[i], 0]
-            reward_matrix(LS[i], LV[i], LA[i], hs0, hb[i], hw[i], RS[k], rw[k], disc, P, M_e)
-            reward_matrix(RS[k], RV[k], RA[k], s0, rb[k], rw[k], LS[i], hw[i], disc, P, M_o)
-            solve_both(M_e, M_o, agg_max, sol, Q)
-            answer[i, k, 0] = sol[EGO_LEADER]
-            answer[i, k, 1] = sol[EGO_FOLLOWER]
+            if need[i, c]:
+                solve_libs(LH1[i], L1, w_c, thr, agg_max, M_e, M_o, Cm, Q, sol)
+                answer[i, c, 0] = sol[EGO_LEADER]
+                answer[i, c, 1] = sol[EGO_FOLLOWER]
 
-    # d-e. Branch safety, rewards, expectation and the chance constraint.
-    base_R = np.empty(n_traj)
-    base_rewards(SR, AR, s_R, disc, P, base_R)
-    hv_s = np.empty((4, n))
-    safe = np.empty((4, n))
+    # d-e. Branch safety, rewards R_b = B - w_c C_b, expectation and the chance constraint.
+    # Outside the candidate's zone window every branch is safe, so only its window is scanned.
+    Cb = np.empty(4)
     best_feasible, best_any = -1, -1
-    for k in range(n_traj):
-        for i in range(2):
-            src_i = hv_src[i]
-            s_i1 = SH[hv_traj[i], 0]
-            for j in range(2):
-                b = 2 * i + j
-                path = answer[src_i, av_src[k], j]
-                if paper_q1:
-                    hv_s[b, 0] = s_H
-                    hv_s[b, 1] = s_i1
-                    for m in range(2, n):
-                        hv_s[b, m] = LS[src_i, path, m - 2]
-                else:
-                    hv_s[b, 0] = s_i1
-                    for m in range(1, n):
-                        hv_s[b, m] = LS[src_i, path, m - 1]
-        expected = 0.0
+    for c in range(n_traj):
+        all_safe = 0.0
         for b in range(4):
-            any_unsafe = False
-            for m in range(n):
-                s, sh = SR[k, m], hv_s[b, m]
-                ok = math.sqrt(s * s + sh * sh) >= min_dist
-                safe[b, m] = 1.0 if ok else 0.0
-                any_unsafe = any_unsafe or not ok
-            if not any_unsafe:
-                R_b = base_R[k]
-            elif undiscounted:
-                R_b = 0.0
-                for m in range(n):
-                    c = (1.0 + VR[k, m]) if safe[b, m] == 0.0 else 0.0
-                    R_b += disc[m] * ((SR[k, m] - s_R) - w_u * abs(AR[k, m])) - w_c * c
-            else:
-                R_b = 0.0
-                for m in range(n):
-                    c = (1.0 + VR[k, m]) if safe[b, m] == 0.0 else 0.0
-                    R_b += disc[m] * (((SR[k, m] - s_R) - w_c * c) - w_u * abs(AR[k, m]))
-            expected += probs[k, b] * R_b
-        lo, hi = math.inf, -math.inf
-        for m in range(n):
+            all_safe += probs[c, b] * 1.0
+        lo_c, hi_c = LR.win[c, 0], LR.win[c, 1]
+        covered = lo_c <= 0 and hi_c >= n
+        lo = math.inf if covered else all_safe
+        hi = -math.inf if covered else all_safe
+        for b in range(4):
+            Cb[b] = 0.0
+        for m in range(lo_c, hi_c):
+            own = LR.sq[m, c]
+            weight = (1.0 + VR[m, c]) if undiscounted else LR.coll[m, c]  # Q4
             p_safe = 0.0
             for b in range(4):
-                p_safe += probs[k, b] * safe[b, m]
+                i, j = b // 2, b % 2
+                src = hv_src[i]
+                if m < off:  # samples before the re-solve: the HV's own states
+                    x = SH[0, hv_traj[i]] if m == off - 1 else s_H
+                    hv2 = x * x
+                else:
+                    hv2 = LH1[src].sq[m - off, answer[src, av_src[c], j]]
+                ok = own + hv2 >= thr
+                if not ok:
+                    Cb[b] += weight
+                p_safe += probs[c, b] * (1.0 if ok else 0.0)
             lo = min(lo, p_safe)
             hi = max(hi, p_safe)
-        diag[k, D_EXPECTED] = expected
-        diag[k, D_MIN_SAFE] = lo
-        diag[k, D_MAX_SAFE] = hi
+        expected = 0.0
+        for b in range(4):
+            expected += probs[c, b] * (LR.base[c] - w_c * Cb[b])
+        diag[c, D_EXPECTED] = expected
+        diag[c, D_MIN_SAFE] = lo
+        diag[c, D_MAX_SAFE] = hi
         if best_any < 0 or expected > diag[best_any, D_EXPECTED]:
-            best_any = k
+            best_any = c
         if lo > threshold and (best_feasible < 0 or expected > diag[best_feasible, D_EXPECTED]):
-            best_feasible = k
+            best_feasible = c
     if best_feasible >= 0:
         return best_feasible, True
     return best_any, False
