@@ -1,0 +1,325 @@
+"""The paper's Monte Carlo studies (spec section 8): Tables 1 and 2, run in parallel.
+
+A table is a list of rows (who drives the AV, the HV's initial role, ``p_a``, ``p_a_hat``);
+each row runs seeds ``1..N``. Every run is a pure function of its configuration and seed, so
+the work is split into chunks of seeds, farmed out to worker processes, and put back in
+``(row, seed)`` order: the results do not depend on the number of workers.
+
+Metrics per row (spec section 8): counts of who reached the crossing line first (AV, HV, same
+step, neither) and the AV/HV shares of all runs; collisions; runs with an infeasible MPC step;
+safety violations (minimum distance below ``min_dist``) up to ``idx_end`` and over the whole
+run. The published shares are printed beside the reproduced ones.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+import numpy as np
+
+from . import __version__
+from .config import Config, ConfigError
+from .simulation import simulate
+
+TABLES = ("table1", "table2")
+
+
+@dataclass(frozen=True)
+class Row:
+    """One row of a paper table and its published result (percent of runs)."""
+
+    av: str  #: "lfg" (Table 1) or "mpc" (Table 2)
+    hv_role: str  #: the HV's initial role
+    pa: float  #: the human's p_a
+    pa_hat: float | None  #: the AV's estimate (Table 2), None for Table 1
+    published_av_first_pct: float
+    published_hv_first_pct: float
+
+    def config(self, base: Config) -> Config:
+        """``base`` with this row's agents and parameters."""
+        return base.with_overrides({
+            "simulation.av": self.av,
+            "simulation.hv_role": self.hv_role,
+            "roles.p_a": self.pa,
+            "mpc.p_a_hat": self.pa if self.pa_hat is None else self.pa_hat,
+        })
+
+
+#: The published rows (spec section 8), in the paper's order.
+PUBLISHED: dict[str, tuple[Row, ...]] = {
+    "table1": (
+        Row("lfg", "leader", 1.0, None, 0.0, 100.0),
+        Row("lfg", "follower", 1.0, None, 97.9, 2.1),
+    ),
+    "table2": tuple(
+        Row("mpc", "leader" if r == "L" else "follower", pa, pah, av, hv)
+        for r, pa, pah, av, hv in (
+            ("L", 1.00, 1.00, 87.8, 12.2),
+            ("F", 1.00, 1.00, 96.4, 3.6),
+            ("L", 0.70, 1.00, 86.3, 13.7),
+            ("L", 0.50, 1.00, 82.9, 17.1),
+            ("L", 0.30, 1.00, 78.1, 21.9),
+            ("F", 0.50, 1.00, 96.5, 3.5),
+            ("F", 0.70, 1.00, 96.5, 3.5),
+            ("F", 0.30, 1.00, 96.6, 3.4),
+            ("L", 1.00, 0.98, 78.9, 21.1),
+            ("L", 1.00, 0.95, 0.0, 100.0),
+            ("L", 1.00, 0.70, 0.0, 100.0),
+            ("F", 1.00, 0.98, 96.4, 3.6),
+            ("F", 1.00, 0.95, 38.9, 61.1),
+            ("F", 1.00, 0.70, 1.2, 98.8),
+        )
+    ),
+}
+
+#: Per-run columns kept in the results table, in order.
+RUN_COLUMNS = (
+    "table", "row", "av", "hv_role", "pa", "pa_hat", "mode", "seed",
+    "av_s0_m", "av_v0_mps", "hv_s0_m", "hv_v0_mps",
+    "first_at_line", "first_at_conflict_point", "collision", "min_distance_to_line_m",
+    "min_distance_m", "idx_end", "infeasible_steps", "hv_role_changes", "av_role_changes",
+    "version",
+)
+
+
+_METRICS = RUN_COLUMNS[RUN_COLUMNS.index("first_at_line"):RUN_COLUMNS.index("version")]
+
+
+def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any]:
+    """One closed-loop run as a flat results row (see ``RUN_COLUMNS``)."""
+    rec = simulate(config, seed)
+    s = rec.summary()
+    return {
+        "table": table,
+        "row": row,
+        "av": s["av"],
+        "hv_role": s["hv_role"],
+        "pa": s["pa"],
+        "pa_hat": s["pa_hat"] if s["av"] == "mpc" else None,
+        "mode": s["mode"],
+        "seed": seed,
+        "av_s0_m": s["av_initial_state"][0],
+        "av_v0_mps": s["av_initial_state"][1],
+        "hv_s0_m": s["hv_initial_state"][0],
+        "hv_v0_mps": s["hv_initial_state"][1],
+        **{k: s[k] for k in _METRICS},
+        "version": __version__,
+    }
+
+
+def _run_chunk(task: tuple[str, int, dict[str, Any], list[int]]) -> list[dict[str, Any]]:
+    table, row, config_dict, seeds = task
+    config = Config.from_dict(config_dict)
+    return [run_record(table, row, config, seed) for seed in seeds]
+
+
+def _tasks(tables: Iterable[str], base: Config, seeds: int, chunk: int):
+    for table in tables:
+        for i, row in enumerate(PUBLISHED[table]):
+            cfg = row.config(base).to_dict()
+            for lo in range(1, seeds + 1, chunk):
+                yield table, i, cfg, list(range(lo, min(lo + chunk, seeds + 1)))
+
+
+def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = None,
+               mode: str = "paper", base: Config | None = None, chunk: int = 25,
+               progress: Callable[[int, int, int], None] | None = None) -> list[dict[str, Any]]:
+    """Run every row of ``tables`` for seeds ``1..seeds``; one dict per run, in order.
+
+    ``workers``: processes (default: all cores; 1 runs in this process). ``progress(done_runs,
+    total_runs, rows_done)`` is called as chunks finish.
+    """
+    tables = list(tables)
+    for t in tables:
+        if t not in PUBLISHED:
+            raise ConfigError(f"table = {t!r} is out of range; allowed: {' | '.join(TABLES)}")
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    workers = (os.cpu_count() or 1) if workers is None else workers
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ConfigError(f"workers = {workers!r} is out of range; allowed: integer >= 1")
+    base = (base or Config()).with_overrides({"mode": mode})
+    tasks = list(_tasks(tables, base, seeds, chunk))
+    total = sum(len(t[3]) for t in tasks)
+    per_row: dict[tuple[str, int], int] = {}
+    for t in tasks:
+        per_row[(t[0], t[1])] = per_row.get((t[0], t[1]), 0) + len(t[3])
+    results: dict[tuple[str, int, int], list[dict[str, Any]]] = {}
+    done, rows_done, left = 0, 0, dict(per_row)
+
+    def collect(task, records):
+        nonlocal done, rows_done
+        results[(task[0], task[1], task[3][0])] = records
+        done += len(records)
+        left[(task[0], task[1])] -= len(records)
+        rows_done += left[(task[0], task[1])] == 0
+        if progress is not None:
+            progress(done, total, rows_done)
+
+    if workers == 1:
+        for task in tasks:
+            collect(task, _run_chunk(task))
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            for task, records in zip(tasks, pool.map(_run_chunk, tasks)):
+                collect(task, records)
+    return [rec for key in sorted(results, key=lambda k: (TABLES.index(k[0]), k[1], k[2]))
+            for rec in results[key]]
+
+
+def summarize(runs: list[dict[str, Any]], table: str, min_dist_m: float) -> dict[str, Any]:
+    """The printed table of spec section 8 for ``table``'s rows in ``runs``."""
+    rows = []
+    for i, spec in enumerate(PUBLISHED[table]):
+        mine = [r for r in runs if r["table"] == table and r["row"] == i]
+        if not mine:
+            continue
+        first = np.array([r["first_at_line"] for r in mine])
+        n = len(mine)
+        av, hv = int(np.sum(first == 1)), int(np.sum(first == 2))
+        av_pct, hv_pct = round(100.0 * av / n, 10), round(100.0 * hv / n, 10)
+        rows.append({
+            "hv_role": spec.hv_role,
+            "pa": spec.pa,
+            "pa_hat": spec.pa_hat,
+            "runs": n,
+            "av_first": av,
+            "hv_first": hv,
+            "same_step": int(np.sum(first == 3)),
+            "neither": int(np.sum(first == 0)),
+            "av_first_pct": av_pct,
+            "hv_first_pct": hv_pct,
+            "published_av_first_pct": spec.published_av_first_pct,
+            "published_hv_first_pct": spec.published_hv_first_pct,
+            "diff_av_first_pct": round(av_pct - spec.published_av_first_pct, 10),
+            "diff_hv_first_pct": round(hv_pct - spec.published_hv_first_pct, 10),
+            "collisions": int(sum(r["collision"] for r in mine)),
+            "runs_with_infeasible": int(sum(r["infeasible_steps"] > 0 for r in mine)),
+            "violations_to_line": int(sum(r["min_distance_to_line_m"] < min_dist_m for r in mine)),
+            "violations_whole_run": int(sum(r["min_distance_m"] < min_dist_m for r in mine)),
+        })
+    mode = runs[0]["mode"] if runs else None
+    seeds = max((r["seed"] for r in runs if r["table"] == table), default=0)
+    return {"table": table, "mode": mode, "seeds": seeds, "rows": rows}
+
+
+def matches_published(summary: dict[str, Any]) -> bool:
+    """Every row's AV-first and HV-first shares equal the published ones at one decimal."""
+    return all(
+        round(r["av_first_pct"], 1) == r["published_av_first_pct"]
+        and round(r["hv_first_pct"], 1) == r["published_hv_first_pct"]
+        for r in summary["rows"]
+    )
+
+
+def to_markdown(summary: dict[str, Any]) -> str:
+    """The summary as a Markdown table (one line per row)."""
+    t2 = summary["table"] == "table2"
+    head = ["HV initial role", "p_a"] + (["p_a_hat"] if t2 else []) + [
+        "AV first %", "HV first %", "published AV/HV %", "diff AV/HV", "same step", "neither",
+        "collisions", "runs infeasible", "violations to line", "violations whole run"]
+    lines = [
+        f"**{summary['table']}**, {summary['mode']} mode, seeds 1..{summary['seeds']}",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for r in summary["rows"]:
+        cells = ["L" if r["hv_role"] == "leader" else "F", f"{r['pa']:.2f}"]
+        if t2:
+            cells.append(f"{r['pa_hat']:.2f}")
+        cells += [
+            f"{r['av_first_pct']:.1f}", f"{r['hv_first_pct']:.1f}",
+            f"{r['published_av_first_pct']:.1f} / {r['published_hv_first_pct']:.1f}",
+            f"{r['diff_av_first_pct']:+.1f} / {r['diff_hv_first_pct']:+.1f}",
+            str(r["same_step"]), str(r["neither"]), str(r["collisions"]),
+            str(r["runs_with_infeasible"]), str(r["violations_to_line"]),
+            str(r["violations_whole_run"]),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+@dataclass(frozen=True)
+class Reproduction:
+    """The runs and summaries of one ``reproduce`` call."""
+
+    runs: Any  #: pandas DataFrame, one row per run (``RUN_COLUMNS``)
+    summaries: dict[str, dict[str, Any]]  #: per table, as :func:`summarize`
+    wall_time_s: float
+
+
+def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
+              mode: str = "paper", base: Config | None = None,
+              progress: Callable[[int, int, int], None] | None = None) -> Reproduction:
+    """Rerun the paper's tables: ``table`` is "table1", "table2" or "all"."""
+    import pandas as pd
+
+    tables = TABLES if table == "all" else (table,)
+    base = base or Config()
+    t0 = time.perf_counter()
+    runs = run_tables(tables, seeds, workers, mode, base, progress=progress)
+    wall = time.perf_counter() - t0
+    min_dist = base.vehicle.min_dist_m
+    summaries = {t: summarize(runs, t, min_dist) for t in tables}
+    frame = pd.DataFrame(runs, columns=list(RUN_COLUMNS))
+    return Reproduction(frame, summaries, wall)
+
+
+def _atomic_write(path: Path, write: Callable[[Path], None]) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def save(result: Reproduction, table: str, out: Path) -> None:
+    """Write ``table``'s runs (Parquet) and summary (JSON, Markdown) into ``out``, atomically
+    file by file; a rerun into the same folder replaces them."""
+    out.mkdir(parents=True, exist_ok=True)
+    runs = result.runs[result.runs["table"] == table]
+    summary = result.summaries[table]
+    _atomic_write(out / "runs.parquet", lambda p: runs.to_parquet(p, index=False))
+    _atomic_write(out / "summary.json",
+                  lambda p: p.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8"))
+    _atomic_write(out / "summary.md",
+                  lambda p: p.write_text(to_markdown(summary), encoding="utf-8"))
+
+
+def load_summary(folder: str | Path) -> dict[str, Any]:
+    """Read a summary written by :func:`save`."""
+    path = Path(folder) / "summary.json"
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"results folder {str(folder)!r} has no readable summary.json "
+                          f"({exc.__class__.__name__})") from None
+
+
+def tqdm_progress(total_rows: int) -> Callable[[int, int, int], None]:
+    """A progress callback drawing a tqdm bar on stderr: runs done, runs/s, time left, rows."""
+    from tqdm import tqdm
+
+    bar: dict[str, Any] = {}
+
+    def update(done: int, total: int, rows_done: int) -> None:
+        if "bar" not in bar:
+            bar["bar"] = tqdm(total=total, unit="run", file=sys.stderr, dynamic_ncols=True,
+                              smoothing=0.1)
+        b = bar["bar"]
+        b.set_postfix_str(f"rows {rows_done}/{total_rows}", refresh=False)
+        b.update(done - b.n)
+        if done >= total:
+            b.close()
+
+    return update
