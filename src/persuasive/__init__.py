@@ -3,6 +3,21 @@
 A robot (an autonomous vehicle) predicts a human driver's reaction with a leader-follower game
 whose roles adapt, and plans with a branch MPC that shapes the human's intention under a chance
 constraint on safety (He, Dong, Li, MECC 2025).
+
+The main entry points:
+
+- :class:`Config` — every parameter, validated, the paper's values by default;
+- :func:`simulate` — one closed-loop run of the two-vehicle intersection;
+- :class:`Planner` — the AV's planner inside your own loop;
+- :func:`reproduce` — the paper's Tables 1 and 2.
 """
 
 __version__ = "0.1.0"
+
+from .config import Config, ConfigError  # noqa: E402
+from .experiments import reproduce  # noqa: E402
+from .planner import Plan, Planner  # noqa: E402
+from .simulation import RunRecord, simulate  # noqa: E402
+
+__all__ = ["Config", "ConfigError", "Plan", "Planner", "RunRecord", "reproduce", "simulate",
+           "__version__"]

@@ -21,8 +21,8 @@ import numpy as np
 from numba import njit
 
 from . import _packed as K
-from .game import EGO_FOLLOWER, EGO_LEADER, OTHER_FOLLOWER, OTHER_LEADER, predict_into
-from .library import Lib, new_lib
+from .game import EGO_FOLLOWER, EGO_LEADER, OTHER_FOLLOWER, OTHER_LEADER, predict_buffers
+from .library import Lib, as_lib, lib_buffers, new_lib
 from .mpc import (D_BELIEF_L, D_EXPECTED, D_MAX_SAFE, D_MIN_SAFE, D_P_LL, D_PLAUSIBLE_L, N_DIAG,
                   decide)
 from .roles import FOLLOWER, LEADER, bayes_update, next_role, plausible_leader, transition_into
@@ -135,13 +135,14 @@ def mpc_init(prior_l: float) -> np.ndarray:
 def mpc_step(st: np.ndarray, s_R: float, v_R: float, s_H: float, v_H: float,
              tie_given: bool, given_role: int, p_a_hat: float, LH: Lib, LR: Lib,
              idx: np.ndarray, P: np.ndarray, disc: np.ndarray, diag: np.ndarray,
-             log: np.ndarray) -> float:
+             log: np.ndarray, LH1a: Lib, LH1b: Lib) -> float:
     """One step of the persuasive MPC (spec section 6); returns the AV's acceleration.
 
     ``LH, LR, idx``: the full prediction of ``z = (x_H, x_R)`` from the human's view. The human
     model's own role (for belief ties) is ``given_role`` when ``tie_given`` (quirk Q3), else the
     most likely HV role under ``q`` (ties: L). ``diag`` receives the per-candidate diagnostics
-    of :func:`persuasive.mpc.decide`; ``log`` the ``MPC_LOG`` columns.
+    of :func:`persuasive.mpc.decide`; ``log`` the ``MPC_LOG`` columns; ``LH1a``, ``LH1b``
+    the HV's libraries one sample ahead (scratch, see :func:`persuasive.mpc.decide`).
     """
     if st[MREADY] == 0.0:
         st[MPRED_LS], st[MPRED_LV] = s_H, v_H
@@ -153,7 +154,7 @@ def mpc_step(st: np.ndarray, s_R: float, v_R: float, s_H: float, v_H: float,
     else:
         tie = LEADER if q_l >= q_f else FOLLOWER
     c, feasible = decide(s_R, v_R, s_H, v_H, LH, LR, idx, q_l, q_f, tie == LEADER, p_a_hat,
-                         P, disc, diag)
+                         P, disc, diag, LH1a, LH1b)
     # 6. update q against the stored prediction, then store the new one
     b_l, b_f = bayes_update(
         q_l, q_f,
@@ -186,21 +187,51 @@ def mpc_step(st: np.ndarray, s_R: float, v_R: float, s_H: float, v_H: float,
     return LR.A[0, c]
 
 
+@njit(cache=True)
+def lfg_step_buffers(st, s_other, v_other, r, p_a, adapt, buf_self, win_self, buf_other,
+                     win_other, idx, w_s, w_v, log) -> float:
+    """:func:`lfg_step` on libraries stored as :func:`persuasive.library.lib_buffers`."""
+    return lfg_step(st, s_other, v_other, r, p_a, adapt, as_lib(buf_self, win_self),
+                    as_lib(buf_other, win_other), idx, w_s, w_v, log)
+
+
+@njit(cache=True)
+def mpc_step_buffers(st, s_R, v_R, s_H, v_H, tie_given, given_role, p_a_hat, buf_H, win_H,
+                     buf_R, win_R, idx, P, disc, diag, log) -> float:
+    """:func:`mpc_step` on libraries stored as :func:`persuasive.library.lib_buffers`."""
+    n, n_traj = (buf_H.shape[0] - 1) // 5, win_H.shape[0]
+    return mpc_step(st, s_R, v_R, s_H, v_H, tie_given, given_role, p_a_hat,
+                    as_lib(buf_H, win_H), as_lib(buf_R, win_R), idx, P, disc, diag, log,
+                    new_lib(n, n_traj), new_lib(n, n_traj))
+
+
 # -- Python classes -----------------------------------------------------------------------------
 
 
 class GameView:
-    """One full prediction seen by an ego player: the ego's and the other's built libraries
-    (:class:`persuasive.library.Lib`) and ``idx`` (ego-L, ego-F, other-L, other-F)."""
+    """One full prediction seen by an ego player.
+
+    ``ego`` and ``other``: each library as its ``(buf, win)`` storage
+    (:func:`persuasive.library.lib_buffers`); ``idx``: (ego-L, ego-F, other-L, other-F).
+    """
 
     __slots__ = ("ego", "other", "idx")
 
-    def __init__(self, ego: Lib, other: Lib, idx: np.ndarray):
+    def __init__(self, ego: tuple[np.ndarray, np.ndarray], other: tuple[np.ndarray, np.ndarray],
+                 idx: np.ndarray):
         self.ego, self.other, self.idx = ego, other, idx
 
     def swapped(self) -> GameView:
         """The same game seen by the other player (it is the same pair of solves)."""
         return GameView(self.other, self.ego, self.idx[SWAP])
+
+    def ego_lib(self) -> Lib:
+        """The ego's library as a :class:`persuasive.library.Lib` of views."""
+        return as_lib(*self.ego)
+
+    def other_lib(self) -> Lib:
+        """The other's library as a :class:`persuasive.library.Lib` of views."""
+        return as_lib(*self.other)
 
 
 class GameCache:
@@ -223,9 +254,9 @@ class GameCache:
             return self._view
         if (key[2], key[3], key[0], key[1]) == self._key:
             return self._view.swapped()
-        ego, other = new_lib(*self._shape), new_lib(*self._shape)
+        ego, other = lib_buffers(*self._shape), lib_buffers(*self._shape)
         idx = np.empty(4, np.int64)
-        predict_into(*key, self.P, self.disc, ego, other, idx)
+        predict_buffers(*key, self.P, self.disc, *ego, *other, idx)
         self.solves += 1
         self._key, self._view = key, GameView(ego, other, idx)
         return self._view
@@ -268,9 +299,9 @@ class LFGAgent:
         """One step: act on the current role, then adapt; returns the acceleration [m/s^2]."""
         game = self.games(x_self, x_other)
         P = self.games.P
-        return float(lfg_step(self.state, float(x_other[0]), float(x_other[1]),
-                              rng.random_sample(), self.p_a, self.adapt_role, game.ego,
-                              game.other, game.idx, P[K.W_S], P[K.W_V], self.last))
+        return float(lfg_step_buffers(
+            self.state, float(x_other[0]), float(x_other[1]), rng.random_sample(), self.p_a,
+            self.adapt_role, *game.ego, *game.other, game.idx, P[K.W_S], P[K.W_V], self.last))
 
 
 class PersuasiveMPCAgent:
@@ -312,8 +343,8 @@ class PersuasiveMPCAgent:
             raise ValueError("human_role is required when tie_rule = 'given'")
         game = self.games(x_H, x_R)  # the human's view z = (x_H, x_R)
         self.last_game = game
-        return float(mpc_step(
+        return float(mpc_step_buffers(
             self.state, float(x_R[0]), float(x_R[1]), float(x_H[0]), float(x_H[1]),
-            given, int(human_role or 0), self.p_a_hat, game.ego, game.other, game.idx,
+            given, int(human_role or 0), self.p_a_hat, *game.ego, *game.other, game.idx,
             self.games.P, self.games.disc, self.diagnostics, self.last,
         ))

@@ -50,7 +50,7 @@ def build_config(config_file: str | None, sets: tuple[str, ...], mode: str | Non
     return config.with_overrides(overrides) if overrides else config
 
 
-def run_options(func: Callable) -> Callable:
+def run_options(seed_default: int = 1) -> Callable[[Callable], Callable]:
     """The options that define one closed-loop run (shared by simulate, plot and animate)."""
     options = [
         click.option("--av", type=click.Choice(["mpc", "lfg"]), default=None,
@@ -60,7 +60,8 @@ def run_options(func: Callable) -> Callable:
         click.option("--pa", type=float, default=None, help="Human's p_a in [0, 1] [1.0]."),
         click.option("--pa-hat", type=float, default=None,
                      help="AV's estimate of p_a in [0, 1] [equal to --pa]."),
-        click.option("--seed", type=int, default=1, show_default=True, help="Run seed."),
+        click.option("--seed", type=int, default=seed_default, show_default=True,
+                     help="Run seed."),
         click.option("--mode", type=click.Choice(list(MODES)), default=None,
                      help="paper (quirks Q1..Q7) or corrected [paper]."),
         click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
@@ -68,9 +69,13 @@ def run_options(func: Callable) -> Callable:
         click.option("--set", "sets", multiple=True, metavar="SECTION.FIELD=VALUE",
                      help="Override one parameter (repeatable), e.g. mpc.epsilon=0.05."),
     ]
-    for option in reversed(options):
-        func = option(func)
-    return func
+
+    def decorate(func: Callable) -> Callable:
+        for option in reversed(options):
+            func = option(func)
+        return func
+
+    return decorate
 
 
 def atomic_write_bytes(path: Path, write: Callable[[Path], None]) -> None:
@@ -93,7 +98,7 @@ def cli() -> None:
 
 
 @cli.command()
-@run_options
+@run_options()
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write the per-step log here (Parquet).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
@@ -176,6 +181,44 @@ def reproduce(table, seeds, workers, mode, config_file, sets, out, as_json, quie
         click.echo(f"{verdict} the published one (mode {mode}).\n")
     click.echo(f"{len(result.runs)} runs in {result.wall_time_s:.1f} s with "
                f"{workers or os.cpu_count()} workers")
+
+
+@cli.command()
+@click.option("--runs", "n_runs", type=click.IntRange(min=1), default=10, show_default=True,
+              help="Closed-loop runs whose states are replayed.")
+@click.option("--repeats", type=click.IntRange(min=1), default=3, show_default=True,
+              help="Passes over those states.")
+@click.option("--full", is_flag=True, help="Also time 'reproduce all' (16,000 runs).")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Workers for --full [all cores].")
+@click.option("--reference", is_flag=True, help="Also time the plain NumPy reference path.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def bench(n_runs, repeats, full, workers, reference, as_json) -> None:
+    """Time a game solve, an MPC decision, a run and (--full) the whole reproduction."""
+    from .bench import bench as run_bench
+
+    result = run_bench(n_runs, repeats, full, reference, workers)
+    if as_json:
+        click.echo(json.dumps(result))
+        return
+    m = result["machine"]
+    click.echo(f"machine: {m['cpus']} cpus, {m['processor']}, Python {m['python']}")
+    click.echo(f"game solve (libraries included): median {result['game_solve_us_median']:.1f} us,"
+               f" p99 {result['game_solve_us_p99']:.1f} us")
+    click.echo(f"MPC decision: median {result['mpc_decision_ms_median']:.3f} ms, "
+               f"p99 {result['mpc_decision_ms_p99']:.3f} ms")
+    click.echo(f"closed-loop MPC run (61 steps): median {result['mpc_run_ms_median']:.2f} ms")
+    if reference:
+        click.echo(f"reference NumPy path: game solve {result['reference_game_solve_us_median']:.0f}"
+                   f" us, MPC decision {result['reference_mpc_decision_ms_median']:.1f} ms")
+    if full:
+        click.echo(f"reproduce all (16,000 runs, {result['reproduce_workers']} workers): "
+                   f"{result['reproduce_all_s']:.1f} s, peak memory at most "
+                   f"{result['reproduce_peak_rss_mb']:.0f} MB")
+
+
+from ._cli_plots import animate, plot  # noqa: E402
+cli.add_command(plot); cli.add_command(animate)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from . import _packed as K
-from .library import Lib, Library, fill_library, trajectory_library
+from .library import Lib, Library, as_lib, fill_library, trajectory_library
 from .rewards import reward_matrix, reward_matrix_of, reward_terms
 
 # Indices into the 4-vector returned by a full prediction.
@@ -107,15 +107,27 @@ def solve_libs(Le: Lib, Lo: Lib, w_c: float, min_dist_sq: float, agg_max: bool,
 
 @njit(cache=True)
 def predict_into(s_e: float, v_e: float, s_o: float, v_o: float, P: np.ndarray,
-                 disc: np.ndarray, Le: Lib, Lo: Lib, out: np.ndarray) -> None:
+                 disc: np.ndarray, Le: Lib, Lo: Lib, out: np.ndarray,
+                 ego_built: bool = False) -> None:
     """Full prediction at the joint state: both libraries built into ``Le, Lo``, indices
-    (ego-L, ego-F, other-L, other-F) into ``out``."""
+    (ego-L, ego-F, other-L, other-F) into ``out``. ``ego_built``: ``Le`` already holds the
+    ego's library at ``(s_e, v_e)``."""
     n_traj = Le.S.shape[1]
-    build(s_e, v_e, P, disc, Le)
+    if not ego_built:
+        build(s_e, v_e, P, disc, Le)
     build(s_o, v_o, P, disc, Lo)
     M_e, M_o, C = np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj))
     solve_libs(Le, Lo, P[K.W_C], P[K.MIN_DIST_SQ], P[K.Q5] != 0.0, M_e, M_o, C,
                np.empty((4, n_traj)), out)
+
+
+@njit(cache=True)
+def predict_buffers(s_e: float, v_e: float, s_o: float, v_o: float, P: np.ndarray,
+                    disc: np.ndarray, buf_e: np.ndarray, win_e: np.ndarray, buf_o: np.ndarray,
+                    win_o: np.ndarray, out: np.ndarray) -> None:
+    """:func:`predict_into` on libraries stored as :func:`persuasive.library.lib_buffers`
+    (the cheap entry point from Python)."""
+    predict_into(s_e, v_e, s_o, v_o, P, disc, as_lib(buf_e, win_e), as_lib(buf_o, win_o), out)
 
 
 @dataclass(frozen=True)
@@ -205,6 +217,7 @@ __all__ = [
     "Prediction",
     "full_prediction",
     "leader_follower",
+    "predict_buffers",
     "predict_into",
     "solve_game",
     "build",

@@ -50,13 +50,6 @@ def ovm(h: float, v: float, v1: float, alpha: float, beta: float, kappa: float, 
 
 
 @njit(cache=True)
-def ovm_acceleration(h: float, v: float, v1: float, P: np.ndarray) -> float:
-    """:func:`ovm` with the parameters of ``P`` (from :func:`persuasive.pack`)."""
-    return ovm(h, v, v1, P[K.ALPHA], P[K.BETA], P[K.KAPPA], P[K.H_ST], P[K.H_GO], P[K.V_MAX],
-               P[K.U_MIN], P[K.U_MAX])
-
-
-@njit(cache=True)
 def offers_stop(s0: float, v0: float, P: np.ndarray) -> bool:
     """Whether the library of ``(s0, v0)`` holds the stop-at-the-line trajectory."""
     v_lo = max(P[K.V_MIN], v0 + P[K.U_MIN] * P[K.HORIZON])
@@ -72,7 +65,10 @@ def mesh_speed(v_lo: float, v_hi: float, i: int, n_mesh: int) -> float:
     """``numpy.linspace(v_lo, v_hi, n_mesh)[i]``, computed as numpy does."""
     if i == n_mesh - 1:
         return v_hi
-    return i * ((v_hi - v_lo) / (n_mesh - 1)) + v_lo
+    step = (v_hi - v_lo) / (n_mesh - 1)
+    if step == 0.0:  # numpy scales first when the step underflows
+        return i / (n_mesh - 1) * (v_hi - v_lo) + v_lo
+    return i * step + v_lo
 
 
 @njit(cache=True)
@@ -134,12 +130,28 @@ class Lib(NamedTuple):
     win: np.ndarray
 
 
+def lib_buffers(n: int, n_traj: int) -> tuple[np.ndarray, np.ndarray]:
+    """Storage of one :class:`Lib`: a float ``(5 n + 1, n_traj)`` and an int ``(n_traj, 2)``.
+
+    Python code passes these two plain arrays to the compiled entry points (a tuple of arrays
+    costs several microseconds per call to type-check); :func:`as_lib` views them as a
+    :class:`Lib` inside compiled code.
+    """
+    return np.empty((5 * n + 1, n_traj)), np.empty((n_traj, 2), np.int64)
+
+
+@njit(cache=True)
+def as_lib(buf: np.ndarray, win: np.ndarray) -> Lib:
+    """The :class:`Lib` stored in ``buf``/``win`` (rows: S, V, A, coll, sq, then base)."""
+    n = (buf.shape[0] - 1) // 5
+    return Lib(buf[0:n], buf[n:2 * n], buf[2 * n:3 * n], buf[5 * n], buf[3 * n:4 * n],
+               buf[4 * n:5 * n], win)
+
+
 @njit(cache=True)
 def new_lib(n: int, n_traj: int) -> Lib:
     """Uninitialised kernel arrays for a library of ``n_traj`` trajectories of ``n`` samples."""
-    return Lib(np.empty((n, n_traj)), np.empty((n, n_traj)), np.empty((n, n_traj)),
-               np.empty(n_traj), np.empty((n, n_traj)), np.empty((n, n_traj)),
-               np.empty((n_traj, 2), np.int64))
+    return as_lib(np.empty((5 * n + 1, n_traj)), np.empty((n_traj, 2), np.int64))
 
 
 @dataclass(frozen=True)

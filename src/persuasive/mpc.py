@@ -34,6 +34,10 @@ feasible, the best of all, flagged infeasible.
 
 Re-solves are batched: the HV's state at ``T1`` takes at most two values and the AV's re-solve
 start at most ``n_traj``; identical states (exact equality) share one library and one solve.
+A re-solve is skipped when no trajectory of the HV's library at ``T1`` comes within
+``min_dist`` of the candidates sharing it: every branch after ``T1`` is then safe whatever the
+answer, so the decision and its diagnostics are exactly those of the full computation
+(``persuasive.reference.mpc`` solves all 22 and the tests compare the two bit for bit).
 """
 
 from __future__ import annotations
@@ -74,7 +78,8 @@ def any_unsafe(LR: Lib, c: int, LH: Lib, off: int, thr: float) -> bool:
 @njit(cache=True)
 def decide(s_R: float, v_R: float, s_H: float, v_H: float, LH: Lib, LR: Lib, idx: np.ndarray,
            q_l: float, q_f: float, tie_leader: bool, p_a_hat: float,
-           P: np.ndarray, disc: np.ndarray, diag: np.ndarray) -> tuple[int, bool]:
+           P: np.ndarray, disc: np.ndarray, diag: np.ndarray, LH1a: Lib,
+           LH1b: Lib) -> tuple[int, bool]:
     """One branch-MPC decision; returns ``(chosen candidate, feasible)``.
 
     ``LH`` / ``LR``: the HV's and AV's libraries at ``x_H`` / ``x_R`` with their reward parts,
@@ -82,7 +87,10 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, LH: Lib, LR: Lib, idx
     (``persuasive.game.predict_into``). ``tie_leader``: the human model's own role is L.
     ``diag`` ``(n_traj, N_DIAG)`` receives per-candidate diagnostics (expected reward, min and
     max of P(safe) over the samples, the human's belief on the AV, P(plausible = L), the four
-    branch probabilities). Index names: ``c`` candidate, ``m`` sample, ``b`` branch.
+    branch probabilities). ``LH1a``, ``LH1b``: scratch that receives the HV's libraries at
+    its role-L and role-F states one sample ahead (``LH1b`` only when the two states differ);
+    the closed loop reuses them for the next step's prediction. Index names: ``c`` candidate,
+    ``m`` sample, ``b`` branch.
     """
     SR, VR = LR.S, LR.V
     SH, VH = LH.S, LH.V
@@ -140,7 +148,7 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, LH: Lib, LR: Lib, idx
                 av_src[c] = av_src[c2]
                 break
     # The HV's libraries at T1.
-    LH1 = (new_lib(n, n_traj), new_lib(n, n_traj))
+    LH1 = (LH1a, LH1b)
     for i in range(2):
         if hv_src[i] == i:
             build(SH[0, hv_traj[i]], VH[0, hv_traj[i]], P, disc, LH1[i])

@@ -34,7 +34,7 @@ def saturated_step(s, v, a, dt, v_min, v_max):
     """Section 1, vectorised: ``(s', v')`` for arrays ``s, v, a`` (same shape)."""
     s, v, a = np.asarray(s, float), np.asarray(v, float), np.asarray(a, float)
     v_new = v + a * dt
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t1_hi = (v_max - v) / a
         ds_hi = (v_max * v_max - v * v) / (2.0 * a) + v_max * (dt - t1_hi)
         t1_lo = (v_min - v) / a

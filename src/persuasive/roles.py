@@ -35,27 +35,34 @@ def gaussian_density(e_s: float, e_v: float, w_s: float, w_v: float) -> float:
     )
 
 
+#: Smallest normal double: a product below it has lost precision (or underflowed to 0).
+_TINY = 2.2250738585072014e-308
+
+
 @njit(cache=True)
 def bayes_update(b_l: float, b_f: float, e_ls: float, e_lv: float, e_fs: float, e_fv: float,
                  w_s: float, w_v: float) -> tuple[float, float]:
     """Posterior ``(P(L), P(F))`` from the prior ``(b_l, b_f)`` and the residuals per role.
 
     ``e_ls, e_lv``: residuals [m, m/s] of the prediction made for the other as leader;
-    ``e_fs, e_fv``: as follower. If both products underflow to zero, the posterior is
-    computed from log-likelihoods instead (never NaN).
+    ``e_fs, e_fv``: as follower. Computed as written, prior times density, normalised; when
+    both products are subnormal or zero (residuals of metres), the densities are first divided
+    by the larger one, which keeps the prior's digits and never gives NaN.
     """
     pl = b_l * gaussian_density(e_ls, e_lv, w_s, w_v)
     pf = b_f * gaussian_density(e_fs, e_fv, w_s, w_v)
+    if pl >= _TINY or pf >= _TINY:
+        z = pl + pf
+        return pl / z, pf / z
+    ql = 0.5 * (e_ls * e_ls / w_s + e_lv * e_lv / w_v)
+    qf = 0.5 * (e_fs * e_fs / w_s + e_fv * e_fv / w_v)
+    m = min(ql, qf)
+    pl = b_l * (1.0 if ql == m else math.exp(m - ql))
+    pf = b_f * (1.0 if qf == m else math.exp(m - qf))
     z = pl + pf
     if z > 0.0:
         return pl / z, pf / z
-    # Both underflow: compare in log space (a zero prior stays zero).
-    ll = (math.log(b_l) if b_l > 0.0 else -math.inf) - 0.5 * (e_ls * e_ls / w_s + e_lv * e_lv / w_v)
-    lf = (math.log(b_f) if b_f > 0.0 else -math.inf) - 0.5 * (e_fs * e_fs / w_s + e_fv * e_fv / w_v)
-    m = max(ll, lf)
-    pl, pf = math.exp(ll - m), math.exp(lf - m)
-    z = pl + pf
-    return pl / z, pf / z
+    return b_l, b_f  # the only role the evidence favours has prior 0: the prior stands
 
 
 @njit(cache=True)
@@ -91,12 +98,3 @@ def next_role(role: int, r: float, Pi: np.ndarray) -> int:
     if role == LEADER:
         return FOLLOWER if r > Pi[0, 0] else LEADER
     return LEADER if r > Pi[1, 1] else FOLLOWER
-
-
-def role_index(role: str) -> int:
-    """0 for "leader", 1 for "follower"."""
-    return LEADER if role == "leader" else FOLLOWER
-
-
-def role_name(index: int) -> str:
-    return "leader" if index == LEADER else "follower"

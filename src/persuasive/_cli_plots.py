@@ -1,0 +1,121 @@
+"""The ``persuasive plot`` and ``persuasive animate`` commands (registered by ``persuasive.cli``).
+
+The run options are those of ``persuasive simulate`` (:func:`persuasive.cli.run_options`),
+except that ``--seed`` defaults to the run the authors show (996). matplotlib and the
+simulation are imported inside the commands, so ``persuasive --help`` stays fast and the
+command line never pulls matplotlib in unless a figure is drawn; the Agg backend is forced
+there, as no window is ever opened. Every file is checked for a known extension before any
+work, and written to a temporary sibling first, then renamed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import click
+
+from .cli import build_config, run_options
+
+#: Seed of the run shown in the paper's Figs. 2 and 3.
+PAPER_SEED = 996
+
+
+def _plots():
+    """The plotting module, with the non-interactive backend forced first."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from . import plots
+
+    return plots
+
+
+def _runs(single: bool, av: str | None, hv_role, pa, pa_hat, seed, mode, config_file, sets):
+    """The run the options describe (``single``), or the LFG-AV and MPC-AV runs of Figs. 2-3."""
+    from .simulation import simulate
+
+    if single:
+        return (simulate(build_config(config_file, sets, mode, av, hv_role, pa, pa_hat), seed),)
+    if av is not None:
+        raise click.UsageError("--av applies only with --single (without it both the LFG AV "
+                               "and the MPC AV are plotted)")
+    return tuple(simulate(build_config(config_file, sets, mode, kind, hv_role, pa, pa_hat), seed)
+                 for kind in ("lfg", "mpc"))
+
+
+def _out_option(help_text: str) -> Callable:
+    return click.option("--out", required=True, type=click.Path(dir_okay=False),
+                        help=help_text)
+
+
+@click.group()
+def plot() -> None:
+    """Draw the paper's figures (profiles, top view) and reproduced tables."""
+
+
+def _single_option(func: Callable) -> Callable:
+    return click.option("--single", is_flag=True,
+                        help="Plot the one run the options describe instead of both cases "
+                             "(LFG AV and MPC AV).")(func)
+
+
+@plot.command()
+@run_options(seed_default=PAPER_SEED)
+@_single_option
+@_out_option("Figure file: .png, .svg or .pdf.")
+def profile(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, single, out) -> None:
+    """Roles, beliefs, speeds and accelerations over time (the paper's Fig. 2)."""
+    plots = _plots()
+    plots.check_figure_path(out)
+    runs = _runs(single, av, hv_role, pa, pa_hat, seed, mode, config_file, sets)
+    fig = plots.profile_single(*runs) if single else plots.profile_figure(*runs)
+    click.echo(f"wrote {plots.save_figure(fig, out)}")
+
+
+@plot.command()
+@run_options(seed_default=PAPER_SEED)
+@_single_option
+@click.option("--every", "every_s", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
+              show_default=True, metavar="SECONDS", help="Time between vehicle snapshots.")
+@_out_option("Figure file: .png, .svg or .pdf.")
+def topview(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, single, every_s,
+            out) -> None:
+    """The intersection from above with vehicle snapshots (the paper's Fig. 3)."""
+    plots = _plots()
+    plots.check_figure_path(out)
+    runs = _runs(single, av, hv_role, pa, pa_hat, seed, mode, config_file, sets)
+    fig = (plots.topview_single(*runs, every_s=every_s) if single
+           else plots.topview_figure(*runs, every_s=every_s))
+    click.echo(f"wrote {plots.save_figure(fig, out)}")
+
+
+@plot.command()
+@click.option("--from", "results", required=True, type=click.Path(file_okay=False),
+              help="Results folder of 'persuasive reproduce' (holds summary.json).")
+@_out_option("Figure file: .png, .svg or .pdf.")
+def table(results: str, out: str) -> None:
+    """A reproduced table as bars beside the published shares."""
+    from .experiments import load_summary
+
+    plots = _plots()
+    plots.check_figure_path(out)
+    fig = plots.table_figure(load_summary(Path(results)))
+    click.echo(f"wrote {plots.save_figure(fig, out)}")
+
+
+@click.command()
+@run_options(seed_default=PAPER_SEED)
+@click.option("--fps", type=click.IntRange(min=1), default=10, show_default=True,
+              help="Frames per second (10 is real time).")
+@_out_option("Animation file: .mp4 or .gif.")
+def animate(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, fps, out) -> None:
+    """Animate one run: the top view, with the beliefs and roles shown live."""
+    plots = _plots()
+    plots.check_animation_path(out)
+    (run,) = _runs(True, av, hv_role, pa, pa_hat, seed, mode, config_file, sets)
+    path = plots.animate(run, out, fps=fps)
+    click.echo(f"wrote {path} ({len(run.log['step'])} frames at {fps} fps)")
+
+
+__all__ = ["animate", "plot"]

@@ -1,0 +1,132 @@
+"""Benchmarks of the planner and the simulator (``persuasive bench``).
+
+Figures, each over states visited by real closed-loop runs (paper mode, Table 2's first row,
+seeds ``1..n_runs``), after a warm-up, timed call by call with ``time.perf_counter_ns`` from
+Python (so they include the cost of calling the compiled code, as a user pays it):
+
+- ``game_solve_us_median``: one full prediction of a joint state (both trajectory libraries,
+  both reward matrices, both leader-follower solves), microseconds;
+- ``mpc_decision_ms_median`` / ``_p99``: one decision of the AV (:meth:`Planner.plan`: the
+  human-view prediction, the branch MPC with its re-solves, the belief update), replayed along
+  the runs' states, milliseconds;
+- ``mpc_run_ms_median``: one whole closed-loop MPC run (61 steps) with :func:`simulate`;
+- with ``full``: ``reproduce_all_s``, the wall time of reproducing Tables 1 and 2 (16,000 runs),
+  and ``reproduce_peak_rss_mb``, an upper bound of the memory held at once (this process's
+  peak plus each worker at the largest worker peak; Linux ``ru_maxrss``).
+- with ``reference``: the same game solve and MPC decision on the plain NumPy path
+  (``persuasive.reference``), the "before" of the compiled kernels.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import resource
+import time
+from typing import Any
+
+import numpy as np
+
+from ._packed import discounts, pack
+from .config import Config
+from .game import predict_buffers
+from .library import lib_buffers
+from .planner import Planner
+from .simulation import simulate
+
+
+def _game_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
+    P, disc = pack(config), discounts(config)
+    n, n_traj = config.library.n_samples, config.library.n_traj
+    (be, we), (bo, wo) = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
+    idx = np.empty(4, np.int64)
+    joint = [tuple(float(x) for x in row) for run in runs for row in run.states[:-1]]
+    for s_av, v_av, s_hv, v_hv in joint[:20]:  # warm-up
+        predict_buffers(s_hv, v_hv, s_av, v_av, P, disc, be, we, bo, wo, idx)
+    times = []
+    clock = time.perf_counter_ns
+    for _ in range(repeats):
+        for s_av, v_av, s_hv, v_hv in joint:
+            t = clock()
+            predict_buffers(s_hv, v_hv, s_av, v_av, P, disc, be, we, bo, wo, idx)
+            times.append(clock() - t)
+    return np.array(times)
+
+
+def _decision_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
+    """Each run's AV decisions replayed with a :class:`Planner` (same states, same HV roles)."""
+    planner = Planner(config)
+    times = []
+    clock = time.perf_counter_ns
+    for rep in range(repeats + 1):
+        for run in runs:
+            planner.reset()
+            # quirk Q3 reads the HV's role after its own step, as in the closed loop
+            for row, role in zip(run.states[:-1], run.log["hv_next_role"]):
+                s_av, v_av, s_hv, v_hv = row
+                t = clock()
+                planner.plan((s_av, v_av), (s_hv, v_hv), human_role=str(role))
+                if rep:  # the first pass is the warm-up
+                    times.append(clock() - t)
+    return np.array(times)
+
+
+def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: bool = False,
+          workers: int | None = None) -> dict[str, Any]:
+    """Measure the figures of the module docstring; returns them as a flat dict."""
+    config = Config()  # paper mode, HV starts as leader, p_a = p_a_hat = 1 (Table 2, row 1)
+    simulate(config, 1)  # load the compiled code
+    runs = [simulate(config, seed) for seed in range(1, n_runs + 1)]
+    game = _game_times_ns(config, runs, repeats)
+    decision = _decision_times_ns(config, runs, repeats)
+    run_times = []
+    for seed in range(1, n_runs + 1):
+        t = time.perf_counter()
+        simulate(config, seed)
+        run_times.append(time.perf_counter() - t)
+    out: dict[str, Any] = {
+        "game_solve_us_median": float(np.median(game) / 1e3),
+        "game_solve_us_p99": float(np.percentile(game, 99) / 1e3),
+        "mpc_decision_ms_median": float(np.median(decision) / 1e6),
+        "mpc_decision_ms_p99": float(np.percentile(decision, 99) / 1e6),
+        "mpc_run_ms_median": float(np.median(run_times) * 1e3),
+        "samples": {"game_solves": int(game.size), "mpc_decisions": int(decision.size),
+                    "runs": n_runs},
+        "machine": {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
+                    "python": platform.python_version()},
+    }
+    if reference:
+        out.update(_reference_times(config, runs[0]))
+    if full:
+        from .experiments import reproduce
+
+        workers = workers or os.cpu_count() or 1
+        t = time.perf_counter()
+        reproduce("all", 1000, workers, "paper")
+        out["reproduce_all_s"] = time.perf_counter() - t
+        out["reproduce_workers"] = workers
+        # an upper bound of the memory in use at once: this process at its peak plus every
+        # worker at the largest peak of any worker
+        own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        out["reproduce_peak_rss_mb"] = (own + workers * child) / 1024
+    return out
+
+
+def _reference_times(config: Config, run, n: int = 5) -> dict[str, float]:
+    """The straightforward NumPy path on ``n`` states of one run (it is slow)."""
+    from . import reference
+
+    P, disc = pack(config), discounts(config)
+    states = run.states
+    picks = states[np.linspace(0, len(states) - 2, n).astype(int)]
+    games, decisions = [], []
+    for s_av, v_av, s_hv, v_hv in picks:
+        t = time.perf_counter_ns()
+        reference.full_prediction((s_hv, v_hv), (s_av, v_av), P, disc)
+        games.append(time.perf_counter_ns() - t)
+        t = time.perf_counter_ns()
+        reference.mpc((s_av, v_av), (s_hv, v_hv), (0.5, 0.5), True, 1.0, P, disc)
+        decisions.append(time.perf_counter_ns() - t)
+    return {"reference_game_solve_us_median": float(np.median(games) / 1e3),
+            "reference_mpc_decision_ms_median": float(np.median(decisions) / 1e6)}

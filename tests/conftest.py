@@ -1,0 +1,45 @@
+"""Shared fixtures and the hypothesis profile.
+
+The profile drops hypothesis' per-example deadline: the first call of a Numba kernel loads it
+from the on-disk cache (or compiles it), which takes longer than any sensible deadline.
+"""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import HealthCheck, settings
+
+from persuasive._packed import discounts, pack
+from persuasive.config import Config
+
+settings.register_profile(
+    "persuasive", deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.load_profile("persuasive")
+
+
+class Packed:
+    """A configuration with its kernel parameter vector ``P`` and discounts ``disc``."""
+
+    def __init__(self, config: Config):
+        self.config = config
+        self.P = pack(config)
+        self.disc = discounts(config)
+
+
+@pytest.fixture(scope="session")
+def paper() -> Packed:
+    """The paper-mode defaults (quirks Q1..Q7 on)."""
+    return Packed(Config(mode="paper"))
+
+
+@pytest.fixture(scope="session")
+def corrected() -> Packed:
+    """The corrected-mode defaults (Q1, Q2, Q3, Q5 off)."""
+    return Packed(Config(mode="corrected"))
+
+
+@pytest.fixture(scope="session", params=["paper", "corrected"])
+def packed(request) -> Packed:
+    """Both modes, one after the other."""
+    return Packed(Config(mode=request.param))

@@ -1,0 +1,162 @@
+"""The command line as a user types it: outputs, files, and one-line errors with exit status 2."""
+
+import json
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from persuasive.cli import main
+from persuasive.simulation import simulate
+from persuasive.config import Config
+
+REQUIRED = ("mode", "av", "hv_role", "pa", "pa_hat", "seed", "hv_initial_state", "first_at_line",
+            "first_at_conflict_point", "collision", "min_distance_to_line_m", "min_distance_m",
+            "idx_end", "infeasible_steps", "hv_role_changes")
+
+
+def run(capsys, *args):
+    code = main(list(args))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize("mode", ["paper", "corrected"])
+def test_simulate_json_in_both_modes(capsys, mode):
+    code, out, err = run(capsys, "simulate", "--json", "--mode", mode, "--seed", "7")
+    assert code == 0 and err == ""
+    payload = json.loads(out)  # exactly one JSON object
+    assert set(REQUIRED) <= set(payload)
+    assert payload["mode"] == mode and payload["seed"] == 7 and payload["av"] == "mpc"
+    assert payload["pa_hat"] == payload["pa"] == 1.0
+    expected = simulate(Config(mode=mode), 7).summary()
+    assert payload == json.loads(json.dumps(expected))
+
+
+def test_simulate_options_reach_the_configuration(capsys):
+    code, out, _ = run(capsys, "simulate", "--json", "--av", "lfg", "--hv-role", "follower",
+                       "--pa", "0.7", "--seed", "3", "--set", "mpc.epsilon=0.05")
+    payload = json.loads(out)
+    assert (payload["av"], payload["hv_role"], payload["pa"]) == ("lfg", "follower", 0.7)
+    cfg = Config().with_overrides({"simulation.av": "lfg", "simulation.hv_role": "follower",
+                                   "roles.p_a": 0.7})
+    assert payload["first_at_line"] == simulate(cfg, 3).outcome.first_at_line
+
+
+def test_simulate_text_and_parquet(capsys, tmp_path):
+    out_file = tmp_path / "sub" / "log.parquet"
+    code, out, _ = run(capsys, "simulate", "--seed", "996", "--out", str(out_file))
+    assert code == 0
+    assert "first at the crossing line: AV" in out and "collision: no" in out
+    log = pd.read_parquet(out_file)
+    record = simulate(Config(), 996)
+    assert len(log) == 61
+    pd.testing.assert_frame_equal(log, record.frame())
+
+
+def test_config_file_and_precedence(capsys, tmp_path):
+    toml = tmp_path / "c.toml"
+    toml.write_text('mode = "corrected"\n[roles]\np_a = 0.5\n[mpc]\nepsilon = 0.05\n')
+    _, out, _ = run(capsys, "simulate", "--json", "--config", str(toml))
+    assert json.loads(out)["mode"] == "corrected" and json.loads(out)["pa"] == 0.5
+    _, out, _ = run(capsys, "simulate", "--json", "--config", str(toml), "--pa", "0.3",
+                    "--mode", "paper")
+    assert json.loads(out)["pa"] == 0.3 and json.loads(out)["mode"] == "paper"
+
+
+BAD = [
+    (["simulate", "--pa", "1.5"], "roles.p_a = 1.5"),
+    (["simulate", "--pa-hat", "-0.1"], "mpc.p_a_hat"),
+    (["simulate", "--pa", "nan"], "roles.p_a"),
+    (["simulate", "--set", "mpc.epsilon=1"], "mpc.epsilon"),
+    (["simulate", "--set", "vehicle.u_min_mps2=0"], "vehicle.u_min_mps2"),
+    (["simulate", "--set", "vehicle.v_max_mps=0"], "vehicle.v_max_mps"),
+    (["simulate", "--set", "simulation.dt_s=0"], "simulation.dt_s"),
+    (["simulate", "--set", "scenario.hv_s0_m=0"], "scenario.hv_s0_m"),
+    (["simulate", "--set", "roles.w_s_m2=inf"], "roles.w_s_m2"),
+    (["simulate", "--mode", "exact"], "--mode"),
+    (["simulate", "--hv-role", "boss"], "--hv-role"),
+    (["simulate", "--set", "nonsense"], "--set"),
+    (["simulate", "--set", "mpc.horizon=3"], "mpc.horizon"),
+    (["simulate", "--seed", "-4"], "seed"),
+    (["reproduce", "table3"], "table3"),
+    (["reproduce", "table1", "--seeds", "0"], "--seeds"),
+    (["reproduce", "table1", "--workers", "0"], "--workers"),
+]
+
+
+@pytest.mark.parametrize("args, names", BAD, ids=[" ".join(a) for a, _ in BAD])
+def test_bad_input_is_one_line_and_exit_2(capsys, args, names):
+    code, out, err = run(capsys, *args)
+    assert code == 2
+    assert out == ""
+    assert err.count("\n") == 1 and err.startswith("error: ") and names in err
+    assert "Traceback" not in err
+
+
+def test_malformed_and_missing_config_files(capsys, tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[roles\np_a = ")
+    code, _, err = run(capsys, "simulate", "--config", str(bad))
+    assert code == 2 and "not valid TOML" in err and err.count("\n") == 1
+    code, _, err = run(capsys, "simulate", "--config", str(tmp_path / "none.toml"))
+    assert code == 2 and "cannot be read" in err
+
+
+def test_failed_run_leaves_existing_output_untouched(capsys, tmp_path):
+    target = tmp_path / "log.parquet"
+    target.write_bytes(b"previous results")
+    code, _, _ = run(capsys, "simulate", "--pa", "2", "--out", str(target))
+    assert code == 2 and target.read_bytes() == b"previous results"
+    assert [p.name for p in tmp_path.iterdir()] == ["log.parquet"]
+
+
+def test_console_script_exit_status_and_no_traceback():
+    bad = subprocess.run([sys.executable, "-m", "persuasive", "simulate", "--pa", "-1"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2
+    assert bad.stderr.strip().startswith("error: roles.p_a = -1.0 is out of range")
+    assert "Traceback" not in bad.stderr and bad.stdout == ""
+    good = subprocess.run([sys.executable, "-m", "persuasive", "simulate", "--json"],
+                          capture_output=True, text=True)
+    assert good.returncode == 0 and json.loads(good.stdout)["first_at_line"] == 1
+
+
+def test_reproduce_json_and_files(capsys, tmp_path):
+    code, out, _ = run(capsys, "reproduce", "all", "--seeds", "3", "--workers", "1", "--json",
+                       "--quiet", "--out", str(tmp_path))
+    assert code == 0
+    payload = json.loads(out)
+    assert set(payload) == {"table1", "table2"}
+    t2 = payload["table2"]
+    assert t2["table"] == "table2" and t2["mode"] == "paper" and t2["seeds"] == 3
+    row = t2["rows"][0]
+    for key in ("hv_role", "pa", "pa_hat", "runs", "av_first", "hv_first", "same_step",
+                "neither", "av_first_pct", "hv_first_pct", "published_av_first_pct",
+                "published_hv_first_pct", "collisions", "runs_with_infeasible",
+                "violations_to_line", "violations_whole_run"):
+        assert key in row
+    assert payload["table1"]["rows"][0]["pa_hat"] is None
+    for t in ("table1", "table2"):
+        assert {p.name for p in (tmp_path / t).iterdir()} == {"runs.parquet", "summary.json",
+                                                               "summary.md"}
+
+
+def test_reproduce_text_table(capsys, tmp_path):
+    code, out, _ = run(capsys, "reproduce", "table1", "--seeds", "2", "--workers", "1",
+                       "--quiet", "--out", str(tmp_path))
+    assert code == 0
+    assert "| L | 1.00 | 0.0 | 100.0 | 0.0 / 100.0 |" in out
+    assert "4 runs in" in out
+
+
+def test_bench_json(capsys):
+    code, out, _ = run(capsys, "bench", "--json", "--runs", "1", "--repeats", "1")
+    assert code == 0
+    result = json.loads(out)
+    for key in ("game_solve_us_median", "mpc_decision_ms_median", "mpc_decision_ms_p99",
+                "mpc_run_ms_median"):
+        assert result[key] > 0
+    assert result["mpc_decision_ms_p99"] >= result["mpc_decision_ms_median"]
+    assert result["samples"]["mpc_decisions"] == 61 and "reproduce_all_s" not in result

@@ -1,0 +1,439 @@
+"""Figures, animations and the plot commands (``persuasive.plots``, ``persuasive._cli_plots``).
+
+The figures are checked through their artists: every data artist carries a ``gid``, and its
+data must equal the run's log and states exactly (the plot functions copy, never compute).
+Crossing times are recomputed here from the states and the spec's arrival test
+(``s >= -(stop_distance + 0.2 m)``), independently of the plotting code. Saved files are read
+back: PNGs must hold the HV blue and the AV red, animations one frame per decision step.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import imageio.v2 as iio2
+import imageio.v3 as iio3
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+from matplotlib.patches import Circle, Rectangle
+
+from persuasive import plots
+from persuasive.cli import cli, main
+from persuasive.config import Config, ConfigError
+from persuasive.experiments import PUBLISHED, reproduce, save
+from persuasive.simulation import simulate
+
+SEED = 996
+ARRIVAL_TOL_M = 0.2  # Q7, the arrival tolerance of the paper's runs
+
+
+# -- fixtures -----------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def lfg_run():
+    return simulate(Config().with_overrides({"simulation.av": "lfg"}), SEED)
+
+
+@pytest.fixture(scope="module")
+def mpc_run():
+    return simulate(Config().with_overrides({"simulation.av": "mpc"}), SEED)
+
+
+@pytest.fixture(scope="module")
+def short_run():
+    """A 25-step MPC run, for the animations."""
+    return simulate(Config().with_overrides({"simulation.n_steps": 25}), SEED)
+
+
+@pytest.fixture(scope="module")
+def profile(lfg_run, mpc_run):
+    return plots.profile_figure(lfg_run, mpc_run)
+
+
+@pytest.fixture(scope="module")
+def topview(lfg_run, mpc_run):
+    return plots.topview_figure(lfg_run, mpc_run)
+
+
+@pytest.fixture(scope="module")
+def results_dir(tmp_path_factory):
+    """A real ``reproduce table2`` results folder (2 seeds per row)."""
+    folder = tmp_path_factory.mktemp("results") / "table2"
+    save(reproduce("table2", seeds=2, workers=1), "table2", folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def summary(results_dir):
+    import json
+
+    return json.loads((results_dir / "summary.json").read_text())
+
+
+# -- helpers ------------------------------------------------------------------------------------
+
+
+def by_gid(container, gid):
+    """The artists of ``container`` (axes or figure) with ``gid``."""
+    return [a for a in container.findobj() if a.get_gid() == gid]
+
+
+def one(ax, gid):
+    found = by_gid(ax, gid)
+    assert len(found) == 1, f"{gid}: {len(found)} artists"
+    return found[0]
+
+
+def expected_crossing(run, column):
+    """First ``k >= 1`` with the vehicle at the crossing line, as ``k * dt``; None if never."""
+    line = -(run.config.vehicle.stop_distance_m + ARRIVAL_TOL_M)
+    hits = np.flatnonzero(run.states[1:, column] >= line)
+    return None if hits.size == 0 else (hits[0] + 1) * run.config.simulation.dt_s
+
+
+def colour_pixels(image):
+    """Counts of AV-red and HV-blue pixels in an RGB(A) image with values in [0, 255]."""
+    rgb = image[..., :3].astype(float)
+    if rgb.max() <= 1.0:
+        rgb = rgb * 255
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    red = (r > 180) & (g < 90) & (b < 90)
+    blue = (b > 150) & (r < 80) & (g > 80) & (g < 160)
+    return int(red.sum()), int(blue.sum())
+
+
+# -- module boundaries --------------------------------------------------------------------------
+
+
+def test_model_modules_and_cli_do_not_import_matplotlib():
+    code = ("import sys, persuasive.cli, persuasive.simulation, persuasive.experiments; "
+            "sys.exit(any(m.split('.')[0] == 'matplotlib' for m in sys.modules))")
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+# -- profile figure (Fig. 2) --------------------------------------------------------------------
+
+
+def test_profile_layout(profile, lfg_run, mpc_run):
+    axes = profile.axes
+    assert len(axes) == 8  # 4 rows x 2 columns
+    grid = np.array(axes).reshape(4, 2)
+    assert "AV: LFG" in grid[0, 0].get_title() and "branch MPC" in grid[0, 1].get_title()
+    assert "seed 996" in profile.get_suptitle()
+    for ax in axes:  # one shared time axis over the whole run
+        assert ax.get_xlim() == pytest.approx((0.0, 61 * 0.1))
+    # data lines per row (+ 2 crossing markers each): the MPC AV has no role line
+    counts = [[len(ax.get_lines()) for ax in row] for row in grid]
+    assert counts == [[4, 3], [4, 4], [4, 4], [4, 4]]
+    assert by_gid(grid[0, 1], "av-role") == []
+    assert grid[0, 0].get_yticks().tolist() == [0.0, 1.0]
+    assert [t.get_text() for t in grid[0, 0].get_yticklabels()] == ["F", "L"]
+
+
+@pytest.mark.parametrize("column", [0, 1])
+def test_profile_lines_equal_the_log(profile, lfg_run, mpc_run, column):
+    run = (lfg_run, mpc_run)[column]
+    log, states, n = run.log, run.states, len(run.log["step"])
+    rows = np.array(profile.axes).reshape(4, 2)[:, column]
+    t_states = np.arange(n + 1) * 0.1
+    for who, s_col in (("hv", 3), ("av", 1)):
+        speed = one(rows[2], f"{who}-speed")
+        np.testing.assert_array_equal(speed.get_ydata()[:-1], log[f"{who}_v_mps"])
+        assert speed.get_ydata()[-1] == states[-1, s_col]
+        np.testing.assert_allclose(speed.get_xdata(), t_states, rtol=0, atol=1e-12)
+        accel = one(rows[3], f"{who}-accel")
+        assert accel.get_drawstyle() == "steps-post"
+        np.testing.assert_array_equal(accel.get_ydata()[:-1], log[f"{who}_accel_mps2"])
+        np.testing.assert_array_equal(one(rows[1], f"{who}-belief").get_xdata(), log["t_s"])
+    np.testing.assert_array_equal(one(rows[1], "hv-belief").get_ydata(),
+                                  log["hv_belief_other_leader"])
+    av_belief = "av_belief_other_leader" if column == 0 else "av_belief_hv_leader"
+    np.testing.assert_array_equal(one(rows[1], "av-belief").get_ydata(), log[av_belief])
+    for who in ("hv", "av") if column == 0 else ("hv",):
+        role = one(rows[0], f"{who}-role")
+        np.testing.assert_array_equal(role.get_ydata()[:-1], log[f"{who}_role"] == "leader")
+    # colours: HV blue, AV red
+    assert one(rows[2], "hv-speed").get_color() == plots.HV_COLOR
+    assert one(rows[2], "av-speed").get_color() == plots.AV_COLOR
+
+
+@pytest.mark.parametrize("column", [0, 1])
+def test_profile_crossing_markers(profile, lfg_run, mpc_run, column):
+    run = (lfg_run, mpc_run)[column]
+    rows = np.array(profile.axes).reshape(4, 2)[:, column]
+    times = {who: expected_crossing(run, col) for who, col in (("av", 0), ("hv", 2))}
+    # the first arrival is the outcome's idx_end (after step idx_end)
+    assert min(times.values()) == pytest.approx((run.outcome.idx_end + 1) * 0.1)
+    for ax in rows:
+        for who, t in times.items():
+            marker = one(ax, f"{who}-crossing")
+            np.testing.assert_allclose(marker.get_xdata(), [t, t], rtol=0, atol=1e-12)
+            assert marker.get_linestyle() == "--"
+            assert marker.get_color() == {"hv": plots.HV_COLOR, "av": plots.AV_COLOR}[who]
+
+
+def test_seed_996_crossings_are_the_papers_order(lfg_run, mpc_run):
+    # 2-LFG: the HV leads and crosses first; with the MPC the AV persuades it and goes first.
+    assert plots.crossing_time(lfg_run, "hv") < plots.crossing_time(lfg_run, "av")
+    assert plots.crossing_time(mpc_run, "av") < plots.crossing_time(mpc_run, "hv")
+
+
+def test_no_crossing_no_marker():
+    run = simulate(Config().with_overrides({"simulation.n_steps": 8}), SEED)
+    assert plots.crossing_time(run, "av") is None and plots.crossing_time(run, "hv") is None
+    fig = plots.profile_single(run)
+    assert len(fig.axes) == 4
+    assert by_gid(fig, "av-crossing") == [] and by_gid(fig, "hv-crossing") == []
+    np.testing.assert_array_equal(one(fig.axes[2], "hv-speed").get_ydata(), run.states[:, 3])
+
+
+def test_profile_single_lfg_draws_both_roles(lfg_run):
+    fig = plots.profile_single(lfg_run)
+    assert len(fig.axes) == 4
+    assert [len(ax.get_lines()) for ax in fig.axes] == [4, 4, 4, 4]
+    assert "seed 996" in fig.axes[0].get_title()
+
+
+# -- saving -------------------------------------------------------------------------------------
+
+
+def test_saved_png_is_not_blank_and_has_both_colours(profile, tmp_path):
+    path = plots.save_figure(profile, tmp_path / "profile.png", dpi=100)
+    image = mpimg.imread(path)
+    assert image.shape[:2] == (520, 700)  # 7.0 x 5.2 in at 100 dpi
+    assert image[..., :3].std() > 0.05
+    red, blue = colour_pixels(image)
+    assert red > 500 and blue > 500
+
+
+@pytest.mark.parametrize("ext, magic", [(".svg", b"<svg"), (".pdf", b"%PDF"), (".PNG", b"\x89PNG")])
+def test_format_follows_extension(lfg_run, tmp_path, ext, magic):
+    path = plots.save_figure(plots.profile_single(lfg_run), tmp_path / f"fig{ext}", dpi=50)
+    head = path.read_bytes()[:400]
+    assert magic in head
+    if ext == ".svg":  # the gids reach the SVG
+        assert b'id="hv-speed"' in path.read_bytes()
+
+
+def test_unknown_extension_and_failed_write_leave_files_alone(lfg_run, tmp_path, monkeypatch):
+    fig = plots.profile_single(lfg_run)
+    with pytest.raises(ConfigError, match="unsupported extension '.jpg'"):
+        plots.save_figure(fig, tmp_path / "fig.jpg")
+    target = tmp_path / "fig.png"
+    target.write_bytes(b"old")
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(fig, "savefig", broken)
+    with pytest.raises(RuntimeError):
+        plots.save_figure(fig, target)
+    assert target.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png"]
+
+
+# -- top view (Fig. 3) --------------------------------------------------------------------------
+
+
+def test_topview_geometry(topview, lfg_run):
+    veh = lfg_run.config.vehicle
+    assert len(topview.axes) == 2
+    a, b = topview.axes
+    assert a.get_xlim() == b.get_xlim() == a.get_ylim() == b.get_ylim()  # one square window
+    for ax in (a, b):
+        assert ax.get_aspect() == 1.0
+        road_av, road_hv = one(ax, "road-av"), one(ax, "road-hv")
+        assert road_av.get_height() == road_hv.get_width() == veh.lane_width_m == 4.0
+        np.testing.assert_array_equal(one(ax, "av-crossing-line").get_xdata(), [-6.5, -6.5])
+        np.testing.assert_array_equal(one(ax, "hv-crossing-line").get_ydata(), [-6.5, -6.5])
+        circle = one(ax, "safety-circle")
+        assert isinstance(circle, Circle) and circle.get_radius() == veh.min_dist_m == 7.5
+        assert circle.center == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("column", [0, 1])
+def test_topview_snapshots_follow_the_states(topview, lfg_run, mpc_run, column):
+    run, ax = (lfg_run, mpc_run)[column], topview.axes[column]
+    idx = np.arange(0, 62, 10)  # every 1 s: states 0, 10, ..., 60
+    for who, col in (("av", 0), ("hv", 2)):
+        snaps = by_gid(ax, f"{who}-snapshot")
+        assert len(snaps) == idx.size and all(isinstance(r, Rectangle) for r in snaps)
+        s = run.states[idx, col]
+        if who == "av":  # along x at (s, 0), 5 m long and 2.5 m wide
+            centres = [(r.get_x() + r.get_width() / 2, r.get_y() + r.get_height() / 2)
+                       for r in snaps]
+            np.testing.assert_allclose(centres, np.c_[s, np.zeros_like(s)], atol=1e-12)
+            assert {(r.get_width(), r.get_height()) for r in snaps} == {(5.0, 2.5)}
+        else:  # along y at (0, s)
+            centres = [(r.get_x() + r.get_width() / 2, r.get_y() + r.get_height() / 2)
+                       for r in snaps]
+            np.testing.assert_allclose(centres, np.c_[np.zeros_like(s), s], atol=1e-12)
+            assert {(r.get_width(), r.get_height()) for r in snaps} == {(2.5, 5.0)}
+        alphas = [r.get_facecolor()[3] for r in snaps]
+        assert np.all(np.diff(alphas) > 0)  # older snapshots fainter
+        path = one(ax, f"{who}-path")
+        np.testing.assert_array_equal(path.get_xdata() if who == "av" else path.get_ydata(),
+                                      run.states[:, col])
+        labels = [t.get_text() for t in by_gid(ax, f"{who}-time-label")]
+        assert labels[0] == "0 s" and labels[-1] == "6 s"
+        assert set(labels) <= {f"{k / 10:g} s" for k in idx}
+
+
+def test_topview_every_and_single(mpc_run):
+    fig = plots.topview_single(mpc_run, every_s=0.5)
+    assert len(fig.axes) == 1
+    assert len(by_gid(fig, "hv-snapshot")) == len(range(0, 62, 5))
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ConfigError, match="every"):
+            plots.topview_single(mpc_run, every_s=bad)
+
+
+# -- table figure -------------------------------------------------------------------------------
+
+
+def test_table_bars_and_published_markers(summary):
+    fig = plots.table_figure(summary)
+    ax = fig.axes[0]
+    rows = summary["rows"]
+    assert len(rows) == len(PUBLISHED["table2"]) == 14
+    for who in ("av", "hv"):
+        bars = by_gid(ax, f"{who}-first")
+        assert len(bars) == 14
+        order = np.argsort([bar.get_y() for bar in bars])  # paper order, top first
+        widths = [bars[i].get_width() for i in order]
+        np.testing.assert_array_equal(widths, [r[f"{who}_first_pct"] for r in rows])
+        marks = one(ax, f"{who}-published")
+        np.testing.assert_array_equal(marks.get_xdata(),
+                                      [r[f"published_{who}_first_pct"] for r in rows])
+        np.testing.assert_array_equal(marks.get_xdata(),
+                                      [getattr(row, f"published_{who}_first_pct")
+                                       for row in PUBLISHED["table2"]])
+        # each marker sits on its own row's bar
+        np.testing.assert_allclose(marks.get_ydata(),
+                                   [bars[i].get_y() + bars[i].get_height() / 2 for i in order])
+    labels = [t.get_text() for t in ax.get_yticklabels()]
+    assert labels == [plots.table_row_label(r) for r in rows]
+    assert labels[8].startswith("L, ") and "0.98" in labels[8] and "hat" in labels[8]
+    assert "Table 2" in ax.get_title() and "seeds 1..2" in ax.get_title()
+
+
+def test_table_rejects_a_summary_without_rows(summary):
+    with pytest.raises(ConfigError):
+        plots.table_figure({"table": "table2", "mode": "paper", "seeds": 1, "rows": []})
+    with pytest.raises(ConfigError, match="rows"):
+        plots.table_figure({"table": "table2"})
+
+
+# -- animation ----------------------------------------------------------------------------------
+
+
+def test_animation_frames_follow_the_run(short_run):
+    frames = list(plots.animation_frames(short_run))
+    assert len(frames) == len(short_run.log["step"]) == 25
+    assert {f.shape for f in frames} == {(480, 960, 3)} and frames[0].dtype == np.uint8
+    red, blue = colour_pixels(frames[0])
+    assert red > 100 and blue > 100
+
+    def centroid(frame, colour):  # of a vehicle's pixels in the top view (left half)
+        rgb = frame[:, :480].astype(int)
+        r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+        mask = ((r > 180) & (g < 90) & (b < 90)) if colour == "red" else \
+            ((b > 150) & (r < 80) & (g > 80) & (g < 160))
+        ys, xs = np.nonzero(mask)
+        return xs.mean(), ys.mean()
+
+    # The AV drives right (+x), the HV up (+y: image rows decrease), as in the states.
+    av_dx = centroid(frames[-1], "red")[0] - centroid(frames[0], "red")[0]
+    hv_dy = centroid(frames[-1], "blue")[1] - centroid(frames[0], "blue")[1]
+    assert av_dx > 10 and hv_dy < -10
+    assert short_run.states[24, 0] > short_run.states[0, 0]
+
+
+def test_gif_has_one_frame_per_step(short_run, tmp_path):
+    path = plots.animate(short_run, tmp_path / "run.gif", fps=5)
+    frames = iio3.imread(path, index=None)
+    assert frames.shape[0] == 25
+    assert iio3.immeta(path)["duration"] == 200  # ms, from fps = 5
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.gif"]
+
+
+def test_mp4_has_one_frame_per_step(short_run, tmp_path):
+    path = plots.animate(short_run, tmp_path / "run.mp4")
+    reader = iio2.get_reader(path, format="FFMPEG")
+    try:
+        assert sum(1 for _ in reader) == 25
+        assert reader.get_meta_data()["fps"] == 10
+    finally:
+        reader.close()
+
+
+def test_animation_rejects_bad_extension_and_fps(short_run, tmp_path):
+    with pytest.raises(ConfigError, match="unsupported extension '.avi'"):
+        plots.animate(short_run, tmp_path / "run.avi")
+    with pytest.raises(ConfigError, match="fps"):
+        plots.animate(short_run, tmp_path / "run.gif", fps=0)
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- command line -------------------------------------------------------------------------------
+
+
+def test_plot_commands_default_to_seed_996_and_keep_simulate_at_1():
+    plot = cli.commands["plot"]
+    for command in (plot.commands["profile"], plot.commands["topview"], cli.commands["animate"]):
+        assert {p.name: p.default for p in command.params}["seed"] == 996
+    assert {p.name: p.default for p in cli.commands["simulate"].params}["seed"] == 1
+
+
+def test_cli_profile_and_topview(tmp_path, capsys):
+    out = tmp_path / "profile.png"
+    assert main(["plot", "profile", "--set", "simulation.n_steps=30", "--out", str(out)]) == 0
+    assert out.read_bytes()[:4] == b"\x89PNG"
+    assert f"wrote {out}" in capsys.readouterr().out
+    svg = tmp_path / "single.svg"
+    assert main(["plot", "profile", "--single", "--av", "lfg", "--seed", "3",
+                 "--out", str(svg)]) == 0
+    assert b"<svg" in svg.read_bytes()[:400]
+    assert b'id="av-role"' in svg.read_bytes()  # --single --av lfg: one LFG AV's role line
+    pdf = tmp_path / "top.pdf"
+    assert main(["plot", "topview", "--every", "0.5", "--hv-role", "follower",
+                 "--out", str(pdf)]) == 0
+    assert pdf.read_bytes()[:4] == b"%PDF"
+
+
+def test_cli_table_and_animate(results_dir, tmp_path):
+    out = tmp_path / "table.png"
+    assert main(["plot", "table", "--from", str(results_dir), "--out", str(out)]) == 0
+    red, blue = colour_pixels(mpimg.imread(out))
+    assert red > 500 and blue > 500
+    gif = tmp_path / "run.gif"
+    assert main(["animate", "--set", "simulation.n_steps=12", "--fps", "5",
+                 "--out", str(gif)]) == 0
+    assert iio3.imread(gif, index=None).shape[0] == 12
+
+
+@pytest.mark.parametrize("args, message", [
+    (["plot", "profile", "--out", "{out}.jpg"], "unsupported extension"),
+    (["plot", "profile", "--pa", "2", "--out", "{out}.png"], "roles.p_a"),
+    (["plot", "profile", "--av", "lfg", "--out", "{out}.png"], "--single"),
+    (["plot", "topview", "--every", "0", "--out", "{out}.png"], "--every"),
+    (["plot", "table", "--from", "{missing}", "--out", "{out}.png"], "summary.json"),
+    (["animate", "--out", "{out}.avi"], "unsupported extension"),
+    (["animate", "--fps", "0", "--out", "{out}.gif"], "--fps"),
+    (["plot", "profile"], "--out"),
+])
+def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys, args, message):
+    old = {ext: tmp_path / f"fig{ext}" for ext in (".png", ".gif")}
+    for path in old.values():
+        path.write_bytes(b"old")
+    argv = [a.format(out=tmp_path / "fig", missing=tmp_path / "no-results") for a in args]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and message in err
+    assert "Traceback" not in err
+    for path in old.values():  # nothing written, nothing lost
+        assert path.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.gif", "fig.png"]
