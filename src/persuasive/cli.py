@@ -20,6 +20,7 @@ from typing import Any, Callable
 import click
 
 from . import __version__
+from ._files import atomic_write
 from .config import MODES, ROLES, Config, ConfigError
 
 
@@ -78,19 +79,6 @@ def run_options(seed_default: int = 1) -> Callable[[Callable], Callable]:
     return decorate
 
 
-def atomic_write_bytes(path: Path, write: Callable[[Path], None]) -> None:
-    """Write through ``write(tmp)`` to a temporary sibling of ``path``, then rename it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="persuasive")
 def cli() -> None:
@@ -112,7 +100,7 @@ def simulate(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, out, as_jso
     elapsed = time.perf_counter() - t0
     if out:
         frame = record.frame()
-        atomic_write_bytes(Path(out), lambda p: frame.to_parquet(p, index=False))
+        atomic_write(out, lambda p: frame.to_parquet(p, index=False))
     summary = record.summary()
     if as_json:
         click.echo(json.dumps(summary))

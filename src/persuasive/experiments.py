@@ -25,6 +25,7 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from . import __version__
+from ._files import atomic_write
 from .config import Config, ConfigError
 from .simulation import simulate
 
@@ -273,26 +274,16 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
     return Reproduction(frame, summaries, wall)
 
 
-def _atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 def save(result: Reproduction, table: str, out: Path) -> None:
     """Write ``table``'s runs (Parquet) and summary (JSON, Markdown) into ``out``, atomically
     file by file; a rerun into the same folder replaces them."""
     out.mkdir(parents=True, exist_ok=True)
     runs = result.runs[result.runs["table"] == table]
     summary = result.summaries[table]
-    _atomic_write(out / "runs.parquet", lambda p: runs.to_parquet(p, index=False))
-    _atomic_write(out / "summary.json",
+    atomic_write(out / "runs.parquet", lambda p: runs.to_parquet(p, index=False))
+    atomic_write(out / "summary.json",
                   lambda p: p.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8"))
-    _atomic_write(out / "summary.md",
+    atomic_write(out / "summary.md",
                   lambda p: p.write_text(to_markdown(summary), encoding="utf-8"))
 
 

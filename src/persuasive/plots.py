@@ -28,11 +28,10 @@ two-column paper: :data:`DOUBLE_COLUMN_IN` wide for two-panel figures,
 
 from __future__ import annotations
 
-import os
 import re
 from numbers import Real
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -42,6 +41,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
+from ._files import atomic_write
 from .config import ConfigError
 from .scenario import Intersection
 from .simulation import RunRecord
@@ -736,22 +736,6 @@ def check_animation_path(path: str | Path) -> str:
     return _suffix(Path(path), ANIMATION_EXTENSIONS, "animation")
 
 
-def _atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    """Write through ``write(tmp)`` to a hidden sibling of ``path``, then rename it.
-
-    The temporary name keeps the extension, so every writer can infer the format from it.
-    A failure leaves ``path`` as it was and removes the temporary file.
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 def save_figure(fig: Figure, path: str | Path, dpi: float = 300.0) -> Path:
     """Save ``fig`` as PNG, SVG or PDF, chosen by the extension of ``path``, atomically.
 
@@ -772,7 +756,7 @@ def save_figure(fig: Figure, path: str | Path, dpi: float = 300.0) -> Path:
     """
     path = Path(path)
     ext = check_figure_path(path)
-    _atomic_write(path, lambda tmp: fig.savefig(tmp, format=ext[1:], dpi=dpi,
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format=ext[1:], dpi=dpi,
                                                 facecolor="white"))
     return path
 
@@ -816,7 +800,7 @@ def animate(run: RunRecord, path: str | Path, fps: int = 10, dpi: float = 120.0)
             iio3.imwrite(tmp, np.stack(list(frames)), extension=".gif", plugin="pillow",
                          duration=1000.0 / fps, loop=0)
 
-    _atomic_write(path, write)
+    atomic_write(path, write)
     return path
 
 
