@@ -108,7 +108,9 @@ def simulate(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, out, as_jso
     o = record.outcome
     dt = config.simulation.dt_s
     line = ARRIVAL_LABELS[o.first_at_line]
-    where = f" (after step {o.idx_end}, t = {(o.idx_end + 1) * dt:.1f} s)" if o.first_at_line else ""
+    where = ""
+    if o.first_at_line:
+        where = f" (after step {o.idx_end}, t = {(o.idx_end + 1) * dt:.1f} s)"
     pa_hat_text = f", p_a_hat = {config.p_a_hat:g}" if config.simulation.av == "mpc" else ""
     click.echo(
         f"{config.simulation.av.upper()} AV, HV starts as {config.simulation.hv_role}, "
@@ -197,8 +199,9 @@ def bench(n_runs, repeats, full, workers, reference, as_json) -> None:
                f"p99 {result['mpc_decision_ms_p99']:.3f} ms")
     click.echo(f"closed-loop MPC run (61 steps): median {result['mpc_run_ms_median']:.2f} ms")
     if reference:
-        click.echo(f"reference NumPy path: game solve {result['reference_game_solve_us_median']:.0f}"
-                   f" us, MPC decision {result['reference_mpc_decision_ms_median']:.1f} ms")
+        click.echo("reference NumPy path: game solve "
+                   f"{result['reference_game_solve_us_median']:.0f} us, MPC decision "
+                   f"{result['reference_mpc_decision_ms_median']:.1f} ms")
     if full:
         click.echo(f"reproduce all (16,000 runs, {result['reproduce_workers']} workers): "
                    f"{result['reproduce_all_s']:.1f} s, peak memory at most "

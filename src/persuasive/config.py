@@ -384,7 +384,8 @@ class Config:
                 kwargs["mode"] = value
                 continue
             if key not in _SECTIONS:
-                _fail(key, value if not isinstance(value, dict) else "{...}", _known([*_SECTIONS, "mode"]))
+                shown = "{...}" if isinstance(value, dict) else value
+                _fail(key, shown, _known([*_SECTIONS, "mode"]))
             section_cls = _SECTIONS[key]
             if not isinstance(value, dict):
                 raise ConfigError(f"[{key}] must be a table of parameters")
@@ -392,7 +393,7 @@ class Config:
             for name in value:
                 if name not in known:
                     _fail(f"{key}.{name}", value[name], _known(known))
-            kwargs[key] = section_cls(**_coerce(section_cls, key, value))
+            kwargs[key] = section_cls(**_coerce(section_cls, value))
         return cls(**kwargs)
 
     @classmethod
@@ -429,7 +430,7 @@ def _known(names: Any) -> str:
     return "one of " + ", ".join(sorted(names))
 
 
-def _coerce(section_cls: type, section: str, values: dict[str, Any]) -> dict[str, Any]:
+def _coerce(section_cls: type, values: dict[str, Any]) -> dict[str, Any]:
     """Accept TOML integers for float fields (``epsilon = 1`` means 1.0)."""
     out = dict(values)
     for f in fields(section_cls):

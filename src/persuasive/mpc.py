@@ -163,7 +163,8 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, LH: Lib, LR: Lib, idx
                 need[i, av_src[c]] = any_unsafe(LR, c, LH1[i], off, thr)
     # The AV's library from each distinct start that matters, and the solves.
     L1 = new_lib(n, n_traj)
-    M_e, M_o, Cm = np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj))
+    M_e, M_o = np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj))
+    Cm = np.empty((n_traj, n_traj))
     Q = np.empty((4, n_traj))
     sol = np.empty(4, np.int64)
     answer = np.zeros((2, n_traj, 2), np.int64)  # HV role-j trajectory, per (i, AV source)

@@ -127,7 +127,9 @@ def plausible_leader(b_l, b_f, own_leader: bool) -> float:
 
 def transition_matrix(pl: float, p_a: float) -> np.ndarray:
     pf = 1.0 - pl
-    return pl * np.array([[1.0, p_a], [0.0, 1.0 - p_a]]) + pf * np.array([[1.0 - p_a, 0.0], [p_a, 1.0]])
+    to_leader = np.array([[1.0, p_a], [0.0, 1.0 - p_a]])
+    to_follower = np.array([[1.0 - p_a, 0.0], [p_a, 1.0]])
+    return pl * to_leader + pf * to_follower
 
 
 def mpc(x_R, x_H, q, tie_leader: bool, p_a_hat: float, P, disc):

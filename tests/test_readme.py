@@ -1,0 +1,51 @@
+"""The README's promises, run as a user would: its opening commands, its command-line examples
+and its Python example (with the outputs written to a temporary folder)."""
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from persuasive.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+
+def _block(after_heading: str, lang: str) -> str:
+    section = README.split(after_heading, 1)[1]
+    return re.search(rf"```{lang}\n(.*?)```", section, re.S).group(1)
+
+
+def test_readme_opens_with_the_two_commands_and_ci_runs_the_test_one():
+    first = re.search(r"```sh\n(.*?)```", README, re.S).group(1).splitlines()
+    assert [line.split("#")[0].strip() for line in first] == ["make demo", "make test"]
+    makefile = (ROOT / "Makefile").read_text()
+    assert re.search(r"^demo: setup\n\t.*persuasive reproduce all$", makefile, re.M)
+    assert re.search(r"^test: setup\n\t.*-m pytest$", makefile, re.M)
+    assert "make test" in (ROOT / ".ci" / "run").read_text()
+
+
+@pytest.mark.slow
+def test_command_line_examples_run(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    commands = [line.split("  #")[0].strip() for line in _block("## Use it", "sh").splitlines()]
+    commands = [c for c in commands if c.startswith(".venv/bin/persuasive ")]
+    assert len(commands) >= 6
+    for command in commands:
+        argv = shlex.split(command)[1:]
+        assert main(argv) == 0, command
+    capsys.readouterr()
+    for made in ("run.parquet", "profile.pdf", "run.mp4", "results/table2-paper/runs.parquet"):
+        assert (tmp_path / made).stat().st_size > 0, made
+
+
+@pytest.mark.slow
+def test_python_example_runs(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    namespace: dict = {}
+    exec(compile(_block("From Python:", "python"), "README.md", "exec"), namespace)
+    assert namespace["record"].outcome.first_at_line in (0, 1, 2, 3)
+    assert namespace["plan"].feasible
+    assert len(namespace["result"].runs) == 1400
