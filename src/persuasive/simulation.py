@@ -26,7 +26,8 @@ from numba import njit
 from . import __version__
 from . import _packed as K
 from ._packed import discounts, pack
-from .agents import (LFG_LOG, MPC_LOG, ROLE, SWAP, lfg_init, lfg_step, mpc_init, mpc_step)
+from .agents import (LFG_LOG, MPC_LOG, MPRED_FS, MPRED_FV, MPRED_LS, MPRED_LV, MREADY, ROLE,
+                     SWAP, lfg_init, lfg_step, mpc_init, mpc_step)
 from .config import Config, ConfigError
 from .game import predict_into
 from .kinematics import saturated_step
@@ -130,11 +131,10 @@ def run_loop(P: np.ndarray, disc: np.ndarray, x0: np.ndarray, dt: float, av_lfg:
     n, n_traj = int(P[K.N_SAMPLES]), int(P[K.N_MESH]) + 1
     v_min, v_max, w_s, w_v = P[K.V_MIN], P[K.V_MAX], P[K.W_S], P[K.W_V]
     LH, LR = new_lib(n, n_traj), new_lib(n, n_traj)
-    # The MPC builds the HV's libraries one sample ahead (at its role-L and role-F states); the
-    # HV's next measured state is one of them unless noise moved it, and then that library is
-    # the next step's HV library.
+    # The MPC builds the HV's libraries one sample ahead, at the states it stores as its
+    # prediction of the HV (role L into LH1a; role F into LH1b when it differs). Unless noise
+    # moved the HV, its next measured state is one of them and that library is reused.
     LH1a, LH1b = new_lib(n, n_traj), new_lib(n, n_traj)
-    ahead = np.full((2, 2), np.nan)  # states of LH1a, LH1b (NaN: not built)
     idx, idx_av = np.empty(4, np.int64), np.empty(4, np.int64)
     diag = np.empty((n_traj, N_DIAG))
     hv = lfg_init(hv_role, P[K.PRIOR_L])
@@ -151,12 +151,13 @@ def run_loop(P: np.ndarray, disc: np.ndarray, x0: np.ndarray, dt: float, av_lfg:
             mv_hv = min(max(mv_hv + meas_noise[k, 3], v_min), v_max)
         # The HV's own game; the AV's view of it is the same pair of solves.
         built = False
-        if ahead[0, 0] == ms_hv and ahead[0, 1] == mv_hv:
-            LH, LH1a = LH1a, LH
-            built = True
-        elif ahead[1, 0] == ms_hv and ahead[1, 1] == mv_hv:
-            LH, LH1b = LH1b, LH
-            built = True
+        if not av_lfg and av[MREADY] != 0.0:
+            if av[MPRED_LS] == ms_hv and av[MPRED_LV] == mv_hv:
+                LH, LH1a = LH1a, LH
+                built = True
+            elif av[MPRED_FS] == ms_hv and av[MPRED_FV] == mv_hv:
+                LH, LH1b = LH1b, LH
+                built = True
         predict_into(ms_hv, mv_hv, ms_av, mv_av, P, disc, LH, LR, idx, built)
         row = log[k]
         a_hv = lfg_step(hv, ms_av, mv_av, draws[k, 0], p_a, adapt, LH, LR, idx, w_s, w_v,
@@ -170,11 +171,6 @@ def run_loop(P: np.ndarray, disc: np.ndarray, x0: np.ndarray, dt: float, av_lfg:
             given = int(hv[ROLE]) if model_is_human else hv_role
             a_av = mpc_step(av, ms_av, mv_av, ms_hv, mv_hv, tie_given, given, p_a_hat,
                             LH, LR, idx, P, disc, diag, row[_AV_OFF:], LH1a, LH1b)
-            h_l, h_f = idx[0], idx[1]
-            ahead[0, 0], ahead[0, 1] = LH.S[0, h_l], LH.V[0, h_l]
-            ahead[1, 0], ahead[1, 1] = LH.S[0, h_f], LH.V[0, h_f]
-            if ahead[1, 0] == ahead[0, 0] and ahead[1, 1] == ahead[0, 1]:
-                ahead[1, 0] = np.nan  # one library served both roles: LH1b was not built
         if noisy:
             a_av += accel_noise[k, 0]
             a_hv += accel_noise[k, 1]
