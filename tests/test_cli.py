@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+import tomllib
 
 import pandas as pd
 import pytest
@@ -45,7 +46,7 @@ def test_simulate_options_reach_the_configuration(capsys):
 
 
 def test_simulate_text_and_parquet(capsys, tmp_path):
-    out_file = tmp_path / "sub" / "log.parquet"
+    out_file = tmp_path / "log.parquet"
     code, out, _ = run(capsys, "simulate", "--seed", "996", "--out", str(out_file))
     assert code == 0
     assert "first at the crossing line: AV" in out and "collision: no" in out
@@ -53,6 +54,17 @@ def test_simulate_text_and_parquet(capsys, tmp_path):
     record = simulate(Config(), 996)
     assert len(log) == 61
     pd.testing.assert_frame_equal(log, record.frame())
+
+
+def test_simulate_csv_is_csv(capsys, tmp_path):
+    out_file = tmp_path / "log.csv"
+    code, _, _ = run(capsys, "simulate", "--seed", "3", "--out", str(out_file))
+    assert code == 0
+    assert not out_file.read_bytes().startswith(b"PAR1")
+    log = pd.read_csv(out_file)
+    frame = simulate(Config(), 3).frame()
+    assert list(log.columns) == list(frame.columns) and len(log) == 61
+    assert (log["av_s_m"].to_numpy() == frame["av_s_m"].to_numpy()).all()
 
 
 def test_config_file_and_precedence(capsys, tmp_path):
@@ -83,6 +95,10 @@ BAD = [
     (["reproduce", "table3"], "table3"),
     (["reproduce", "table1", "--seeds", "0"], "--seeds"),
     (["reproduce", "table1", "--workers", "0"], "--workers"),
+    (["reproduce", "table1", "--workers", "100000"], "--workers"),
+    (["simulate", "--set", "nosection.x=1"], "unknown section 'nosection'"),
+    (["simulate", "--set", "mpc.x=1"], "mpc.x: unknown key; allowed: epsilon, p_a_hat"),
+    (["simulate", "--set", "mpc.epsilon=1e-13"], "mpc.epsilon"),
 ]
 
 
@@ -102,6 +118,14 @@ def test_malformed_and_missing_config_files(capsys, tmp_path):
     assert code == 2 and "not valid TOML" in err and err.count("\n") == 1
     code, _, err = run(capsys, "simulate", "--config", str(tmp_path / "none.toml"))
     assert code == 2 and "cannot be read" in err
+    unknown = tmp_path / "unknown.toml"
+    unknown.write_text("[roles]\np_x = 1\n")
+    code, _, err = run(capsys, "simulate", "--config", str(unknown))
+    assert code == 2 and "roles.p_x: unknown key; allowed: p_a, adapt_role" in err
+    assert "out of range" not in err
+    unknown.write_text("[rolez]\np_a = 1\n")
+    code, _, err = run(capsys, "simulate", "--config", str(unknown))
+    assert code == 2 and "unknown section 'rolez'" in err and "roles" in err
 
 
 def test_failed_run_leaves_existing_output_untouched(capsys, tmp_path):
@@ -123,6 +147,122 @@ def test_console_script_exit_status_and_no_traceback():
     assert good.returncode == 0 and json.loads(good.stdout)["first_at_line"] == 1
 
 
+OUTPUT_ERRORS = [
+    ("x.csvx", "unsupported extension '.csvx'"),
+    ("missing/dir/x.parquet", "does not exist"),
+    ("afile/x.parquet", "is not a folder"),
+]
+
+
+@pytest.mark.parametrize("target, reason", OUTPUT_ERRORS, ids=[t for t, _ in OUTPUT_ERRORS])
+def test_output_errors_are_one_line_exit_2_and_create_nothing(capsys, tmp_path, target, reason):
+    (tmp_path / "afile").write_text("a file, not a folder")
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    code, out, err = run(capsys, "simulate", "--out", str(tmp_path / target))
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and reason in err and str(tmp_path / target) in err
+    assert ".tmp" not in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
+def test_unwritable_output_names_the_users_path(capsys, tmp_path):
+    code, _, err = run(capsys, "simulate", "--out", "/proc/x.parquet")
+    assert code == 2 and err.startswith("error: cannot write '/proc/x.parquet'")
+    assert err.count("\n") == 1 and ".tmp" not in err
+
+
+def _precedence_runs(capsys, tmp_path, command, extra=()):
+    """``command`` run four ways: p_a from the file, from --set over it, from --pa over both,
+    and mode from each layer; returns the payloads (JSON of simulate, or the configuration
+    the command recorded)."""
+    toml = tmp_path / "c.toml"
+    toml.write_text('mode = "corrected"\n[roles]\np_a = 0.5\n')
+    layers = [
+        ("--config", str(toml)),
+        ("--config", str(toml), "--set", "roles.p_a=0.4", "--set", "mode=paper"),
+        ("--config", str(toml), "--set", "roles.p_a=0.4", "--set", "mode=paper",
+         "--pa", "0.3", "--mode", "corrected"),
+    ]
+    return [run(capsys, *command, *layer, *extra) for layer in layers]
+
+
+def test_precedence_simulate(capsys, tmp_path):
+    got = [json.loads(out) for _, out, _ in _precedence_runs(capsys, tmp_path,
+                                                           ["simulate", "--json"])]
+    assert [(g["pa"], g["mode"]) for g in got] == [(0.5, "corrected"), (0.4, "paper"),
+                                                  (0.3, "corrected")]
+
+
+@pytest.mark.parametrize("command", [["plot", "profile", "--single"],
+                                     ["plot", "topview", "--single"], ["animate"]])
+def test_precedence_figure_commands(capsys, tmp_path, monkeypatch, command):
+    import persuasive.simulation as sim
+
+    seen = []
+    real = sim.simulate
+    monkeypatch.setattr(sim, "simulate", lambda config, seed: seen.append(config) or
+                        real(config.with_overrides({"simulation.n_steps": 3}), seed))
+    ext = ".gif" if command == ["animate"] else ".png"
+    runs = _precedence_runs(capsys, tmp_path, command, ("--out", str(tmp_path / f"f{ext}")))
+    assert [code for code, _, _ in runs] == [0, 0, 0]
+    assert [(c.roles.p_a, c.mode) for c in seen] == [(0.5, "corrected"), (0.4, "paper"),
+                                                    (0.3, "corrected")]
+
+
+def test_precedence_reproduce(capsys, tmp_path):
+    toml = tmp_path / "c.toml"
+    toml.write_text('mode = "corrected"\n[mpc]\nepsilon = 0.05\n')
+    args = ["reproduce", "table1", "--seeds", "1", "--workers", "1", "--quiet", "--json"]
+    modes = []
+    for layer in [("--config", str(toml)), ("--config", str(toml), "--set", "mode=paper"),
+                  ("--config", str(toml), "--set", "mode=paper", "--mode", "corrected")]:
+        out_dir = tmp_path / f"r{len(modes)}"
+        code, out, _ = run(capsys, *args, *layer, "--out", str(out_dir))
+        assert code == 0
+        summary = json.loads(out)
+        modes.append(summary["mode"])
+        written = tomllib.loads((out_dir / "config.toml").read_text())
+        assert written["mode"] == summary["mode"] and written["mpc"]["epsilon"] == 0.05
+    assert modes == ["corrected", "paper", "corrected"]
+
+
+def test_reproduce_refuses_to_replace_other_settings(capsys, tmp_path):
+    args = ["reproduce", "table1", "--workers", "1", "--quiet", "--out", str(tmp_path / "r")]
+    assert run(capsys, *args, "--seeds", "2")[0] == 0
+    before = (tmp_path / "r" / "runs.parquet").read_bytes()
+    code, out, err = run(capsys, *args, "--seeds", "1")
+    assert code == 2 and "other settings" in err and "--force" in err and out == ""
+    assert (tmp_path / "r" / "runs.parquet").read_bytes() == before
+    assert run(capsys, *args, "--seeds", "2")[0] == 0  # same settings: replaced in place
+    code, _, _ = run(capsys, *args, "--seeds", "1", "--force")
+    assert code == 0 and len(pd.read_parquet(tmp_path / "r" / "runs.parquet")) == 2
+
+
+def test_reproduce_default_folder_names_the_settings(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    common = ["reproduce", "table1", "--workers", "1", "--quiet"]
+    run(capsys, *common, "--seeds", "2")
+    run(capsys, *common, "--seeds", "1")
+    run(capsys, *common, "--seeds", "1", "--mode", "corrected")
+    folders = sorted(p.name for p in (tmp_path / "results").iterdir())
+    assert len(folders) == 3 and all(f.startswith("table1-") for f in folders)
+    assert sum(f.startswith("table1-corrected-") for f in folders) == 1
+    summaries = [json.loads((tmp_path / "results" / f / "summary.json").read_text())
+                 for f in folders]
+    assert {s["config_hash"] for s in summaries} == {f.rsplit("-", 1)[1] for f in folders}
+    assert sorted(tuple(s["seed_range"]) for s in summaries) == [(1, 1), (1, 1), (1, 2)]
+
+
+def test_reproduce_caps_workers_at_the_chunks_and_warns_above_the_cores(capsys, tmp_path):
+    import os
+
+    cores = os.cpu_count()
+    code, out, err = run(capsys, "reproduce", "table1", "--seeds", "2", "--quiet",
+                         "--workers", str(cores + 1), "--out", str(tmp_path / "r"))
+    assert code == 0 and "warning:" in err and f"on {cores} cores" in err
+    assert out.rstrip().endswith("with 2 workers")  # 2 rows of 2 seeds: two chunks
+
+
 def test_reproduce_json_and_files(capsys, tmp_path):
     code, out, _ = run(capsys, "reproduce", "all", "--seeds", "3", "--workers", "1", "--json",
                        "--quiet", "--out", str(tmp_path))
@@ -139,8 +279,8 @@ def test_reproduce_json_and_files(capsys, tmp_path):
         assert key in row
     assert payload["table1"]["rows"][0]["pa_hat"] is None
     for t in ("table1", "table2"):
-        assert {p.name for p in (tmp_path / t).iterdir()} == {"runs.parquet", "summary.json",
-                                                               "summary.md"}
+        assert {p.name for p in (tmp_path / t).iterdir()} == {
+            "runs.parquet", "summary.json", "summary.md", "config.toml"}
 
 
 def test_reproduce_text_table(capsys, tmp_path):
@@ -149,6 +289,8 @@ def test_reproduce_text_table(capsys, tmp_path):
     assert code == 0
     assert "| L | 1.00 | 0.0 | 100.0 | 0.0 / 100.0 |" in out
     assert "4 runs in" in out
+    # a short run is not a failure to reproduce: the published values are for 1000 seeds
+    assert "NOT" not in out and "published values are for seeds 1..1000" in out
 
 
 def test_bench_json(capsys):

@@ -76,7 +76,7 @@ def test_reproduce_rows_equal_simulate_summaries():
 
 def test_summary_counts_and_markdown():
     runs = ex.run_tables(["table2"], seeds=3, workers=1, mode="corrected")
-    summary = ex.summarize(runs, "table2", 7.5)
+    summary = ex.summarize(runs, "table2")
     assert summary["mode"] == "corrected" and summary["seeds"] == 3
     assert len(summary["rows"]) == 14
     for row, spec in zip(summary["rows"], ex.PUBLISHED["table2"]):
@@ -89,31 +89,138 @@ def test_summary_counts_and_markdown():
     assert "corrected mode" in md
 
 
-def test_save_is_atomic_and_replaces(tmp_path, monkeypatch):
+def test_violations_use_each_runs_own_safety_distance():
+    runs = ex.run_tables(["table1"], seeds=2, workers=1)
+    assert {r["min_dist_m"] for r in runs} == {7.5}
+    closest = min(r["min_distance_m"] for r in runs)
+    for r in runs:  # a run whose own safe distance is larger than its closest approach
+        r["min_dist_m"] = closest + 1.0 if r is runs[0] else r["min_dist_m"]
+    summary = ex.summarize(runs, "table1")
+    assert sum(row["violations_whole_run"] for row in summary["rows"]) == \
+        int(runs[0]["min_distance_m"] < closest + 1.0) + \
+        sum(r["min_distance_m"] < 7.5 for r in runs[1:])
+
+
+def test_save_writes_the_folder_as_a_set(tmp_path, monkeypatch):
+    target = tmp_path / "results"
     result = ex.reproduce("table1", seeds=3, workers=1)
-    ex.save(result, "table1", tmp_path)
-    runs = pd.read_parquet(tmp_path / "runs.parquet")
+    ex.save(result, "table1", target)
+    runs = pd.read_parquet(target / "runs.parquet")
     assert list(runs.columns) == list(ex.RUN_COLUMNS) and len(runs) == 6
-    assert json.loads((tmp_path / "summary.json").read_text()) == result.summaries["table1"]
-    # a second run into the same folder replaces the files
+    assert json.loads((target / "summary.json").read_text()) == result.summaries["table1"]
+    assert Config.from_toml(target / "config.toml") == Config()
+    # a second run with the same settings replaces the folder
+    ex.save(ex.reproduce("table1", seeds=3, workers=1), "table1", target)
+    # other settings are refused without force, and the folder is untouched
     bigger = ex.reproduce("table1", seeds=5, workers=1)
-    ex.save(bigger, "table1", tmp_path)
-    assert len(pd.read_parquet(tmp_path / "runs.parquet")) == 10
-    # a write that fails half-way leaves the previous file whole and no temporary file behind
+    with pytest.raises(ConfigError, match="other settings"):
+        ex.save(bigger, "table1", target, force=False)
+    assert len(pd.read_parquet(target / "runs.parquet")) == 6
+    ex.save(bigger, "table1", target, force=True)
+    assert len(pd.read_parquet(target / "runs.parquet")) == 10
+
+    # a write that fails half-way leaves the previous folder whole, every file of it, and no
+    # temporary file or folder behind
     def broken(self, path, **kw):
         Path(path).write_bytes(b"partial")
-        raise OSError("disk full")
+        raise OSError(28, "No space left on device")
 
+    before = {p.name: p.read_bytes() for p in target.iterdir()}
     monkeypatch.setattr(pd.DataFrame, "to_parquet", broken)
-    with pytest.raises(OSError):
-        ex.save(result, "table1", tmp_path)
-    assert len(pd.read_parquet(tmp_path / "runs.parquet")) == 10
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["runs.parquet", "summary.json",
-                                                          "summary.md"]
+    with pytest.raises(ConfigError, match="cannot be written: no space left on device"):
+        ex.save(result, "table1", target)
+    assert {p.name: p.read_bytes() for p in target.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]
+
+
+def test_a_failing_run_is_reported_and_the_others_kept(monkeypatch):
+    real = ex.simulate
+
+    def flaky(config, seed):
+        if seed == 2:
+            raise FloatingPointError("boom at seed 2")
+        return real(config, seed)
+
+    monkeypatch.setattr(ex, "simulate", flaky)  # forked workers inherit the patch
+    for workers in (1, 2):
+        failures = []
+        runs = ex.run_tables(["table1"], seeds=3, workers=workers, chunk=2, failures=failures)
+        assert [(r["row"], r["seed"]) for r in runs] == [(0, 1), (0, 3), (1, 1), (1, 3)]
+        assert [(f.table, f.row, f.seed) for f in failures] == [("table1", 0, 2),
+                                                                 ("table1", 1, 2)]
+        assert failures[0].error == "FloatingPointError: boom at seed 2"
+        assert failures[0].config_hash == ex.PUBLISHED["table1"][0].config(Config()).digest()
+    result = ex.reproduce("table1", seeds=3, workers=1)
+    assert len(result.failures) == 2 and len(result.runs) == 4
+    assert [f["seed"] for f in result.summaries["table1"]["failures"]] == [2, 2]
+
+
+def test_cli_reports_failed_runs_and_exits_1(monkeypatch, capsys, tmp_path):
+    from persuasive.cli import main
+
+    # seeds whose initial state cannot be drawn in one try fail; the others are kept
+    code = main(["reproduce", "table1", "--seeds", "6", "--workers", "1", "--quiet",
+                 "--set", "scenario.hv_s0_halfwidth_m=12", "--set", "scenario.max_init_draws=1",
+                 "--out", str(tmp_path / "r")])
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert "error: run failed: table1 row 0 seed" in err and "InitialStateError" in err
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    n_failed = len(summary["failures"])
+    assert 0 < n_failed < 12
+    assert len(pd.read_parquet(tmp_path / "r" / "runs.parquet")) == 12 - n_failed
+
+
+def test_workers_end_when_the_main_process_is_killed(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "persuasive", "reproduce", "table2",
+                             "--seeds", "400", "--workers", "2", "--quiet", "--out",
+                             str(tmp_path / "r")], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    workers: list[int] = []
+    deadline = time.monotonic() + 60
+    while len(workers) < 2 and time.monotonic() < deadline:
+        time.sleep(0.2)
+        workers = _children(proc.pid)
+    assert len(workers) == 2, "the pool never started"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 10
+    while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(pid) for pid in workers)
+    assert not (tmp_path / "r").exists()
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = (Path("/proc") / str(pid) / "stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
 @pytest.mark.parametrize("kwargs, name", [
     ({"seeds": 0}, "seeds"), ({"workers": 0}, "workers"), ({"seeds": 2.5}, "seeds"),
+    ({"chunk": 0}, "chunk"), ({"chunk": -3}, "chunk"),
 ])
 def test_bad_arguments(kwargs, name):
     with pytest.raises(ConfigError, match=name):

@@ -12,9 +12,10 @@ own in :class:`Quirks` (``None`` means "as the mode says").
 
 from __future__ import annotations
 
+import hashlib
 import math
 import tomllib
-from dataclasses import MISSING, asdict, dataclass, field, fields
+from dataclasses import MISSING, asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, Literal, get_args
 
@@ -31,6 +32,10 @@ NOISE_KINDS: tuple[str, ...] = get_args(NoiseKind)
 
 class ConfigError(ValueError):
     """An out-of-range or inconsistent parameter; the message is one line."""
+
+
+#: Smallest accepted chance-constraint level ``mpc.epsilon``.
+EPSILON_MIN = 1e-12
 
 
 def _fail(name: str, value: Any, allowed: str) -> None:
@@ -191,7 +196,9 @@ class MPCParams:
     p_a_hat: float | None = None  #: the AV's estimate of p_a [-]; None means equal to roles.p_a
 
     def __post_init__(self) -> None:
-        _in_range("mpc.epsilon", self.epsilon, 0.0, 1.0, lo_open=True, hi_open=True)
+        # below 1e-12 the threshold 1 - epsilon rounds to (nearly) 1.0 and no candidate is ever
+        # feasible; the bound keeps the constraint meaningful
+        _in_range("mpc.epsilon", self.epsilon, EPSILON_MIN, 1.0, hi_open=True)
         if self.p_a_hat is not None:
             _in_range("mpc.p_a_hat", self.p_a_hat, 0.0, 1.0)
 
@@ -368,10 +375,8 @@ class Config:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (TOML/JSON friendly); unset optional values are left out."""
-        out: dict[str, Any] = {"mode": self.mode}
-        for name in _SECTIONS:
-            out[name] = {k: v for k, v in asdict(getattr(self, name)).items() if v is not None}
-        return out
+        return {"mode": self.mode, **{name: _section_dict(getattr(self, name))
+                                      for name in _SECTIONS}}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Config:
@@ -384,16 +389,9 @@ class Config:
                 kwargs["mode"] = value
                 continue
             if key not in _SECTIONS:
-                shown = "{...}" if isinstance(value, dict) else value
-                _fail(key, shown, _known([*_SECTIONS, "mode"]))
-            section_cls = _SECTIONS[key]
-            if not isinstance(value, dict):
-                raise ConfigError(f"[{key}] must be a table of parameters")
-            known = {f.name for f in fields(section_cls)}
-            for name in value:
-                if name not in known:
-                    _fail(f"{key}.{name}", value[name], _known(known))
-            kwargs[key] = section_cls(**_coerce(section_cls, value))
+                raise ConfigError(f"unknown section {key!r}; allowed: "
+                                  f"{', '.join(['mode', *_SECTIONS])}")
+            kwargs[key] = _build_section(key, _SECTIONS[key], value)
         return cls(**kwargs)
 
     @classmethod
@@ -410,8 +408,32 @@ class Config:
             raise ConfigError(f"config file {str(path)!r} is not valid TOML: {exc}") from None
         return cls.from_dict(data)
 
+    def to_toml(self) -> str:
+        """The whole configuration as TOML text: every field written out, defaults included.
+
+        ``Config.from_dict(tomllib.loads(c.to_toml())) == c``; the text is canonical (fixed
+        order, fixed number format), so equal configurations give equal text.
+        """
+        import tomli_w
+
+        return tomli_w.dumps(self.to_dict())
+
+    def digest(self, *extra: Any) -> str:
+        """A short hash (10 hex digits) of :meth:`to_toml` and of ``extra`` (e.g. a seed range).
+
+        Equal configurations (and extras) give equal digests, in any process and version of
+        Python.
+        """
+        h = hashlib.sha256(self.to_toml().encode("utf-8"))
+        for item in extra:
+            h.update(b"\0" + repr(item).encode("utf-8"))
+        return h.hexdigest()[:10]
+
     def with_overrides(self, overrides: dict[str, Any]) -> Config:
-        """A copy with ``{"section.field": value}`` (or ``{"mode": ...}``) applied."""
+        """A copy with ``{"section.field": value}`` (or ``{"mode": ...}``) applied.
+
+        Nested sections take longer paths (``"hv.idm.time_gap_s"``).
+        """
         data = self.to_dict()
         # Quirks left to the mode must stay unset, so that a new mode sets them.
         data["quirks"] = {k: v for k, v in asdict(self.quirks).items() if v is not None}
@@ -419,15 +441,57 @@ class Config:
             if dotted == "mode":
                 data["mode"] = value
                 continue
-            section, _, name = dotted.partition(".")
-            if not name or section not in data or section == "mode":
-                _fail(dotted, value, "section.field, e.g. mpc.epsilon")
-            data[section][name] = value
+            *path, name = dotted.split(".")
+            if not path or not name:
+                raise ConfigError(f"{dotted!r} is not of the form section.field "
+                                  "(e.g. mpc.epsilon)")
+            if path[0] not in _SECTIONS:
+                raise ConfigError(f"unknown section {path[0]!r} in {dotted!r}; allowed: "
+                                  f"{', '.join(['mode', *_SECTIONS])}")
+            table, cls = data.setdefault(path[0], {}), _SECTIONS[path[0]]
+            for i, part in enumerate(path[1:], start=1):
+                sub = _subsections(cls).get(part)
+                if sub is None:
+                    raise ConfigError(f"unknown section {'.'.join(path[:i + 1])!r} in "
+                                      f"{dotted!r}; allowed: {_allowed_keys(cls)}")
+                table, cls = table.setdefault(part, {}), sub
+            table[name] = value
         return Config.from_dict(data)
 
 
-def _known(names: Any) -> str:
-    return "one of " + ", ".join(sorted(names))
+def _subsections(section_cls: type) -> dict[str, type]:
+    """The nested sections of a section class, by field name."""
+    return {f.name: f.default_factory().__class__ for f in fields(section_cls)
+            if f.default_factory is not MISSING}
+
+
+def _allowed_keys(section_cls: type) -> str:
+    return ", ".join(f.name for f in fields(section_cls))
+
+
+def _section_dict(section: Any) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for f in fields(section):
+        value = getattr(section, f.name)
+        if is_dataclass(value):
+            out[f.name] = _section_dict(value)
+        elif value is not None:
+            out[f.name] = value
+    return out
+
+
+def _build_section(name: str, section_cls: type, value: Any) -> Any:
+    if not isinstance(value, dict):
+        raise ConfigError(f"[{name}] must be a table of parameters")
+    known = {f.name for f in fields(section_cls)}
+    subs = _subsections(section_cls)
+    kwargs = {}
+    for key, item in value.items():
+        if key not in known:
+            raise ConfigError(f"{name}.{key}: unknown key; allowed: {_allowed_keys(section_cls)}")
+        kwargs[key] = (_build_section(f"{name}.{key}", subs[key], item) if key in subs
+                       else item)
+    return section_cls(**_coerce(section_cls, kwargs))
 
 
 def _coerce(section_cls: type, values: dict[str, Any]) -> dict[str, Any]:

@@ -13,10 +13,14 @@ run. The published shares are printed beside the reproduced ones.
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
+import signal
 import sys
+import threading
 import time
+import tomllib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +29,7 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from . import __version__
-from ._files import atomic_write
+from ._files import OutputError, atomic_folder
 from .config import Config, ConfigError
 from .simulation import simulate
 
@@ -86,11 +90,11 @@ RUN_COLUMNS = (
     "av_s0_m", "av_v0_mps", "hv_s0_m", "hv_v0_mps",
     "first_at_line", "first_at_conflict_point", "collision", "min_distance_to_line_m",
     "min_distance_m", "idx_end", "infeasible_steps", "hv_role_changes", "av_role_changes",
-    "version",
+    "min_dist_m", "config_hash", "version",
 )
 
 
-_METRICS = RUN_COLUMNS[RUN_COLUMNS.index("first_at_line"):RUN_COLUMNS.index("version")]
+_METRICS = RUN_COLUMNS[RUN_COLUMNS.index("first_at_line"):RUN_COLUMNS.index("min_dist_m")]
 
 
 def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any]:
@@ -111,31 +115,91 @@ def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any
         "hv_s0_m": s["hv_initial_state"][0],
         "hv_v0_mps": s["hv_initial_state"][1],
         **{k: s[k] for k in _METRICS},
+        "min_dist_m": config.vehicle.min_dist_m,
+        "config_hash": config.digest(),
         "version": __version__,
     }
 
 
-def _run_chunk(task: tuple[str, int, dict[str, Any], list[int]]) -> list[dict[str, Any]]:
-    table, row, config_dict, seeds = task
-    config = Config.from_dict(config_dict)
-    return [run_record(table, row, config, seed) for seed in seeds]
+@dataclass(frozen=True)
+class RunFailure:
+    """A run that raised instead of finishing: which one, and the one-line error."""
+
+    table: str
+    row: int
+    seed: int
+    config_hash: str
+    error: str
+
+    def describe(self) -> str:
+        return (f"{self.table} row {self.row} seed {self.seed} (config {self.config_hash}): "
+                f"{self.error}")
+
+
+def _run_chunk(task: tuple[str, int, str, list[int]]) -> tuple[list[dict], list[RunFailure]]:
+    """The runs of one chunk; a run that raises is recorded as failed, the others go on."""
+    table, row, config_toml, seeds = task
+    config = Config.from_dict(tomllib.loads(config_toml))
+    done, failed = [], []
+    for seed in seeds:
+        try:
+            done.append(run_record(table, row, config, seed))
+        except Exception as exc:  # noqa: BLE001 - report the run, keep the others
+            text = str(exc).strip().splitlines()
+            failed.append(RunFailure(table, row, seed, config.digest(),
+                                     f"{exc.__class__.__name__}: {text[0] if text else ''}"))
+    return done, failed
 
 
 def _tasks(tables: Iterable[str], base: Config, seeds: int, chunk: int):
     for table in tables:
         for i, row in enumerate(PUBLISHED[table]):
-            cfg = row.config(base).to_dict()
+            cfg = row.config(base).to_toml()
             for lo in range(1, seeds + 1, chunk):
                 yield table, i, cfg, list(range(lo, min(lo + chunk, seeds + 1)))
 
 
+def _die_with_parent(parent_pid: int) -> None:
+    """Worker initializer: end this worker when the process that started it dies.
+
+    On Linux the kernel sends SIGKILL on the parent's death (``prctl(PR_SET_PDEATHSIG)``);
+    everywhere, a daemon thread also checks once a second that the parent is still there.
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the line above
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="persuasive-parent-watch", daemon=True).start()
+
+
+def warm_up() -> None:
+    """Load (or compile, on first use) the kernels in this process before workers start."""
+    simulate(Config().with_overrides({"simulation.n_steps": 1}), 1)
+    simulate(Config().with_overrides({"simulation.n_steps": 1, "simulation.av": "lfg"}), 1)
+
+
 def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = None,
-               mode: str = "paper", base: Config | None = None, chunk: int = 25,
-               progress: Callable[[int, int, int], None] | None = None) -> list[dict[str, Any]]:
+               mode: str | None = None, base: Config | None = None, chunk: int = 25,
+               progress: Callable[[int, int, int], None] | None = None,
+               failures: list[RunFailure] | None = None) -> list[dict[str, Any]]:
     """Run every row of ``tables`` for seeds ``1..seeds``; one dict per run, in order.
 
-    ``workers``: processes (default: all cores; 1 runs in this process). ``progress(done_runs,
-    total_runs, rows_done)`` is called as chunks finish.
+    ``mode``: overrides ``base.mode`` when given. ``workers``: processes (default: all cores,
+    never more than the chunks of ``chunk`` runs; 1 runs in this process); workers end when
+    this process dies. ``progress(done_runs, total_runs, rows_done)`` is called as chunks
+    finish. A run that raises is left out of the result and appended to ``failures`` (when
+    given) as a :class:`RunFailure`; the others go on.
     """
     tables = list(tables)
     for t in tables:
@@ -143,23 +207,31 @@ def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = N
             raise ConfigError(f"table = {t!r} is out of range; allowed: {' | '.join(TABLES)}")
     if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
         raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
+        raise ConfigError(f"chunk = {chunk!r} is out of range; allowed: integer >= 1")
     workers = (os.cpu_count() or 1) if workers is None else workers
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ConfigError(f"workers = {workers!r} is out of range; allowed: integer >= 1")
-    base = (base or Config()).with_overrides({"mode": mode})
+    base = base or Config()
+    if mode is not None:
+        base = base.with_overrides({"mode": mode})
     tasks = list(_tasks(tables, base, seeds, chunk))
+    workers = min(workers, len(tasks))
     total = sum(len(t[3]) for t in tasks)
     per_row: dict[tuple[str, int], int] = {}
     for t in tasks:
         per_row[(t[0], t[1])] = per_row.get((t[0], t[1]), 0) + len(t[3])
     results: dict[tuple[str, int, int], list[dict[str, Any]]] = {}
+    failed: list[RunFailure] = []
     done, rows_done, left = 0, 0, dict(per_row)
 
-    def collect(task, records):
+    def collect(task, outcome):
         nonlocal done, rows_done
+        records, bad = outcome
         results[(task[0], task[1], task[3][0])] = records
-        done += len(records)
-        left[(task[0], task[1])] -= len(records)
+        failed.extend(bad)
+        done += len(task[3])
+        left[(task[0], task[1])] -= len(task[3])
         rows_done += left[(task[0], task[1])] == 0
         if progress is not None:
             progress(done, total, rows_done)
@@ -168,15 +240,26 @@ def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = N
         for task in tasks:
             collect(task, _run_chunk(task))
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            for task, records in zip(tasks, pool.map(_run_chunk, tasks)):
-                collect(task, records)
+        warm_up()  # compile once here rather than in every worker at the same time
+        with ProcessPoolExecutor(max_workers=workers, initializer=_die_with_parent,
+                                 initargs=(os.getpid(),)) as pool:
+            for task, outcome in zip(tasks, pool.map(_run_chunk, tasks)):
+                collect(task, outcome)
+    if failures is not None:
+        failures.extend(sorted(failed, key=lambda f: (TABLES.index(f.table), f.row, f.seed)))
     return [rec for key in sorted(results, key=lambda k: (TABLES.index(k[0]), k[1], k[2]))
             for rec in results[key]]
 
 
-def summarize(runs: list[dict[str, Any]], table: str, min_dist_m: float) -> dict[str, Any]:
-    """The printed table of spec section 8 for ``table``'s rows in ``runs``."""
+def summarize(runs: list[dict[str, Any]], table: str, base: Config | None = None,
+              seeds: int | None = None,
+              failures: Iterable[RunFailure] = ()) -> dict[str, Any]:
+    """The printed table of docs/method.md §8 for ``table``'s rows in ``runs``.
+
+    Safety violations compare each run's distances with that run's own ``min_dist_m``.
+    ``base`` and ``seeds`` (the configuration and seed count the runs were made with) are
+    recorded with their TOML text and digest; ``failures`` are listed.
+    """
     rows = []
     for i, spec in enumerate(PUBLISHED[table]):
         mine = [r for r in runs if r["table"] == table and r["row"] == i]
@@ -203,12 +286,58 @@ def summarize(runs: list[dict[str, Any]], table: str, min_dist_m: float) -> dict
             "diff_hv_first_pct": round(hv_pct - spec.published_hv_first_pct, 10),
             "collisions": int(sum(r["collision"] for r in mine)),
             "runs_with_infeasible": int(sum(r["infeasible_steps"] > 0 for r in mine)),
-            "violations_to_line": int(sum(r["min_distance_to_line_m"] < min_dist_m for r in mine)),
-            "violations_whole_run": int(sum(r["min_distance_m"] < min_dist_m for r in mine)),
+            "violations_to_line": int(sum(r["min_distance_to_line_m"] < r["min_dist_m"]
+                                          for r in mine)),
+            "violations_whole_run": int(sum(r["min_distance_m"] < r["min_dist_m"]
+                                            for r in mine)),
+            "config_hash": mine[0]["config_hash"],
         })
-    mode = runs[0]["mode"] if runs else None
-    seeds = max((r["seed"] for r in runs if r["table"] == table), default=0)
-    return {"table": table, "mode": mode, "seeds": seeds, "rows": rows}
+    mode = base.mode if base is not None else (runs[0]["mode"] if runs else None)
+    if seeds is None:
+        seeds = max((r["seed"] for r in runs if r["table"] == table), default=0)
+    out: dict[str, Any] = {"table": table, "mode": mode, "seeds": seeds,
+                           "seed_range": [1, seeds], "rows": rows}
+    if base is not None:
+        out["config_hash"] = settings_digest(base, table, seeds)
+        out["config_toml"] = base.to_toml()
+    out["failures"] = [vars(f) for f in failures if f.table == table]
+    out["version"] = __version__
+    return out
+
+
+def settings_digest(base: Config, table: str, seeds: int) -> str:
+    """The digest naming a reproduction: base configuration, table and seed range."""
+    return base.digest(table, 1, seeds)
+
+
+def default_folder(base: Config, table: str, seeds: int) -> Path:
+    """``results/<table>-<mode>-<digest>``: runs made with other settings never share it."""
+    return Path("results") / f"{table}-{base.mode}-{settings_digest(base, table, seeds)}"
+
+
+def check_folder(folder: str | Path, digest: str, force: bool = False) -> None:
+    """Refuse (:class:`ConfigError`) to replace results made with other settings.
+
+    A folder holding a ``summary.json`` whose ``config_hash`` differs from ``digest`` is
+    only replaced with ``force``; so is a folder that holds other files.
+    """
+    folder = Path(folder)
+    if force or not folder.exists():
+        return
+    if not folder.is_dir():
+        raise OutputError(f"results folder {str(folder)!r} cannot be written: it is a file")
+    if not any(folder.iterdir()):
+        return
+    try:
+        old = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        raise OutputError(f"results folder {str(folder)!r} holds other files; choose another "
+                          "--out or pass --force to replace it") from None
+    if old.get("config_hash") != digest:
+        raise OutputError(
+            f"results folder {str(folder)!r} holds results made with other settings "
+            f"(config {old.get('config_hash')}, {old.get('mode')} mode, seeds "
+            f"1..{old.get('seeds')}); choose another --out or pass --force to replace them")
 
 
 def matches_published(summary: dict[str, Any]) -> bool:
@@ -218,6 +347,23 @@ def matches_published(summary: dict[str, Any]) -> bool:
         and round(r["hv_first_pct"], 1) == r["published_hv_first_pct"]
         for r in summary["rows"]
     )
+
+
+def verdict(summary: dict[str, Any], base: Config) -> str:
+    """One sentence on how a summary relates to the published table."""
+    n = summary["seeds"]
+    if base.mode != "paper":
+        return (f"{base.mode} mode: the published values (paper mode) are shown for "
+                "comparison only.")
+    if base != Config():
+        return ("the configuration differs from the paper's, so the published values are "
+                "shown for comparison only.")
+    if n != 1000:
+        return (f"the published values are for seeds 1..1000; with seeds 1..{n} the shares "
+                "differ by sampling (run with the default --seeds 1000 to compare).")
+    if matches_published(summary):
+        return "every AV-first and HV-first cell equals the published one."
+    return "NOT every cell equals the published one."
 
 
 def to_markdown(summary: dict[str, Any]) -> str:
@@ -255,36 +401,54 @@ class Reproduction:
     runs: Any  #: pandas DataFrame, one row per run (``RUN_COLUMNS``)
     summaries: dict[str, dict[str, Any]]  #: per table, as :func:`summarize`
     wall_time_s: float
+    failures: tuple[RunFailure, ...] = ()  #: runs that raised (left out of ``runs``)
+    base: Config | None = None  #: the base configuration of every row
 
 
 def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
-              mode: str = "paper", base: Config | None = None,
+              mode: str | None = None, base: Config | None = None,
               progress: Callable[[int, int, int], None] | None = None) -> Reproduction:
-    """Rerun the paper's tables: ``table`` is "table1", "table2" or "all"."""
+    """Rerun the paper's tables: ``table`` is "table1", "table2" or "all".
+
+    ``mode`` overrides ``base.mode`` when given (``base`` defaults to the paper's values).
+    """
     import pandas as pd
 
+    if table not in (*TABLES, "all"):
+        raise ConfigError(f"table = {table!r} is out of range; allowed: "
+                          f"{' | '.join((*TABLES, 'all'))}")
     tables = TABLES if table == "all" else (table,)
     base = base or Config()
+    if mode is not None:
+        base = base.with_overrides({"mode": mode})
+    failures: list[RunFailure] = []
     t0 = time.perf_counter()
-    runs = run_tables(tables, seeds, workers, mode, base, progress=progress)
+    runs = run_tables(tables, seeds, workers, None, base, progress=progress, failures=failures)
     wall = time.perf_counter() - t0
-    min_dist = base.vehicle.min_dist_m
-    summaries = {t: summarize(runs, t, min_dist) for t in tables}
+    summaries = {t: summarize(runs, t, base, seeds, failures) for t in tables}
     frame = pd.DataFrame(runs, columns=list(RUN_COLUMNS))
-    return Reproduction(frame, summaries, wall)
+    return Reproduction(frame, summaries, wall, tuple(failures), base)
 
 
-def save(result: Reproduction, table: str, out: Path) -> None:
-    """Write ``table``'s runs (Parquet) and summary (JSON, Markdown) into ``out``, atomically
-    file by file; a rerun into the same folder replaces them."""
-    out.mkdir(parents=True, exist_ok=True)
-    runs = result.runs[result.runs["table"] == table]
+def save(result: Reproduction, table: str, out: str | Path, force: bool = True) -> Path:
+    """Write ``table``'s runs (Parquet), summary (JSON, Markdown) and configuration (TOML)
+    into the folder ``out`` as a set: all files or none (temporary folder, then rename).
+
+    Without ``force``, a folder holding results made with other settings is refused
+    (:func:`check_folder`).
+    """
+    out = Path(out)
     summary = result.summaries[table]
-    atomic_write(out / "runs.parquet", lambda p: runs.to_parquet(p, index=False))
-    atomic_write(out / "summary.json",
-                  lambda p: p.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8"))
-    atomic_write(out / "summary.md",
-                  lambda p: p.write_text(to_markdown(summary), encoding="utf-8"))
+    check_folder(out, summary.get("config_hash", ""), force)
+    runs = result.runs[result.runs["table"] == table]
+    with atomic_folder(out) as tmp:
+        runs.to_parquet(tmp / "runs.parquet", index=False)
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n",
+                                          encoding="utf-8")
+        (tmp / "summary.md").write_text(to_markdown(summary), encoding="utf-8")
+        if "config_toml" in summary:
+            (tmp / "config.toml").write_text(summary["config_toml"], encoding="utf-8")
+    return out
 
 
 def load_summary(folder: str | Path) -> dict[str, Any]:

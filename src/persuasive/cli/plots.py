@@ -1,7 +1,8 @@
 """The ``persuasive plot`` and ``persuasive animate`` commands (registered by ``persuasive.cli``).
 
-The run options are those of ``persuasive simulate`` (:func:`persuasive.cli.run_options`),
-except that ``--seed`` defaults to the run the authors show (996). matplotlib and the
+The run options are those of ``persuasive simulate`` (:func:`persuasive.cli._common.run_options`),
+except that ``--seed`` defaults to the run the authors show in their Figs. 2 and 3 (996), so
+that ``persuasive plot profile`` draws the paper's figure; ``simulate`` defaults to seed 1. matplotlib and the
 simulation are imported inside the commands, so ``persuasive --help`` stays fast and the
 command line never pulls matplotlib in unless a figure is drawn; the Agg backend is forced
 there, as no window is ever opened. Every file is checked for a known extension before any
@@ -15,10 +16,9 @@ from typing import Callable
 
 import click
 
-from .cli import build_config, run_options
+from ._common import PAPER_SEED, build_config, compile_notice, run_explicit, run_options
 
-#: Seed of the run shown in the paper's Figs. 2 and 3.
-PAPER_SEED = 996
+_SEED_HELP = f"Run seed [{PAPER_SEED}: the run shown in the paper's Figs. 2 and 3]."
 
 
 def _plots():
@@ -26,21 +26,24 @@ def _plots():
     import matplotlib
 
     matplotlib.use("Agg")
-    from . import plots
+    from .. import plots
 
     return plots
 
 
 def _runs(single: bool, av: str | None, hv_role, pa, pa_hat, seed, mode, config_file, sets):
     """The run the options describe (``single``), or the LFG-AV and MPC-AV runs of Figs. 2-3."""
-    from .simulation import simulate
+    from ..simulation import simulate
 
+    compile_notice()
     if single:
-        return (simulate(build_config(config_file, sets, mode, av, hv_role, pa, pa_hat), seed),)
+        return (simulate(build_config(config_file, sets,
+                                      run_explicit(av, hv_role, pa, pa_hat, mode)), seed),)
     if av is not None:
         raise click.UsageError("--av applies only with --single (without it both the LFG AV "
                                "and the MPC AV are plotted)")
-    return tuple(simulate(build_config(config_file, sets, mode, kind, hv_role, pa, pa_hat), seed)
+    return tuple(simulate(build_config(config_file, sets,
+                                       run_explicit(kind, hv_role, pa, pa_hat, mode)), seed)
                  for kind in ("lfg", "mpc"))
 
 
@@ -61,7 +64,7 @@ def _single_option(func: Callable) -> Callable:
 
 
 @plot.command()
-@run_options(seed_default=PAPER_SEED)
+@run_options(seed_default=PAPER_SEED, seed_help=_SEED_HELP)
 @_single_option
 @_out_option("Figure file: .png, .svg or .pdf.")
 def profile(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, single, out) -> None:
@@ -74,7 +77,7 @@ def profile(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, single, out)
 
 
 @plot.command()
-@run_options(seed_default=PAPER_SEED)
+@run_options(seed_default=PAPER_SEED, seed_help=_SEED_HELP)
 @_single_option
 @click.option("--every", "every_s", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
               show_default=True, metavar="SECONDS", help="Time between vehicle snapshots.")
@@ -96,7 +99,7 @@ def topview(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, single, ever
 @_out_option("Figure file: .png, .svg or .pdf.")
 def table(results: str, out: str) -> None:
     """A reproduced table as bars beside the published shares."""
-    from .experiments import load_summary
+    from ..experiments import load_summary
 
     plots = _plots()
     plots.check_figure_path(out)
@@ -105,7 +108,7 @@ def table(results: str, out: str) -> None:
 
 
 @click.command()
-@run_options(seed_default=PAPER_SEED)
+@run_options(seed_default=PAPER_SEED, seed_help=_SEED_HELP)
 @click.option("--fps", type=click.IntRange(min=1), default=10, show_default=True,
               help="Frames per second (10 is real time).")
 @_out_option("Animation file: .mp4 or .gif.")

@@ -1,0 +1,62 @@
+"""The ``persuasive`` command line.
+
+Each command lives in its own module of this package and is added to the :func:`cli` group
+here; the modules share only :mod:`persuasive.cli._common` (configuration precedence, run
+options, worker and output checks), so each imports on its own. Bad input ends a command with
+one line on stderr (``error: ...``) and exit status 2; nothing already written is touched, and
+results are written to temporary files (or folders) first, then renamed.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from .. import __version__
+from ..config import ConfigError
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="persuasive")
+def cli() -> None:
+    """Persuasive trajectory planning with an adaptive leader-follower game."""
+
+
+def _register() -> None:
+    from .bench import bench
+    from .plots import animate, plot
+    from .reproduce import reproduce
+    from .simulate import simulate
+
+    for command in (simulate, reproduce, bench, plot, animate):
+        cli.add_command(command)
+
+
+_register()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: one-line errors, exit status 2 for bad input."""
+    try:
+        rv = cli.main(args=argv, prog_name="persuasive", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("error: aborted", err=True)
+        return 130
+    except click.ClickException as exc:
+        click.echo(f"error: {exc.format_message()}", err=True)
+        return exc.exit_code
+    except ConfigError as exc:
+        click.echo(f"error: {exc}", err=True)
+        return 2
+    except OSError as exc:
+        where = f": {exc.filename}" if exc.filename else ""
+        click.echo(f"error: {(exc.strerror or str(exc)).lower()}{where}", err=True)
+        return 2
+    return rv if isinstance(rv, int) else 0
+
+
+__all__ = ["cli", "main"]
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,119 @@
+"""What every command shares: building the configuration, the run options, output checks.
+
+Precedence, the same for every command: an explicit option (``--mode``, ``--av``, ``--pa``,
+...) beats ``--set section.field=value``, which beats ``--config FILE.toml``, which beats the
+defaults (the paper's values).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tomllib
+from typing import Any, Callable
+
+import click
+
+from ..config import MODES, ROLES, Config, ConfigError
+
+#: Seed of the run the paper shows in its Figs. 2 and 3 (the default of the figure commands).
+PAPER_SEED = 996
+
+
+def parse_set(values: tuple[str, ...]) -> dict[str, Any]:
+    """``("section.field=value", ...)`` as a dict; values are read as TOML, else as text."""
+    out: dict[str, Any] = {}
+    for item in values:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set {item!r} is not of the form section.field=value")
+        try:
+            value = tomllib.loads(f"v = {raw.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw.strip()  # a bare word, e.g. --set simulation.measurement_noise=uniform
+        out[key.strip()] = value
+    return out
+
+
+def build_config(config_file: str | None, sets: tuple[str, ...],
+                 explicit: dict[str, Any] | None = None) -> Config:
+    """The configuration of a command: defaults < ``--config`` < ``--set`` < ``explicit``.
+
+    ``explicit`` maps dotted fields to the values of explicit options; ``None`` values (an
+    option not given) are ignored.
+    """
+    config = Config.from_toml(config_file) if config_file else Config()
+    overrides = parse_set(sets)
+    overrides.update({k: v for k, v in (explicit or {}).items() if v is not None})
+    return config.with_overrides(overrides) if overrides else config
+
+
+def run_explicit(av: str | None, hv_role: str | None, pa: float | None,
+                 pa_hat: float | None, mode: str | None) -> dict[str, Any]:
+    """The dotted fields set by the run options of :func:`run_options`."""
+    return {"mode": mode, "simulation.av": av, "simulation.hv_role": hv_role,
+            "roles.p_a": pa, "mpc.p_a_hat": pa_hat}
+
+
+def config_options(func: Callable) -> Callable:
+    """``--mode``, ``--config`` and ``--set``."""
+    for option in reversed([
+        click.option("--mode", type=click.Choice(list(MODES)), default=None,
+                     help="paper (quirks Q1..Q7, docs/method.md §9) or corrected [paper]."),
+        click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
+                     help="TOML file of parameters."),
+        click.option("--set", "sets", multiple=True, metavar="SECTION.FIELD=VALUE",
+                     help="Override one parameter (repeatable), e.g. mpc.epsilon=0.05."),
+    ]):
+        func = option(func)
+    return func
+
+
+def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable:
+    """The options that define one closed-loop run (shared by simulate, plot and animate)."""
+    options = [
+        click.option("--av", type=click.Choice(["mpc", "lfg"]), default=None,
+                     help="AV planner: persuasive branch MPC or LFG (2-LFG case) [mpc]."),
+        click.option("--hv-role", type=click.Choice(list(ROLES)), default=None,
+                     help="HV initial role [leader]."),
+        click.option("--pa", type=float, default=None, help="Human's p_a in [0, 1] [1.0]."),
+        click.option("--pa-hat", type=float, default=None,
+                     help="AV's estimate of p_a in [0, 1] [equal to --pa]."),
+        click.option("--seed", type=int, default=seed_default, show_default=True,
+                     help=seed_help),
+    ]
+
+    def decorate(func: Callable) -> Callable:
+        func = config_options(func)
+        for option in reversed(options):
+            func = option(func)
+        return func
+
+    return decorate
+
+
+def check_workers(workers: int | None, n_tasks: int) -> int:
+    """Worker processes for ``n_tasks`` chunks: default all cores, capped at ``n_tasks``.
+
+    More than 8 processes per core is refused (exit 2); more than the cores gets a warning.
+    """
+    cores = os.cpu_count() or 1
+    if workers is None:
+        workers = cores
+    if workers > 8 * cores:
+        raise ConfigError(f"--workers = {workers} is out of range; allowed: 1..{8 * cores} "
+                          f"(8 per core, {cores} cores)")
+    if workers > cores:
+        click.echo(f"warning: {workers} workers on {cores} cores; runs will share the cores",
+                   err=True)
+    return max(1, min(workers, n_tasks))
+
+
+def compile_notice() -> None:
+    """One line on stderr when the compiled kernels are not cached yet (first use)."""
+    from .._compile import kernels_cached
+
+    if not kernels_cached():
+        click.echo("compiling the numerical kernels once (about 20 s; cached for later runs)",
+                   err=True)
+        sys.stderr.flush()

@@ -1,0 +1,74 @@
+"""``persuasive simulate``: one closed-loop run, as text, JSON or a per-step log file."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import click
+
+from ._common import build_config, compile_notice, run_explicit, run_options
+
+#: Per-step log formats ``--out`` writes, by extension.
+LOG_EXTENSIONS = (".parquet", ".csv")
+
+
+def write_log(frame, path: str) -> None:
+    """Write a per-step log: Parquet or CSV by extension, atomically."""
+    from .._files import atomic_write, check_output_file
+
+    ext = check_output_file(path, LOG_EXTENSIONS, "log")
+    if ext == ".csv":
+        atomic_write(path, lambda p: frame.to_csv(p, index=False))
+    else:
+        atomic_write(path, lambda p: frame.to_parquet(p, index=False))
+
+
+@click.command()
+@run_options(seed_help="Run seed.")
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Write the per-step log here: .parquet or .csv (the folder must exist).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def simulate(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, out, as_json) -> None:
+    """Simulate one closed-loop run of the intersection."""
+    from .._files import check_output_file
+    from ..simulation import ARRIVAL_LABELS, simulate as run
+
+    config = build_config(config_file, sets, run_explicit(av, hv_role, pa, pa_hat, mode))
+    if out:
+        check_output_file(out, LOG_EXTENSIONS, "log")  # before any work
+    compile_notice()
+    t0 = time.perf_counter()
+    record = run(config, seed)
+    elapsed = time.perf_counter() - t0
+    if out:
+        write_log(record.frame(), out)
+    summary = record.summary()
+    if as_json:
+        click.echo(json.dumps(summary))
+        return
+    o = record.outcome
+    dt = config.simulation.dt_s
+    line = ARRIVAL_LABELS[o.first_at_line]
+    where = ""
+    if o.first_at_line:
+        where = f" (after step {o.idx_end}, t = {(o.idx_end + 1) * dt:.1f} s)"
+    pa_hat_text = f", p_a_hat = {config.p_a_hat:g}" if config.simulation.av == "mpc" else ""
+    click.echo(
+        f"{config.simulation.av.upper()} AV, HV starts as {config.simulation.hv_role}, "
+        f"p_a = {config.roles.p_a:g}{pa_hat_text}, seed {record.seed}, {config.mode} mode"
+    )
+    s0, v0 = record.hv_initial_state
+    click.echo(f"HV initial state: s = {s0:.3f} m, v = {v0:.3f} m/s")
+    click.echo(f"first at the crossing line: {line}{where}; "
+               f"first at the conflict point: {ARRIVAL_LABELS[o.first_at_conflict_point]}")
+    click.echo(f"collision: {'yes' if o.collision else 'no'}; minimum distance "
+               f"{o.min_distance_to_line_m:.2f} m up to the line, {o.min_distance_m:.2f} m over "
+               f"the run (safe set {config.vehicle.min_dist_m:g} m)")
+    changes = f"HV role changes: {o.hv_role_changes}"
+    if config.simulation.av == "lfg":
+        changes += f"; AV role changes: {o.av_role_changes}"
+    else:
+        changes += f"; infeasible MPC steps: {o.infeasible_steps}"
+    click.echo(changes)
+    click.echo(f"time: {elapsed:.3f} s" + (f"; per-step log written to {out}" if out else ""))
