@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 from hypothesis import HealthCheck, settings
 
-from persuasive._packed import discounts, pack
+from persuasive.packing import discounts, pack
 from persuasive.config import Config
 
 settings.register_profile(
@@ -19,11 +19,17 @@ settings.load_profile("persuasive")
 
 
 class Packed:
-    """A configuration with its kernel parameter vector ``P`` and discounts ``disc``."""
+    """A configuration with its kernel parameter vectors and discounts ``disc``.
+
+    ``P`` is the AV's vector and ``P_hv`` the HV's; at the paper's intersection they differ
+    only in the path's direction, which the perpendicular kernels never read, so tests of one
+    vehicle's library may use either.
+    """
 
     def __init__(self, config: Config):
         self.config = config
-        self.P = pack(config)
+        self.P, self.P_hv = pack(config)
+        self.P_av = self.P
         self.disc = discounts(config)
 
 

@@ -9,17 +9,25 @@ back: PNGs must hold the HV blue and the AV red, animations one frame per decisi
 
 from __future__ import annotations
 
+import gc
+import pkgutil
 import subprocess
 import sys
+from pathlib import Path
 
 import imageio.v2 as iio2
 import imageio.v3 as iio3
 import matplotlib.image as mpimg
 import numpy as np
 import pytest
-from matplotlib.patches import Circle, Rectangle
+from matplotlib.colors import to_rgba
+from matplotlib.legend import Legend
+from matplotlib.patches import Circle, Polygon, Rectangle
+from matplotlib.transforms import Bbox
 
+import persuasive
 from persuasive import plots
+from persuasive._files import OutputError
 from persuasive.cli import cli, main
 from persuasive.config import Config, ConfigError
 from persuasive.experiments import PUBLISHED, reproduce, save
@@ -34,12 +42,12 @@ ARRIVAL_TOL_M = 0.2  # Q7, the arrival tolerance of the paper's runs
 
 @pytest.fixture(scope="module")
 def lfg_run():
-    return simulate(Config().with_overrides({"simulation.av": "lfg"}), SEED)
+    return simulate(Config().with_overrides({"av.kind": "lfg"}), SEED)
 
 
 @pytest.fixture(scope="module")
 def mpc_run():
-    return simulate(Config().with_overrides({"simulation.av": "mpc"}), SEED)
+    return simulate(Config().with_overrides({"av.kind": "persuasive"}), SEED)
 
 
 @pytest.fixture(scope="module")
@@ -109,9 +117,30 @@ def colour_pixels(image):
 
 
 def test_model_modules_and_cli_do_not_import_matplotlib():
-    code = ("import sys, persuasive.cli, persuasive.simulation, persuasive.experiments; "
+    # Every module outside persuasive.plots (but the entry point __main__, which runs), listed
+    # here: walking the package imports each subpackage, persuasive.plots included.
+    names = [m.name for m in pkgutil.walk_packages(persuasive.__path__, "persuasive.")
+             if m.name.split(".")[1] not in ("plots", "__main__")]
+    assert "persuasive.cli" in names and "persuasive.simulation" in names
+    code = (f"import sys; import {', '.join(names)}; "
             "sys.exit(any(m.split('.')[0] == 'matplotlib' for m in sys.modules))")
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+PLOTS_API = ["ANIMATION_EXTENSIONS", "AV_COLOR", "DOUBLE_COLUMN_IN", "FIGURE_EXTENSIONS",
+             "HV_COLOR", "PROFILE_ROWS", "SINGLE_COLUMN_IN", "animate", "animation_frames",
+             "belief_column", "case_title", "check_animation_path", "check_figure_path",
+             "crossing_time", "draw_intersection", "profile_figure", "profile_single",
+             "run_label", "save_figure", "snapshot_indices", "table_figure", "table_row_label",
+             "topview_figure", "topview_single"]
+
+
+def test_plots_package_keeps_the_public_api():
+    assert set(PLOTS_API) <= set(plots.__all__)
+    for name in PLOTS_API:
+        value = getattr(plots, name)
+        if callable(value):
+            assert value.__module__.startswith("persuasive.plots."), name
 
 
 # -- profile figure (Fig. 2) --------------------------------------------------------------------
@@ -229,10 +258,64 @@ def test_unknown_extension_and_failed_write_leave_files_alone(lfg_run, tmp_path,
         raise RuntimeError("disk full")
 
     monkeypatch.setattr(fig, "savefig", broken)
-    with pytest.raises(RuntimeError):
+    with pytest.raises(OutputError) as info:
         plots.save_figure(fig, target)
+    assert str(info.value) == f"cannot write {str(target)!r}: disk full"
     assert target.read_bytes() == b"old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png"]
+
+
+def _write_figure(fig, run, path):
+    return plots.save_figure(fig, path, dpi=20)
+
+
+def _write_animation(fig, run, path):
+    return plots.animate(run, path)
+
+
+WRITERS = {"figure": (_write_figure, ".png"), "animation": (_write_animation, ".mp4")}
+
+
+@pytest.fixture(scope="module")
+def tiny_run():
+    return simulate(Config().with_overrides({"simulation.n_steps": 3}), SEED)
+
+
+@pytest.mark.parametrize("kind", WRITERS)
+@pytest.mark.parametrize("case, reason", [
+    ("parent is a file", "is not a folder"),
+    ("missing parent", "does not exist"),
+    ("target is a folder", "it is a folder"),
+])
+def test_unwritable_targets_fail_in_one_line_and_leave_nothing(tiny_run, tmp_path, kind, case,
+                                                               reason):
+    write, ext = WRITERS[kind]
+    (tmp_path / "file").write_bytes(b"old")
+    (tmp_path / f"folder{ext}").mkdir()
+    target = {"parent is a file": tmp_path / "file" / f"out{ext}",
+              "missing parent": tmp_path / "missing" / f"out{ext}",
+              "target is a folder": tmp_path / f"folder{ext}"}[case]
+    fig = plots.profile_single(tiny_run) if kind == "figure" else None
+    with pytest.raises(OutputError) as info:
+        write(fig, tiny_run, target)
+    message = str(info.value)
+    assert "\n" not in message and repr(str(target)) in message and reason in message
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file", f"folder{ext}"]
+    assert (tmp_path / "file").read_bytes() == b"old"
+    assert list((tmp_path / f"folder{ext}").iterdir()) == []
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
+@pytest.mark.parametrize("kind", WRITERS)
+def test_target_in_a_read_only_folder_fails_in_one_line(tiny_run, kind):
+    write, ext = WRITERS[kind]
+    target = Path(f"/proc/persuasive-test{ext}")
+    fig = plots.profile_single(tiny_run) if kind == "figure" else None
+    with pytest.raises(OutputError) as info:
+        write(fig, tiny_run, target)
+    message = str(info.value)
+    assert message.startswith(f"cannot write {str(target)!r}: ") and "\n" not in message
+    assert not target.exists()
 
 
 # -- top view (Fig. 3) --------------------------------------------------------------------------
@@ -245,8 +328,10 @@ def test_topview_geometry(topview, lfg_run):
     assert a.get_xlim() == b.get_xlim() == a.get_ylim() == b.get_ylim()  # one square window
     for ax in (a, b):
         assert ax.get_aspect() == 1.0
-        road_av, road_hv = one(ax, "road-av"), one(ax, "road-hv")
-        assert road_av.get_height() == road_hv.get_width() == veh.lane_width_m == 4.0
+        road_av, road_hv = one(ax, "road-av").get_xy(), one(ax, "road-hv").get_xy()
+        # each road is a strip lane_width_m wide around its vehicle's path
+        assert np.ptp(road_av[:, 1]) == np.ptp(road_hv[:, 0]) == veh.lane_width_m == 4.0
+        assert set(road_av[:, 1]) == {-2.0, 2.0} and set(road_hv[:, 0]) == {-2.0, 2.0}
         np.testing.assert_array_equal(one(ax, "av-crossing-line").get_xdata(), [-6.5, -6.5])
         np.testing.assert_array_equal(one(ax, "hv-crossing-line").get_ydata(), [-6.5, -6.5])
         circle = one(ax, "safety-circle")
@@ -260,18 +345,19 @@ def test_topview_snapshots_follow_the_states(topview, lfg_run, mpc_run, column):
     idx = np.arange(0, 62, 10)  # every 1 s: states 0, 10, ..., 60
     for who, col in (("av", 0), ("hv", 2)):
         snaps = by_gid(ax, f"{who}-snapshot")
-        assert len(snaps) == idx.size and all(isinstance(r, Rectangle) for r in snaps)
+        assert len(snaps) == idx.size and all(isinstance(r, Polygon) for r in snaps)
         s = run.states[idx, col]
+        corners = [r.get_xy()[:4] for r in snaps]
+        centres = [c.mean(axis=0) for c in corners]
+        # corners are centre +- half-extents: exact to rounding of the positions
+        extents = {(round(float(np.ptp(c[:, 0])), 9), round(float(np.ptp(c[:, 1])), 9))
+                   for c in corners}
         if who == "av":  # along x at (s, 0), 5 m long and 2.5 m wide
-            centres = [(r.get_x() + r.get_width() / 2, r.get_y() + r.get_height() / 2)
-                       for r in snaps]
             np.testing.assert_allclose(centres, np.c_[s, np.zeros_like(s)], atol=1e-12)
-            assert {(r.get_width(), r.get_height()) for r in snaps} == {(5.0, 2.5)}
+            assert extents == {(5.0, 2.5)}
         else:  # along y at (0, s)
-            centres = [(r.get_x() + r.get_width() / 2, r.get_y() + r.get_height() / 2)
-                       for r in snaps]
             np.testing.assert_allclose(centres, np.c_[np.zeros_like(s), s], atol=1e-12)
-            assert {(r.get_width(), r.get_height()) for r in snaps} == {(2.5, 5.0)}
+            assert extents == {(2.5, 5.0)}
         alphas = [r.get_facecolor()[3] for r in snaps]
         assert np.all(np.diff(alphas) > 0)  # older snapshots fainter
         path = one(ax, f"{who}-path")
@@ -289,6 +375,61 @@ def test_topview_every_and_single(mpc_run):
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(ConfigError, match="every"):
             plots.topview_single(mpc_run, every_s=bad)
+
+
+def label_boxes(fig):
+    """Per axes: the time labels as ``(who, text, bbox in data coordinates)``."""
+    renderer = fig.canvas.get_renderer()
+    found = []
+    for ax in fig.axes:
+        to_data = ax.transData.inverted()
+        found.append([(t.get_gid()[:2], t.get_text(),
+                       t.get_window_extent(renderer).transformed(to_data))
+                      for t in ax.texts if str(t.get_gid()).endswith("-time-label")])
+    return found
+
+
+def assert_labels_clear(fig):
+    """No time label on a vehicle footprint (of either vehicle) or out of its axes."""
+    for ax, labels in zip(fig.axes, label_boxes(fig)):
+        assert len(labels) >= 4  # at least the first and last of each vehicle
+        (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+        snaps = {who: [Bbox.from_extents(*p.get_xy().min(axis=0), *p.get_xy().max(axis=0))
+                       for p in by_gid(ax, f"{who}-snapshot")]
+                 for who in ("hv", "av")}
+        for who, text, box in labels:
+            other = "av" if who == "hv" else "hv"
+            assert not any(box.overlaps(s) for s in snaps[other]), (who, text, "other vehicle")
+            assert not any(box.overlaps(s) for s in snaps[who]), (who, text, "own vehicle")
+            assert x0 <= box.x0 and box.x1 <= x1 and y0 <= box.y0 and box.y1 <= y1, (who, text)
+        for i, (_, text_a, a) in enumerate(labels):  # and no two labels on each other
+            for _, text_b, b in labels[i + 1:]:
+                assert not a.overlaps(b), (text_a, text_b)
+
+
+def test_seed_996_time_labels_clear_every_vehicle(topview):
+    assert_labels_clear(topview)
+
+
+@pytest.mark.parametrize("seed", [3, 17])
+def test_time_labels_clear_every_vehicle_for_other_runs(seed):
+    runs = [simulate(Config().with_overrides({"av.kind": av}), seed)
+            for av in ("lfg", "persuasive")]
+    assert_labels_clear(plots.topview_figure(*runs))
+    assert_labels_clear(plots.topview_single(runs[1], every_s=0.5))
+
+
+def test_time_labels_sit_on_the_far_side_of_their_road(topview, lfg_run):
+    half = lfg_run.config.vehicle.lane_width_m / 2
+    (lfg_labels, mpc_labels) = label_boxes(topview)
+    # 2-LFG: the AV stops short of the HV's road, so all HV labels are right of it.
+    assert all(box.x0 > half for who, _, box in lfg_labels if who == "hv")
+    # MPC AV: the HV stays below the AV's road, so all AV labels are above it.
+    assert all(box.y0 > half for who, _, box in mpc_labels if who == "av")
+    for labels in (lfg_labels, mpc_labels):  # every label beside its own road
+        for who, text, box in labels:
+            across = (box.y0, box.y1) if who == "av" else (box.x0, box.x1)
+            assert across[0] > half or across[1] < -half, (who, text)
 
 
 # -- table figure -------------------------------------------------------------------------------
@@ -368,6 +509,71 @@ def test_mp4_has_one_frame_per_step(short_run, tmp_path):
         assert reader.get_meta_data()["fps"] == 10
     finally:
         reader.close()
+
+
+def test_animation_has_a_key_to_the_top_view(short_run):
+    from persuasive.plots.animation import _AnimationScene
+
+    scene = _AnimationScene(short_run, 8.0, 4.0, 120.0)
+    entries = {}
+    for legend in scene.fig.findobj(Legend):
+        for handle, text in zip(legend.legend_handles, legend.get_texts()):
+            entries[text.get_text()] = handle
+    vehicles = {"HV (human-driven, LFG)": plots.HV_COLOR, "AV (autonomous)": plots.AV_COLOR}
+    for label, colour in vehicles.items():
+        assert np.allclose(entries[label].get_facecolor(), to_rgba(colour)), label
+    assert entries["crossing line"].get_linestyle() == "-"
+    assert entries["safe distance 7.5 m"].get_linestyle() == ":"
+    # the key and the status text do not overlap
+    renderer = scene.canvas.get_renderer()
+    scene.render(0)
+    key = next(lg for lg in scene.fig.findobj(Legend) if "crossing line" in
+               [t.get_text() for t in lg.get_texts()])
+    assert not key.get_window_extent(renderer).overlaps(scene.text.get_window_extent(renderer))
+
+
+def test_first_animation_frame_shows_both_beliefs(short_run):
+    from persuasive.plots.animation import _AnimationScene
+
+    scene = _AnimationScene(short_run, 8.0, 4.0, 120.0)
+    frame = scene.render(0)
+    np.testing.assert_array_equal(frame, next(plots.animation_frames(short_run)))
+    ax = scene.ax_belief
+    for who in ("hv", "av"):
+        drawn = np.concatenate([np.c_[line.get_xdata(), line.get_ydata()]
+                                for line in ax.get_lines()
+                                if str(line.get_gid()).startswith(f"{who}-belief")])
+        initial = short_run.log[plots.belief_column(short_run, who)][0]
+        assert [0.0, initial] in drawn.tolist(), who
+    # and it is in the pixels: both colours inside the belief axes (image rows run down)
+    box = ax.get_window_extent()
+    height = frame.shape[0]
+    inside = frame[int(height - box.y1) - 5:int(height - box.y0) + 5,
+                   int(box.x0) - 5:int(box.x1) + 5]
+    red, blue = colour_pixels(inside)
+    assert red > 5 and blue > 5
+
+
+@pytest.mark.parametrize("ext", [".mp4", ".gif"])
+def test_failed_animation_write_leaves_the_target_and_no_temporary(short_run, tmp_path,
+                                                                   monkeypatch, ext):
+    from persuasive.plots import animation
+
+    def mismatched_frames(run, dpi=120.0):  # the encoder refuses the second frame
+        yield np.zeros((480, 960, 3), np.uint8)
+        yield np.zeros((240, 960, 3), np.uint8)
+
+    monkeypatch.setattr(animation, "animation_frames", mismatched_frames)
+    target = tmp_path / f"run{ext}"
+    target.write_bytes(b"old")
+    with pytest.raises(OutputError) as info:
+        plots.animate(short_run, target)
+    message = str(info.value)
+    assert message.startswith(f"cannot write {str(target)!r}: ") and "\n" not in message
+    del info
+    gc.collect()  # a writer left open would now finish its file
+    assert target.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [target.name]
 
 
 def test_animation_rejects_bad_extension_and_fps(short_run, tmp_path):

@@ -7,9 +7,11 @@ constraint on safety (He, Dong, Li, MECC 2025).
 The main entry points:
 
 - :class:`Config` — every parameter, validated, the paper's values by default;
-- :func:`simulate` — one closed-loop run of the two-vehicle intersection;
+- :func:`simulate` — one closed-loop run (the paper's intersection, or another scenario);
 - :class:`Planner` — the AV's planner inside your own loop;
 - :func:`reproduce` — the paper's Tables 1 and 2.
+
+The method as implemented is described in ``docs/method.md``.
 """
 
 __version__ = "0.1.0"

@@ -13,7 +13,7 @@ import os
 
 def kernels_cached() -> bool:
     """True when the closed loop's compiled code is cached and newer than its source."""
-    from .simulation import run_loop
+    from .world import run_loop
 
     try:
         index = run_loop._cache._cache_file._index_path  # numba's cache layout

@@ -1,15 +1,19 @@
 """Benchmarks of the planner and the simulator (``persuasive bench``).
 
 Figures, each over states visited by real closed-loop runs (paper mode, Table 2's first row,
-seeds ``1..n_runs``), after a warm-up, timed call by call with ``time.perf_counter_ns`` from
-Python (so they include the cost of calling the compiled code, as a user pays it):
+seeds ``1..n_runs``, with the chosen AV kind and scenario), after a warm-up, timed call by call
+with ``time.perf_counter_ns`` from Python (so they include the cost of calling the compiled
+code, as a user pays it):
 
 - ``game_solve_us_median``: one full prediction of a joint state (both trajectory libraries,
   both reward matrices, both leader-follower solves), microseconds;
-- ``mpc_decision_ms_median`` / ``_p99``: one decision of the AV (:meth:`Planner.plan`: the
-  human-view prediction, the branch MPC with its re-solves, the belief update), replayed along
-  the runs' states, milliseconds;
-- ``mpc_run_ms_median``: one whole closed-loop MPC run (61 steps) with :func:`simulate`;
+- ``mpc_decision_ms_median`` / ``_p99``: one decision of the AV's planner
+  (:meth:`Planner.plan`: for the persuasive MPC, the human-view prediction, the branch MPC with
+  its re-solves, the belief update), replayed along the runs' states, milliseconds;
+- ``mpc_run_ms_median``: one whole closed-loop run (61 steps) with :func:`simulate`;
+- ``work_per_decision``: the kernels' work counters per decision (pair tests of the games and
+  of the MPC, re-solves done and skipped by the pruning, libraries built), so that a change
+  that loses the pruning shows even when the machine's timings are noisy;
 - with ``full``: ``reproduce_all_s``, the wall time of reproducing Tables 1 and 2 (16,000 runs),
   and ``reproduce_peak_rss_mb``, an upper bound of the memory held at once (this process's
   peak plus each worker at the largest worker peak; Linux ``ru_maxrss``).
@@ -27,69 +31,88 @@ from typing import Any
 
 import numpy as np
 
-from ._packed import discounts, pack
 from .config import Config
 from .game import predict_buffers
 from .library import lib_buffers
+from .packing import N_WORK, WORK_NAMES, discounts, pack
 from .planner import Planner
 from .simulation import simulate
 
 
+def bench_config(av: str = "persuasive", scenario: str = "intersection") -> Config:
+    """Paper mode, Table 2's first row (HV starts as leader, p_a = p_a_hat = 1), with the AV
+    kind and the scenario given."""
+    return Config().with_overrides({"av.kind": av, "scenario.kind": scenario})
+
+
 def _game_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
-    P, disc = pack(config), discounts(config)
+    P_av, P_hv = pack(config)
+    disc = discounts(config)
     n, n_traj = config.library.n_samples, config.library.n_traj
     (be, we), (bo, wo) = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
-    idx = np.empty(4, np.int64)
+    idx, q_values, work = np.empty(4, np.int64), np.empty((4, n_traj)), np.zeros(N_WORK, np.int64)
     joint = [tuple(float(x) for x in row) for run in runs for row in run.states[:-1]]
     for s_av, v_av, s_hv, v_hv in joint[:20]:  # warm-up
-        predict_buffers(s_hv, v_hv, s_av, v_av, P, disc, be, we, bo, wo, idx)
+        predict_buffers(s_hv, v_hv, s_av, v_av, P_hv, P_av, disc, be, we, bo, wo, idx, q_values,
+                        work)
     times = []
     clock = time.perf_counter_ns
     for _ in range(repeats):
         for s_av, v_av, s_hv, v_hv in joint:
             t = clock()
-            predict_buffers(s_hv, v_hv, s_av, v_av, P, disc, be, we, bo, wo, idx)
+            predict_buffers(s_hv, v_hv, s_av, v_av, P_hv, P_av, disc, be, we, bo, wo, idx,
+                            q_values, work)
             times.append(clock() - t)
     return np.array(times)
 
 
-def _decision_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
+def _decision_times_ns(config: Config, runs: list, repeats: int) -> tuple[np.ndarray, Planner]:
     """Each run's AV decisions replayed with a :class:`Planner` (same states, same HV roles)."""
-    planner = Planner(config)
+    planner = Planner(config, seed=0)
     times = []
     clock = time.perf_counter_ns
+    has_role = "hv_next_role" in runs[0].log
     for rep in range(repeats + 1):
+        if rep == 1:
+            planner.work[:] = 0  # count the timed passes only
         for run in runs:
             planner.reset()
             # quirk Q3 reads the HV's role after its own step, as in the closed loop
-            for row, role in zip(run.states[:-1], run.log["hv_next_role"]):
+            roles = run.log["hv_next_role"] if has_role else [None] * len(run.states)
+            for row, role in zip(run.states[:-1], roles):
                 s_av, v_av, s_hv, v_hv = row
                 t = clock()
-                planner.plan((s_av, v_av), (s_hv, v_hv), human_role=str(role))
+                planner.plan((s_av, v_av), (s_hv, v_hv),
+                             human_role=None if role is None else str(role))
                 if rep:  # the first pass is the warm-up
                     times.append(clock() - t)
-    return np.array(times)
+    return np.array(times), planner
 
 
 def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: bool = False,
-          workers: int | None = None) -> dict[str, Any]:
+          workers: int | None = None, av: str = "persuasive",
+          scenario: str = "intersection") -> dict[str, Any]:
     """Measure the figures of the module docstring; returns them as a flat dict."""
-    config = Config()  # paper mode, HV starts as leader, p_a = p_a_hat = 1 (Table 2, row 1)
+    config = bench_config(av, scenario)
     simulate(config, 1)  # load the compiled code
     runs = [simulate(config, seed) for seed in range(1, n_runs + 1)]
     game = _game_times_ns(config, runs, repeats)
-    decision = _decision_times_ns(config, runs, repeats)
+    decision, planner = _decision_times_ns(config, runs, repeats)
     run_times = []
     for seed in range(1, n_runs + 1):
         t = time.perf_counter()
         simulate(config, seed)
         run_times.append(time.perf_counter() - t)
     out: dict[str, Any] = {
+        "av": av,
+        "scenario": scenario,
         "game_solve_us_median": float(np.median(game) / 1e3),
         "game_solve_us_p99": float(np.percentile(game, 99) / 1e3),
         "mpc_decision_ms_median": float(np.median(decision) / 1e6),
         "mpc_decision_ms_p99": float(np.percentile(decision, 99) / 1e6),
         "mpc_run_ms_median": float(np.median(run_times) * 1e3),
+        "work_per_decision": {name: float(w) / decision.size
+                              for name, w in zip(WORK_NAMES, planner.work)},
         "samples": {"game_solves": int(game.size), "mpc_decisions": int(decision.size),
                     "runs": n_runs},
         "machine": {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
@@ -117,16 +140,17 @@ def _reference_times(config: Config, run, n: int = 5) -> dict[str, float]:
     """The straightforward NumPy path on ``n`` states of one run (it is slow)."""
     from . import reference
 
-    P, disc = pack(config), discounts(config)
+    P_av, P_hv = pack(config)
+    disc = discounts(config)
     states = run.states
     picks = states[np.linspace(0, len(states) - 2, n).astype(int)]
     games, decisions = [], []
     for s_av, v_av, s_hv, v_hv in picks:
         t = time.perf_counter_ns()
-        reference.full_prediction((s_hv, v_hv), (s_av, v_av), P, disc)
+        reference.full_prediction((s_hv, v_hv), (s_av, v_av), P_hv, P_av, disc)
         games.append(time.perf_counter_ns() - t)
         t = time.perf_counter_ns()
-        reference.mpc((s_av, v_av), (s_hv, v_hv), (0.5, 0.5), True, 1.0, P, disc)
+        reference.mpc((s_av, v_av), (s_hv, v_hv), (0.5, 0.5), True, 1.0, P_av, P_hv, disc)
         decisions.append(time.perf_counter_ns() - t)
     return {"reference_game_solve_us_median": float(np.median(games) / 1e3),
             "reference_mpc_decision_ms_median": float(np.median(decisions) / 1e6)}

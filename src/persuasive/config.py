@@ -15,19 +15,27 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
-from dataclasses import MISSING, asdict, dataclass, field, fields, is_dataclass
+from dataclasses import MISSING, asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any, Literal, get_args
 
 Role = Literal["leader", "follower"]
 Mode = Literal["paper", "corrected"]
-AVKind = Literal["mpc", "lfg"]
+AVKind = Literal["persuasive", "passive", "cv", "lfg", "yield"]
+HVKind = Literal["lfg", "stubborn", "noisy", "idm", "aggressive", "replay"]
+ScenarioKind = Literal["intersection", "crossing", "left-turn", "merge"]
 NoiseKind = Literal["none", "uniform", "gaussian"]
+StreamLayout = Literal["legacy", "per-agent"]
 
 ROLES: tuple[str, ...] = get_args(Role)
 MODES: tuple[str, ...] = get_args(Mode)
 AV_KINDS: tuple[str, ...] = get_args(AVKind)
+HV_KINDS: tuple[str, ...] = get_args(HVKind)
+SCENARIO_KINDS: tuple[str, ...] = get_args(ScenarioKind)
 NOISE_KINDS: tuple[str, ...] = get_args(NoiseKind)
+STREAM_LAYOUTS: tuple[str, ...] = get_args(StreamLayout)
+#: Other names accepted for AV kinds (``mpc`` was the persuasive planner's first name).
+AV_KIND_ALIASES = {"mpc": "persuasive"}
 
 
 class ConfigError(ValueError):
@@ -205,15 +213,21 @@ class MPCParams:
 
 @dataclass(frozen=True)
 class ScenarioParams:
-    """The two-vehicle intersection and its initial-state sampling (spec sections 1, 8).
+    """The scenario and its initial-state sampling (docs/method.md §8 and §10).
 
-    The initial state is the nominal one plus ``U(-w, w)`` per entry; only the listed entries
-    can have a non-zero half-width (the lateral entries of the 8-dim state are always exact).
+    ``kind`` selects the geometry (``persuasive.scenarios``). The initial state is the
+    nominal one plus ``U(-w, w)`` per entry; only the listed entries can have a non-zero
+    half-width (the lateral entries of the 8-dim state are always exact). A nominal position
+    left unset is the scenario's: 13.5 m before the vehicle's yield line (``-20 m`` at the
+    paper's intersection).
     """
 
-    av_s0_m: float = -20.0  #: AV nominal initial position along its road [m]
+    kind: ScenarioKind = "intersection"  #: intersection | crossing | left-turn | merge
+    angle_deg: float | None = None  #: crossing: angle between the paths [deg] (90); merge: ramp angle (30)
+    turn_radius_m: float | None = None  #: left-turn: radius of the AV's arc [m] (1.5 lane widths)
+    av_s0_m: float | None = None  #: AV nominal initial position along its path [m]
     av_v0_mps: float = 4.0  #: AV nominal initial speed [m/s]
-    hv_s0_m: float = -20.0  #: HV nominal initial position along its road [m]
+    hv_s0_m: float | None = None  #: HV nominal initial position along its path [m]
     hv_v0_mps: float = 4.0  #: HV nominal initial speed [m/s]
     av_s0_halfwidth_m: float = 0.0  #: half-width of the AV position disturbance [m]
     av_v0_halfwidth_mps: float = 0.0  #: half-width of the AV speed disturbance [m/s]
@@ -223,8 +237,16 @@ class ScenarioParams:
 
     def __post_init__(self) -> None:
         p = "scenario."
+        _choice(p + "kind", self.kind, SCENARIO_KINDS)
+        if self.angle_deg is not None:
+            _in_range(p + "angle_deg", self.angle_deg, 0.0, 180.0, lo_open=True, hi_open=True)
+            if self.kind == "merge":
+                _in_range(p + "angle_deg", self.angle_deg, 0.0, 90.0, lo_open=True)
+        if self.turn_radius_m is not None:
+            _in_range(p + "turn_radius_m", self.turn_radius_m, 0.0, lo_open=True)
         for name in ("av_s0_m", "hv_s0_m"):
-            _in_range(p + name, getattr(self, name), hi=0.0, hi_open=True)
+            if getattr(self, name) is not None:
+                _in_range(p + name, getattr(self, name))
         for name in ("av_v0_mps", "hv_v0_mps"):
             _in_range(p + name, getattr(self, name), 0.0)
         for name in (
@@ -234,40 +256,147 @@ class ScenarioParams:
             "hv_v0_halfwidth_mps",
         ):
             _in_range(p + name, getattr(self, name), 0.0)
-        for veh in ("av", "hv"):
-            s0, hw = getattr(self, f"{veh}_s0_m"), getattr(self, f"{veh}_s0_halfwidth_m")
-            if s0 + hw >= 0.0:
-                _fail(
-                    f"{p}{veh}_s0_m + {veh}_s0_halfwidth_m",
-                    s0 + hw,
-                    "< 0 (every initial state must be before the conflict point)",
-                )
         _in_range(p + "max_init_draws", self.max_init_draws, 1, 1_000_000, integer=True)
 
 
 @dataclass(frozen=True)
 class SimulationParams:
-    """The closed loop (spec section 7)."""
+    """The closed loop (docs/method.md §7)."""
 
     dt_s: float = 0.1  #: simulation step [s]; must equal library.sample_dt_s
     n_steps: int = 61  #: decision steps per run [-]
-    av: AVKind = "mpc"  #: the AV's planner: persuasive branch MPC, or the LFG (2-LFG case)
-    hv_role: Role = "leader"  #: the HV's initial role; an LFG AV starts in the other role
     measurement_noise: NoiseKind = "none"  #: distribution of the measurement noise
     noise_s_m: float = 0.0  #: position noise: half-width (uniform) or std (gaussian) [m]
     noise_v_mps: float = 0.0  #: speed noise: half-width (uniform) or std (gaussian) [m/s]
     accel_noise_mps2: float = 0.0  #: half-width of the uniform acceleration error [m/s^2]
+    #: random streams: "legacy" (one MT19937 stream, the reference's order; paper mode) or
+    #: "per-agent" (independent streams per agent and for the initial state; corrected mode)
+    streams: StreamLayout | None = None
 
     def __post_init__(self) -> None:
         p = "simulation."
         _in_range(p + "dt_s", self.dt_s, 0.0, 10.0, lo_open=True)
         _in_range(p + "n_steps", self.n_steps, 1, 100_000, integer=True)
-        _choice(p + "av", self.av, AV_KINDS)
-        _choice(p + "hv_role", self.hv_role, ROLES)
         _choice(p + "measurement_noise", self.measurement_noise, NOISE_KINDS)
         _in_range(p + "noise_s_m", self.noise_s_m, 0.0)
         _in_range(p + "noise_v_mps", self.noise_v_mps, 0.0)
         _in_range(p + "accel_noise_mps2", self.accel_noise_mps2, 0.0)
+        if self.streams is not None:
+            _choice(p + "streams", self.streams, STREAM_LAYOUTS)
+
+
+@dataclass(frozen=True)
+class VehicleOverrides:
+    """One vehicle's own size and limits; unset fields take ``[vehicle]``'s."""
+
+    length_m: float | None = None  #: vehicle length [m]
+    width_m: float | None = None  #: vehicle width [m]
+    v_max_mps: float | None = None  #: highest speed [m/s]
+    u_min_mps2: float | None = None  #: strongest braking [m/s^2], negative
+    u_max_mps2: float | None = None  #: strongest acceleration [m/s^2], positive
+
+    def resolve(self, base: VehicleParams, name: str) -> VehicleParams:
+        """``base`` with the set fields applied (validated as a whole, named ``name``)."""
+        changes = {k: v for k, v in asdict(self).items() if v is not None}
+        if not changes:
+            return base
+        try:
+            return replace(base, **changes)
+        except ConfigError as exc:
+            raise ConfigError(str(exc).replace("vehicle.", f"{name}.vehicle.", 1)) from None
+
+
+@dataclass(frozen=True)
+class AVParams:
+    """The AV's planner (docs/method.md §6, §11).
+
+    ``persuasive``: the paper's branch MPC (alias ``mpc``); ``passive``: the same MPC with no
+    role transition at T1; ``cv``: the MPC's candidates and chance constraint against a
+    constant-velocity human; ``lfg``: an adaptive-role LFG player (the 2-LFG case); ``yield``:
+    yields until the human has cleared the conflict, then goes.
+    """
+
+    kind: AVKind = "persuasive"  #: persuasive | passive | cv | lfg | yield
+    role: Role | None = None  #: initial role of an LFG AV; unset: the other of hv.role
+    vehicle: VehicleOverrides = field(default_factory=VehicleOverrides)
+
+    def __post_init__(self) -> None:
+        if self.kind in AV_KIND_ALIASES:
+            object.__setattr__(self, "kind", AV_KIND_ALIASES[self.kind])
+        _choice("av.kind", self.kind, AV_KINDS)
+        if self.role is not None:
+            _choice("av.role", self.role, ROLES)
+
+
+@dataclass(frozen=True)
+class NoisyParams:
+    """The Boltzmann-rational LFG human (``hv.kind = "noisy"``)."""
+
+    beta: float = 1.0  #: rationality [1/reward]: P(trajectory) ~ exp(beta Q); large = the LFG
+
+    def __post_init__(self) -> None:
+        _in_range("hv.noisy.beta", self.beta, 0.0)
+
+
+@dataclass(frozen=True)
+class IDMParams:
+    """The IDM driver with gap acceptance at the conflict (``hv.kind = "idm"``)."""
+
+    desired_speed_mps: float = 10.0  #: IDM desired speed v0 [m/s]
+    time_gap_s: float = 1.5  #: IDM time gap T [s]
+    max_accel_mps2: float = 1.0  #: IDM maximum acceleration a [m/s^2]
+    comfort_decel_mps2: float = 1.5  #: IDM comfortable deceleration b [m/s^2]
+    delta: float = 4.0  #: IDM acceleration exponent [-]
+    jam_gap_m: float = 2.0  #: IDM jam distance s0 [m]
+    critical_gap_s: float = 1.0  #: accepted gap: the AV must reach the conflict this much later [s]
+    impatience_per_s: float = 0.0  #: the gap shrinks by this fraction per second of waiting [1/s]
+
+    def __post_init__(self) -> None:
+        p = "hv.idm."
+        _in_range(p + "desired_speed_mps", self.desired_speed_mps, 0.0, lo_open=True)
+        _in_range(p + "time_gap_s", self.time_gap_s, 0.0)
+        _in_range(p + "max_accel_mps2", self.max_accel_mps2, 0.0, lo_open=True)
+        _in_range(p + "comfort_decel_mps2", self.comfort_decel_mps2, 0.0, lo_open=True)
+        _in_range(p + "delta", self.delta, 0.0, lo_open=True)
+        _in_range(p + "jam_gap_m", self.jam_gap_m, 0.0)
+        _in_range(p + "critical_gap_s", self.critical_gap_s, 0.0)
+        _in_range(p + "impatience_per_s", self.impatience_per_s, 0.0)
+
+
+@dataclass(frozen=True)
+class ReplayParams:
+    """A recorded trajectory replayed open loop (``hv.kind = "replay"``)."""
+
+    file: str = ""  #: per-step log (.parquet or .csv) from ``simulate --out`` or a recorded trial
+    vehicle: Literal["hv", "av"] = "hv"  #: whose accelerations in the log to replay
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.file, str):
+            raise ConfigError(f"hv.replay.file = {self.file!r} is not a file name")
+        _choice("hv.replay.vehicle", self.vehicle, ("hv", "av"))
+
+
+@dataclass(frozen=True)
+class HVParams:
+    """The human driver model (docs/method.md §5, §11).
+
+    ``lfg``: the paper's adaptive-role LFG human; ``stubborn``: the LFG with ``p_a = 0``;
+    ``noisy``: a Boltzmann-rational LFG; ``idm``: an IDM driver with gap acceptance;
+    ``aggressive``: full throttle, never yields; ``replay``: a recorded trajectory, open loop.
+    """
+
+    kind: HVKind = "lfg"  #: lfg | stubborn | noisy | idm | aggressive | replay
+    role: Role = "leader"  #: initial role of an LFG-type human
+    noisy: NoisyParams = field(default_factory=NoisyParams)
+    idm: IDMParams = field(default_factory=IDMParams)
+    replay: ReplayParams = field(default_factory=ReplayParams)
+    vehicle: VehicleOverrides = field(default_factory=VehicleOverrides)
+
+    def __post_init__(self) -> None:
+        _choice("hv.kind", self.kind, HV_KINDS)
+        _choice("hv.role", self.role, ROLES)
+        if self.kind == "replay" and not self.replay.file:
+            raise ConfigError("hv.replay.file is required with hv.kind = 'replay'")
 
 
 #: Quirk values of each mode (spec section 9). Q4, Q6 and Q7 are kept in both modes.
@@ -333,6 +462,8 @@ class Config:
     mpc: MPCParams = field(default_factory=MPCParams)
     scenario: ScenarioParams = field(default_factory=ScenarioParams)
     simulation: SimulationParams = field(default_factory=SimulationParams)
+    av: AVParams = field(default_factory=AVParams)
+    hv: HVParams = field(default_factory=HVParams)
     quirks: Quirks = field(default_factory=Quirks)
 
     def __post_init__(self) -> None:
@@ -347,16 +478,17 @@ class Config:
                 f"equal to library.sample_dt_s = {self.library.sample_dt_s!r} "
                 "(predictions are one sample ahead)",
             )
-        v = self.vehicle
         s = self.scenario
-        for name in ("av_v0_mps", "hv_v0_mps"):
-            v0, hw = getattr(s, name), getattr(s, name.replace("_mps", "_halfwidth_mps"))
+        for who in ("av", "hv"):
+            v = self.vehicle_of(who)
+            name = f"{who}_v0_mps"
+            v0, hw = getattr(s, name), getattr(s, f"{who}_v0_halfwidth_mps")
             if v0 - hw < v.v_min_mps or v0 + hw > v.v_max_mps:
                 _fail(
                     f"scenario.{name}",
                     v0,
                     f"[{v.v_min_mps:g}, {v.v_max_mps:g}] with its half-width {hw:g} "
-                    "(vehicle.v_min_mps, vehicle.v_max_mps)",
+                    f"(the {who.upper()}'s speed limits)",
                 )
 
     # -- derived -----------------------------------------------------------------------------
@@ -365,6 +497,18 @@ class Config:
     def effective_quirks(self) -> Quirks:
         """The quirks in force: the mode's, with any explicit switch applied."""
         return self.quirks.resolved(self.mode)
+
+    def vehicle_of(self, who: str) -> VehicleParams:
+        """The size and limits of the ``"av"`` or ``"hv"``: ``[vehicle]`` with its overrides."""
+        return getattr(self, who).vehicle.resolve(self.vehicle, who)
+
+    @property
+    def streams(self) -> str:
+        """The random-stream layout in force: as set, else "legacy" in paper mode and
+        "per-agent" otherwise."""
+        if self.simulation.streams is not None:
+            return self.simulation.streams
+        return "legacy" if self.mode == "paper" else "per-agent"
 
     @property
     def p_a_hat(self) -> float:
@@ -388,6 +532,11 @@ class Config:
             if key == "mode":
                 kwargs["mode"] = value
                 continue
+            if key == "simulation" and isinstance(value, dict):
+                for old, new in _MOVED.items():
+                    if old in value:
+                        raise ConfigError(f"simulation.{old} moved to {new} "
+                                          f"(e.g. {new} = {value[old]!r})")
             if key not in _SECTIONS:
                 raise ConfigError(f"unknown section {key!r}; allowed: "
                                   f"{', '.join(['mode', *_SECTIONS])}")
@@ -514,14 +663,25 @@ _SECTIONS: dict[str, type] = {
     "mpc": MPCParams,
     "scenario": ScenarioParams,
     "simulation": SimulationParams,
+    "av": AVParams,
+    "hv": HVParams,
     "quirks": Quirks,
 }
 
+#: Fields that moved, for a helpful message when an old configuration names them.
+_MOVED = {"av": "av.kind", "hv_role": "hv.role"}
+
 
 __all__ = [
+    "AVParams",
     "Config",
     "ConfigError",
+    "HVParams",
+    "IDMParams",
     "LibraryParams",
+    "NoisyParams",
+    "ReplayParams",
+    "VehicleOverrides",
     "MPCParams",
     "Quirks",
     "RewardParams",

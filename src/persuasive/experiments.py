@@ -1,11 +1,11 @@
-"""The paper's Monte Carlo studies (spec section 8): Tables 1 and 2, run in parallel.
+"""The paper's Monte Carlo studies (docs/method.md §8): Tables 1 and 2, run in parallel.
 
 A table is a list of rows (who drives the AV, the HV's initial role, ``p_a``, ``p_a_hat``);
 each row runs seeds ``1..N``. Every run is a pure function of its configuration and seed, so
 the work is split into chunks of seeds, farmed out to worker processes, and put back in
 ``(row, seed)`` order: the results do not depend on the number of workers.
 
-Metrics per row (spec section 8): counts of who reached the crossing line first (AV, HV, same
+Metrics per row (§8): counts of who reached the crossing line first (AV, HV, same
 step, neither) and the AV/HV shares of all runs; collisions; runs with an infeasible MPC step;
 safety violations (minimum distance below ``min_dist``) up to ``idx_end`` and over the whole
 run. The published shares are printed beside the reproduced ones.
@@ -40,7 +40,7 @@ TABLES = ("table1", "table2")
 class Row:
     """One row of a paper table and its published result (percent of runs)."""
 
-    av: str  #: "lfg" (Table 1) or "mpc" (Table 2)
+    av: str  #: the AV's kind: "lfg" (Table 1) or "persuasive" (Table 2)
     hv_role: str  #: the HV's initial role
     pa: float  #: the human's p_a
     pa_hat: float | None  #: the AV's estimate (Table 2), None for Table 1
@@ -50,21 +50,21 @@ class Row:
     def config(self, base: Config) -> Config:
         """``base`` with this row's agents and parameters."""
         return base.with_overrides({
-            "simulation.av": self.av,
-            "simulation.hv_role": self.hv_role,
+            "av.kind": self.av,
+            "hv.role": self.hv_role,
             "roles.p_a": self.pa,
             "mpc.p_a_hat": self.pa if self.pa_hat is None else self.pa_hat,
         })
 
 
-#: The published rows (spec section 8), in the paper's order.
+#: The published rows (docs/method.md §8), in the paper's order.
 PUBLISHED: dict[str, tuple[Row, ...]] = {
     "table1": (
         Row("lfg", "leader", 1.0, None, 0.0, 100.0),
         Row("lfg", "follower", 1.0, None, 97.9, 2.1),
     ),
     "table2": tuple(
-        Row("mpc", "leader" if r == "L" else "follower", pa, pah, av, hv)
+        Row("persuasive", "leader" if r == "L" else "follower", pa, pah, av, hv)
         for r, pa, pah, av, hv in (
             ("L", 1.00, 1.00, 87.8, 12.2),
             ("F", 1.00, 1.00, 96.4, 3.6),
@@ -107,7 +107,7 @@ def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any
         "av": s["av"],
         "hv_role": s["hv_role"],
         "pa": s["pa"],
-        "pa_hat": s["pa_hat"] if s["av"] == "mpc" else None,
+        "pa_hat": s["pa_hat"] if s["av"] != "lfg" else None,
         "mode": s["mode"],
         "seed": seed,
         "av_s0_m": s["av_initial_state"][0],
@@ -186,7 +186,7 @@ def _die_with_parent(parent_pid: int) -> None:
 def warm_up() -> None:
     """Load (or compile, on first use) the kernels in this process before workers start."""
     simulate(Config().with_overrides({"simulation.n_steps": 1}), 1)
-    simulate(Config().with_overrides({"simulation.n_steps": 1, "simulation.av": "lfg"}), 1)
+    simulate(Config().with_overrides({"simulation.n_steps": 1, "av.kind": "lfg"}), 1)
 
 
 def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = None,

@@ -1,17 +1,17 @@
-"""The leader-follower game: one solve and the full prediction (spec section 4).
+"""The leader-follower game: one solve and the full prediction (docs/method.md §4).
 
 Notation. The "ego" player solves the game at the joint state ``x = (s_e, v_e, s_o, v_o)``.
-Both players' libraries are built (``persuasive.library``) and each player's reward matrix is
-``M[own trajectory, other's trajectory]`` (``persuasive.rewards``). In the spec's notation
-``R_e[i, j] = M_e[j, i]`` and ``R_o[i, j] = M_o[i, j]`` (row ``i`` the other's trajectory,
-column ``j`` the ego's).
+Both players' libraries are built (``persuasive.library``), each with its own vehicle's
+parameter vector, and each player's reward matrix is ``R_own[own trajectory, other's
+trajectory]`` (``persuasive.rewards``). In the notation of §4, ``R_e[i, j] = R_ego[j, i]`` and
+``R_o[i, j] = R_other[i, j]`` (row ``i`` the other's trajectory, column ``j`` the ego's).
 
-One leader-follower solve, with ``M_lead`` the leader's and ``M_fol`` the follower's matrix:
+One leader-follower solve, with ``R_lead`` the leader's and ``R_fol`` the follower's matrix:
 
-- the follower maximises its worst case: ``Qf[f] = min_l M_fol[f, l]``, ``F* = argmax-set Qf``
+- the follower maximises its worst case: ``Qf[f] = min_l R_fol[f, l]``, ``F* = argmax-set Qf``
   (every tie, exact floating-point equality);
 - the leader evaluates each of its trajectories against the follower's optimal set:
-  ``Ql[l] = agg_{f in F*} M_lead[l, f]`` (``agg`` is ``min`` as in the paper, or ``max``, quirk
+  ``Ql[l] = agg_{f in F*} R_lead[l, f]`` (``agg`` is ``min`` as in the paper, or ``max``, quirk
   Q5), and picks the first (lowest-index) maximiser;
 - the predicted follower trajectory is the first element of ``F*``.
 
@@ -27,29 +27,32 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from . import _packed as K
+from . import packing as slot
 from .library import Lib, Library, as_lib, fill_library, trajectory_library
 from .rewards import reward_matrix, reward_matrix_of, reward_terms
 
 # Indices into the 4-vector returned by a full prediction.
 EGO_LEADER, EGO_FOLLOWER, OTHER_LEADER, OTHER_FOLLOWER = 0, 1, 2, 3
+# Rows of the Q-values of a full prediction ``(4, n_traj)``: the leader's and the follower's
+# values of "ego leads", then of "ego follows".
+Q_EGO_LEADS_LEADER, Q_EGO_LEADS_FOLLOWER, Q_EGO_FOLLOWS_LEADER, Q_EGO_FOLLOWS_FOLLOWER = 0, 1, 2, 3
 
 
 @njit(cache=True)
-def leader_follower(M_lead: np.ndarray, M_fol: np.ndarray, agg_max: bool,
+def leader_follower(R_lead: np.ndarray, R_fol: np.ndarray, agg_max: bool,
                     Ql: np.ndarray, Qf: np.ndarray) -> tuple[int, int]:
     """Solve one leader-follower game; return ``(leader pick, follower pick)``.
 
-    ``M_lead``: ``(n_lead, n_fol)``, ``M_fol``: ``(n_fol, n_lead)``. ``Ql`` and ``Qf`` receive
+    ``R_lead``: ``(n_lead, n_fol)``, ``R_fol``: ``(n_fol, n_lead)``. ``Ql`` and ``Qf`` receive
     the leader's and follower's Q-values. Ties go to the lowest index.
     """
-    n_lead, n_fol = M_lead.shape
+    n_lead, n_fol = R_lead.shape
     best_f = -np.inf
     for f in range(n_fol):
-        q = M_fol[f, 0]
+        q = R_fol[f, 0]
         for l in range(1, n_lead):
-            if M_fol[f, l] < q:
-                q = M_fol[f, l]
+            if R_fol[f, l] < q:
+                q = R_fol[f, l]
         Qf[f] = q
         if q > best_f:
             best_f = q
@@ -60,10 +63,10 @@ def leader_follower(M_lead: np.ndarray, M_fol: np.ndarray, agg_max: bool,
             break
     best_l, pick_l = -np.inf, 0
     for l in range(n_lead):
-        q = M_lead[l, first_f]
+        q = R_lead[l, first_f]
         for f in range(first_f + 1, n_fol):
             if Qf[f] == best_f:
-                x = M_lead[l, f]
+                x = R_lead[l, f]
                 if (x > q) if agg_max else (x < q):
                     q = x
         Ql[l] = q
@@ -73,61 +76,95 @@ def leader_follower(M_lead: np.ndarray, M_fol: np.ndarray, agg_max: bool,
 
 
 @njit(cache=True)
-def solve_both(M_e: np.ndarray, M_o: np.ndarray, agg_max: bool, out: np.ndarray,
-               Q: np.ndarray) -> None:
+def solve_both(R_ego: np.ndarray, R_other: np.ndarray, agg_max: bool, out: np.ndarray,
+               q_values: np.ndarray) -> None:
     """Both role assignments: ``out = (ego-L, ego-F, other-L, other-F)`` trajectory indices.
 
-    ``Q`` ``(4, n)``: rows Ql and Qf of "ego leads", then Ql and Qf of "ego follows".
+    ``q_values`` ``(4, n)``: rows Ql and Qf of "ego leads", then Ql and Qf of "ego follows"
+    (``Q_EGO_LEADS_LEADER`` ...).
     """
-    out[EGO_LEADER], out[OTHER_FOLLOWER] = leader_follower(M_e, M_o, agg_max, Q[0], Q[1])
-    out[OTHER_LEADER], out[EGO_FOLLOWER] = leader_follower(M_o, M_e, agg_max, Q[2], Q[3])
+    out[EGO_LEADER], out[OTHER_FOLLOWER] = leader_follower(R_ego, R_other, agg_max,
+                                                           q_values[0], q_values[1])
+    out[OTHER_LEADER], out[EGO_FOLLOWER] = leader_follower(R_other, R_ego, agg_max,
+                                                           q_values[2], q_values[3])
 
 
 @njit(cache=True)
-def build(s0: float, v0: float, P: np.ndarray, disc: np.ndarray, L: Lib) -> None:
-    """Fill ``L`` with the library of a vehicle at ``(s0, v0)`` and its reward parts."""
-    fill_library(s0, v0, P, L.S, L.V, L.A)
-    reward_terms(L.S, L.V, L.A, s0, disc, P[K.W_U], P[K.MIN_DIST_SQ], L.base, L.coll, L.sq,
-                 L.win)
+def build(s0: float, v0: float, P: np.ndarray, disc: np.ndarray, lib: Lib) -> None:
+    """Fill ``lib`` with the library of the vehicle of ``P`` at ``(s0, v0)`` and its reward
+    parts."""
+    fill_library(s0, v0, P, lib.S, lib.V, lib.A)
+    reward_terms(lib.S, lib.V, lib.A, s0, disc, P, lib.base, lib.coll, lib.pos, lib.win)
 
 
 @njit(cache=True)
-def solve_libs(Le: Lib, Lo: Lib, w_c: float, min_dist_sq: float, agg_max: bool,
-               M_e: np.ndarray, M_o: np.ndarray, C: np.ndarray, Q: np.ndarray,
-               out: np.ndarray) -> None:
+def solve_libs(lib_ego: Lib, lib_other: Lib, P: np.ndarray, R_ego: np.ndarray,
+               R_other: np.ndarray, C: np.ndarray, q_values: np.ndarray, out: np.ndarray,
+               work: np.ndarray) -> None:
     """Both reward matrices of two built libraries (ego, other), then both solves into ``out``.
 
-    ``M_e, M_o, C``: ``(n_traj, n_traj)`` scratch; ``Q``: ``(4, n_traj)`` (see
-    :func:`solve_both`).
+    ``R_ego, R_other, C``: ``(n_traj, n_traj)`` scratch; ``q_values``: ``(4, n_traj)`` (see
+    :func:`solve_both`). ``P``: either vehicle's parameters (only shared slots are read).
+    ``work``: the counters of ``persuasive.packing`` (``WORK_*``).
     """
-    reward_matrix(Le.base, Le.coll, Le.sq, Le.win, Lo.sq, Lo.win, w_c, min_dist_sq, C, M_e)
-    reward_matrix(Lo.base, Lo.coll, Lo.sq, Lo.win, Le.sq, Le.win, w_c, min_dist_sq, C, M_o)
-    solve_both(M_e, M_o, agg_max, out, Q)
+    e, o = lib_ego, lib_other
+    w_c, thr = P[slot.W_C], P[slot.MIN_DIST_SQ]
+    along_paths = P[slot.CONFLICT] == slot.CONFLICT_ALONG_PATHS
+    tests = reward_matrix(e.base, e.coll, e.pos, e.win, o.pos, o.win, w_c, thr, along_paths,
+                          C, R_ego)
+    tests += reward_matrix(o.base, o.coll, o.pos, o.win, e.pos, e.win, w_c, thr, along_paths,
+                           C, R_other)
+    work[slot.WORK_PAIRS_GAME] += tests
+    solve_both(R_ego, R_other, P[slot.QUIRK_LEADER_AGG_MAX] != 0.0, out, q_values)
 
 
 @njit(cache=True)
-def predict_into(s_e: float, v_e: float, s_o: float, v_o: float, P: np.ndarray,
-                 disc: np.ndarray, Le: Lib, Lo: Lib, out: np.ndarray,
+def predict_into(s_e: float, v_e: float, s_o: float, v_o: float, P_ego: np.ndarray,
+                 P_other: np.ndarray, disc: np.ndarray, lib_ego: Lib, lib_other: Lib,
+                 out: np.ndarray, q_values: np.ndarray, work: np.ndarray,
                  ego_built: bool = False) -> None:
-    """Full prediction at the joint state: both libraries built into ``Le, Lo``, indices
-    (ego-L, ego-F, other-L, other-F) into ``out``. ``ego_built``: ``Le`` already holds the
-    ego's library at ``(s_e, v_e)``."""
-    n_traj = Le.S.shape[1]
+    """Full prediction at the joint state: both libraries built into ``lib_ego, lib_other``,
+    indices (ego-L, ego-F, other-L, other-F) into ``out``, Q-values into ``q_values``
+    ``(4, n_traj)``. ``ego_built``: ``lib_ego`` already holds the ego's library at
+    ``(s_e, v_e)``."""
+    n_traj = lib_ego.S.shape[1]
     if not ego_built:
-        build(s_e, v_e, P, disc, Le)
-    build(s_o, v_o, P, disc, Lo)
-    M_e, M_o, C = np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj))
-    solve_libs(Le, Lo, P[K.W_C], P[K.MIN_DIST_SQ], P[K.Q5] != 0.0, M_e, M_o, C,
-               np.empty((4, n_traj)), out)
+        build(s_e, v_e, P_ego, disc, lib_ego)
+        work[slot.WORK_LIBRARIES] += 1
+    else:
+        work[slot.WORK_LIBRARIES_REUSED] += 1
+    build(s_o, v_o, P_other, disc, lib_other)
+    work[slot.WORK_LIBRARIES] += 1
+    solve_libs(lib_ego, lib_other, P_ego, np.empty((n_traj, n_traj)),
+               np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj)), q_values, out, work)
 
 
 @njit(cache=True)
-def predict_buffers(s_e: float, v_e: float, s_o: float, v_o: float, P: np.ndarray,
-                    disc: np.ndarray, buf_e: np.ndarray, win_e: np.ndarray, buf_o: np.ndarray,
-                    win_o: np.ndarray, out: np.ndarray) -> None:
+def predict_buffers(s_e: float, v_e: float, s_o: float, v_o: float, P_ego: np.ndarray,
+                    P_other: np.ndarray, disc: np.ndarray, buf_e: np.ndarray,
+                    win_e: np.ndarray, buf_o: np.ndarray, win_o: np.ndarray, out: np.ndarray,
+                    q_values: np.ndarray, work: np.ndarray) -> None:
     """:func:`predict_into` on libraries stored as :func:`persuasive.library.lib_buffers`
     (the cheap entry point from Python)."""
-    predict_into(s_e, v_e, s_o, v_o, P, disc, as_lib(buf_e, win_e), as_lib(buf_o, win_o), out)
+    predict_into(s_e, v_e, s_o, v_o, P_ego, P_other, disc, as_lib(buf_e, win_e),
+                 as_lib(buf_o, win_o), out, q_values, work)
+
+
+@njit(cache=True)
+def build_buffers(s0: float, v0: float, P: np.ndarray, disc: np.ndarray, buf: np.ndarray,
+                  win: np.ndarray) -> None:
+    """:func:`build` into a library stored as :func:`persuasive.library.lib_buffers`."""
+    build(s0, v0, P, disc, as_lib(buf, win))
+
+
+@njit(cache=True)
+def solve_buffers(buf_e: np.ndarray, win_e: np.ndarray, buf_o: np.ndarray, win_o: np.ndarray,
+                  P: np.ndarray, out: np.ndarray, q_values: np.ndarray,
+                  work: np.ndarray) -> None:
+    """:func:`solve_libs` of two built libraries stored as buffers (ego, other)."""
+    n_traj = win_e.shape[0]
+    solve_libs(as_lib(buf_e, win_e), as_lib(buf_o, win_o), P, np.empty((n_traj, n_traj)),
+               np.empty((n_traj, n_traj)), np.empty((n_traj, n_traj)), q_values, out, work)
 
 
 @dataclass(frozen=True)
@@ -156,20 +193,20 @@ def solve_game(rewards_leader: np.ndarray, rewards_follower: np.ndarray,
     """
     if agg not in ("min", "max"):
         raise ValueError(f"agg = {agg!r} is out of range; allowed: min | max")
-    M_l = np.ascontiguousarray(rewards_leader, dtype=np.float64)
-    M_f = np.ascontiguousarray(rewards_follower, dtype=np.float64)
-    if M_l.ndim != 2 or M_f.shape != M_l.shape[::-1] or 0 in M_l.shape:
+    R_l = np.ascontiguousarray(rewards_leader, dtype=np.float64)
+    R_f = np.ascontiguousarray(rewards_follower, dtype=np.float64)
+    if R_l.ndim != 2 or R_f.shape != R_l.shape[::-1] or 0 in R_l.shape:
         raise ValueError(
-            f"reward shapes {M_l.shape} and {M_f.shape} must be (n_lead, n_fol) and (n_fol, n_lead)"
+            f"reward shapes {R_l.shape} and {R_f.shape} must be (n_lead, n_fol) and (n_fol, n_lead)"
         )
-    Ql, Qf = np.empty(M_l.shape[0]), np.empty(M_l.shape[1])
-    lead, fol = leader_follower(M_l, M_f, agg == "max", Ql, Qf)
+    Ql, Qf = np.empty(R_l.shape[0]), np.empty(R_l.shape[1])
+    lead, fol = leader_follower(R_l, R_f, agg == "max", Ql, Qf)
     return GameSolution(int(lead), int(fol), np.flatnonzero(Qf == Qf.max()), Ql, Qf)
 
 
 @dataclass(frozen=True)
 class Prediction:
-    """A full prediction at a joint state seen by an ego player (spec section 4)."""
+    """A full prediction at a joint state seen by an ego player (docs/method.md §4.3)."""
 
     ego: Library  #: the ego's candidate trajectories
     other: Library  #: the other's candidate trajectories
@@ -177,8 +214,8 @@ class Prediction:
     ego_follower: int  #: the ego's trajectory when it follows
     other_leader: int  #: the other's trajectory when it leads
     other_follower: int  #: the other's trajectory when it follows
-    rewards_ego: np.ndarray  #: ``M_e[ego trajectory, other's trajectory]``
-    rewards_other: np.ndarray  #: ``M_o[other's trajectory, ego trajectory]``
+    rewards_ego: np.ndarray  #: ``R_ego[ego trajectory, other's trajectory]``
+    rewards_other: np.ndarray  #: ``R_other[other's trajectory, ego trajectory]``
 
     def ego_state(self, role: str, k: int) -> tuple[float, float]:
         """The ego's predicted ``(s, v)`` in ``role`` at sample ``k`` (0 = now)."""
@@ -198,18 +235,21 @@ def _state_at(lib: Library, idx: int, k: int) -> tuple[float, float]:
 
 
 def full_prediction(x_ego: tuple[float, float], x_other: tuple[float, float],
-                    P: np.ndarray, disc: np.ndarray) -> Prediction:
+                    P_ego: np.ndarray, P_other: np.ndarray, disc: np.ndarray) -> Prediction:
     """Full prediction of the joint state ``(x_ego, x_other)``, each ``(s [m], v [m/s])``.
 
-    ``P`` and ``disc`` from :func:`persuasive.pack` and :func:`persuasive.discounts`.
+    ``P_ego``, ``P_other``: the two vehicles' parameter vectors; ``disc`` the discounts
+    (:func:`persuasive.packing.pack`, :func:`persuasive.packing.discounts`).
     """
-    ego = trajectory_library(x_ego[0], x_ego[1], P)
-    other = trajectory_library(x_other[0], x_other[1], P)
-    M_e = reward_matrix_of(ego, other, disc, P)
-    M_o = reward_matrix_of(other, ego, disc, P)
+    ego = trajectory_library(x_ego[0], x_ego[1], P_ego)
+    other = trajectory_library(x_other[0], x_other[1], P_other)
+    R_ego = reward_matrix_of(ego, other, disc, P_ego, P_other)
+    R_other = reward_matrix_of(other, ego, disc, P_other, P_ego)
     idx = np.empty(4, np.int64)
-    solve_both(M_e, M_o, P[K.Q5] != 0.0, idx, np.empty((4, M_e.shape[0])))
-    return Prediction(ego, other, int(idx[0]), int(idx[1]), int(idx[2]), int(idx[3]), M_e, M_o)
+    solve_both(R_ego, R_other, P_ego[slot.QUIRK_LEADER_AGG_MAX] != 0.0, idx,
+               np.empty((4, R_ego.shape[0])))
+    return Prediction(ego, other, int(idx[0]), int(idx[1]), int(idx[2]), int(idx[3]), R_ego,
+                      R_other)
 
 
 __all__ = [
@@ -221,5 +261,7 @@ __all__ = [
     "predict_into",
     "solve_game",
     "build",
+    "build_buffers",
+    "solve_buffers",
     "solve_libs",
 ]

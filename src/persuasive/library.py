@@ -1,4 +1,4 @@
-"""The candidate trajectories, the action set U (spec section 2).
+"""The candidate trajectories, the action set U (docs/method.md §2).
 
 Every trajectory follows an optimal-velocity (OVM) car-following law behind a virtual leader:
 
@@ -13,13 +13,15 @@ The library of a vehicle at ``(s0, v0)`` holds ``n_mesh + 1`` trajectories in th
 order decides ties):
 
 0. keep the current speed (``v_t = v0``);
-1. ``v_t = v_mesh[0]``, with the stop position ``-stop_distance`` when one is offered;
+1. ``v_t = v_mesh[0]``, with the stop position ``s_yield`` when one is offered;
 2. .. n_mesh: ``v_t = v_mesh[1:]``;
 
 with ``v_mesh = linspace(v_lo, v_hi, n_mesh)``, ``v_hi = min(v_max, v0 + u_max T)`` and
-``v_lo = max(v_min, v0 + u_min T)``. The stop is offered when ``v_lo <= 0`` and
-``s0 + v0 / |u_min| < -stop_distance`` (quirk Q6; with Q6 off the test uses the stopping
-distance ``v0^2 / (2 |u_min|)``).
+``v_lo = max(v_min, v0 + u_min T)``. The stop position is the vehicle's yield line
+(``-stop_distance`` at the paper's intersection). The stop is offered when ``v_lo <= 0`` and
+``s0 + v0 / |u_min| < s_yield`` (quirk Q6; with Q6 off the test uses the stopping distance
+``v0^2 / (2 |u_min|)``). Every parameter comes from the vehicle's own vector
+(``persuasive.packing``): each vehicle has its own limits and yield line.
 
 Arrays: the kernels store ``S, V, A`` sample-major, shape ``(n_samples, n_traj)``: position
 [m], speed [m/s] and the acceleration [m/s^2] used to reach each sample; sample ``k`` is at time
@@ -35,7 +37,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from . import _packed as K
+from . import packing as slot
 from .kinematics import saturated_step
 
 
@@ -52,12 +54,12 @@ def ovm(h: float, v: float, v1: float, alpha: float, beta: float, kappa: float, 
 @njit(cache=True)
 def offers_stop(s0: float, v0: float, P: np.ndarray) -> bool:
     """Whether the library of ``(s0, v0)`` holds the stop-at-the-line trajectory."""
-    v_lo = max(P[K.V_MIN], v0 + P[K.U_MIN] * P[K.HORIZON])
+    v_lo = max(P[slot.V_MIN], v0 + P[slot.U_MIN] * P[slot.HORIZON])
     if v_lo > 0.0:
         return False
-    if P[K.Q6] != 0.0:
-        return s0 + v0 / abs(P[K.U_MIN]) < -P[K.STOP_DIST]
-    return s0 + v0 * v0 / (2.0 * abs(P[K.U_MIN])) < -P[K.STOP_DIST]
+    if P[slot.QUIRK_TIME_LIKE_STOP_TEST] != 0.0:  # Q6
+        return s0 + v0 / abs(P[slot.U_MIN]) < P[slot.YIELD_S]
+    return s0 + v0 * v0 / (2.0 * abs(P[slot.U_MIN])) < P[slot.YIELD_S]
 
 
 @njit(cache=True, inline="always")
@@ -79,16 +81,17 @@ def fill_library(
 
     ``S, V, A``: ``(n_samples, n_mesh + 1)`` float64 arrays (sample-major), overwritten.
     """
-    n = int(P[K.N_SAMPLES])
-    n_traj = int(P[K.N_MESH]) + 1
-    dt = P[K.SAMPLE_DT]
-    v_min, v_max = P[K.V_MIN], P[K.V_MAX]
-    u_min, u_max = P[K.U_MIN], P[K.U_MAX]
-    alpha, beta, kappa, h_st, h_go = P[K.ALPHA], P[K.BETA], P[K.KAPPA], P[K.H_ST], P[K.H_GO]
-    length = P[K.LENGTH]
-    v_hi = min(v_max, v0 + u_max * P[K.HORIZON])
-    v_lo = max(v_min, v0 + u_min * P[K.HORIZON])
-    stop_leader = -P[K.STOP_DIST] + h_st + length
+    n = int(P[slot.N_SAMPLES])
+    n_traj = int(P[slot.N_MESH]) + 1
+    dt = P[slot.SAMPLE_DT]
+    v_min, v_max = P[slot.V_MIN], P[slot.V_MAX]
+    u_min, u_max = P[slot.U_MIN], P[slot.U_MAX]
+    alpha, beta, kappa = P[slot.ALPHA], P[slot.BETA], P[slot.KAPPA]
+    h_st, h_go = P[slot.H_ST], P[slot.H_GO]
+    length = P[slot.LENGTH]
+    v_hi = min(v_max, v0 + u_max * P[slot.HORIZON])
+    v_lo = max(v_min, v0 + u_min * P[slot.HORIZON])
+    stop_leader = P[slot.YIELD_S] + h_st + length
     v_t = np.empty(n_traj)
     gap = np.empty(n_traj)
     standing = np.zeros(n_traj, np.bool_)
@@ -117,8 +120,10 @@ class Lib(NamedTuple):
     """A library in kernel form, with its reward parts (filled by ``persuasive.game.build``).
 
     Sample-major trajectories ``S, V, A`` ``(n, n_traj)``; reward parts of
-    ``persuasive.rewards``: ``base`` ``(n_traj,)``, ``coll`` and ``sq`` ``(n, n_traj)``,
-    ``win`` ``(n_traj, 2)`` int64.
+    ``persuasive.rewards``: ``base`` ``(n_traj,)``, ``coll`` ``(n, n_traj)``, ``pos``
+    ``(2, n, n_traj)``: ``pos[0] = s^2`` for a conflict along the paths, the positions ``x, y``
+    [m] of the samples inside the window for a euclidean one; ``win`` ``(n_traj, 2)`` int64.
+    (Two coordinates in one array keep the tuple small: every field is passed on each call.)
     """
 
     S: np.ndarray
@@ -126,32 +131,36 @@ class Lib(NamedTuple):
     A: np.ndarray
     base: np.ndarray
     coll: np.ndarray
-    sq: np.ndarray
+    pos: np.ndarray
     win: np.ndarray
 
 
+#: Rows of a library's float storage per sample: S, V, A, coll, pos[0], pos[1] (then base).
+_ROWS = 6
+
+
 def lib_buffers(n: int, n_traj: int) -> tuple[np.ndarray, np.ndarray]:
-    """Storage of one :class:`Lib`: a float ``(5 n + 1, n_traj)`` and an int ``(n_traj, 2)``.
+    """Storage of one :class:`Lib`: a float ``(6 n + 1, n_traj)`` and an int ``(n_traj, 2)``.
 
     Python code passes these two plain arrays to the compiled entry points (a tuple of arrays
     costs several microseconds per call to type-check); :func:`as_lib` views them as a
     :class:`Lib` inside compiled code.
     """
-    return np.empty((5 * n + 1, n_traj)), np.empty((n_traj, 2), np.int64)
+    return np.empty((_ROWS * n + 1, n_traj)), np.empty((n_traj, 2), np.int64)
 
 
 @njit(cache=True)
 def as_lib(buf: np.ndarray, win: np.ndarray) -> Lib:
-    """The :class:`Lib` stored in ``buf``/``win`` (rows: S, V, A, coll, sq, then base)."""
-    n = (buf.shape[0] - 1) // 5
-    return Lib(buf[0:n], buf[n:2 * n], buf[2 * n:3 * n], buf[5 * n], buf[3 * n:4 * n],
-               buf[4 * n:5 * n], win)
+    """The :class:`Lib` stored in ``buf``/``win`` (rows: S, V, A, coll, pos, then base)."""
+    n = (buf.shape[0] - 1) // _ROWS
+    return Lib(buf[0:n], buf[n:2 * n], buf[2 * n:3 * n], buf[_ROWS * n], buf[3 * n:4 * n],
+               buf[4 * n:6 * n].reshape((2, n, buf.shape[1])), win)
 
 
 @njit(cache=True)
 def new_lib(n: int, n_traj: int) -> Lib:
     """Uninitialised kernel arrays for a library of ``n_traj`` trajectories of ``n`` samples."""
-    return as_lib(np.empty((5 * n + 1, n_traj)), np.empty((n_traj, 2), np.int64))
+    return as_lib(np.empty((_ROWS * n + 1, n_traj)), np.empty((n_traj, 2), np.int64))
 
 
 @dataclass(frozen=True)
@@ -174,8 +183,9 @@ class Library:
 
 
 def trajectory_library(s0: float, v0: float, P: np.ndarray) -> Library:
-    """The library of a vehicle at ``(s0 [m], v0 [m/s])``; ``P`` from :func:`persuasive.pack`."""
-    n_traj, n = int(P[K.N_MESH]) + 1, int(P[K.N_SAMPLES])
+    """The library of a vehicle at ``(s0 [m], v0 [m/s])``; ``P`` its parameter vector
+    (:func:`persuasive.packing.pack`)."""
+    n_traj, n = int(P[slot.N_MESH]) + 1, int(P[slot.N_SAMPLES])
     S, V, A = np.empty((n, n_traj)), np.empty((n, n_traj)), np.empty((n, n_traj))
     fill_library(float(s0), float(v0), P, S, V, A)
     return Library(S.T, V.T, A.T, float(s0), float(v0),

@@ -1,9 +1,11 @@
-"""The persuasive planner as a library call: give it the two vehicles' states, get an action.
+"""The AV's planner as a library call: give it the two vehicles' states, get an action.
 
-:class:`Planner` wraps the AV's branch MPC (spec section 6) for use inside a user's own loop,
-e.g. a vehicle stack at 10 Hz. It keeps, between calls, what the method keeps: the belief on the
-human's role and the stored one-step prediction of the human. It uses corrected mode by default
-(the paper's equations); pass a configuration to change any parameter or quirk.
+:class:`Planner` runs one AV policy (docs/method.md §6, §11; the paper's persuasive branch MPC
+by default) inside a user's own loop, e.g. a vehicle stack at 10 Hz. It is the same compiled
+step the closed loop calls (``persuasive.policies.step.policy_step``), and it keeps between
+calls what the policy keeps: for the MPC, the belief on the human's role and the stored
+one-step prediction of the human. It uses corrected mode by default (the paper's equations);
+pass a configuration to change any parameter, quirk, planner kind or scenario.
 
 Example
 -------
@@ -15,26 +17,29 @@ Example
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import _packed as K
-from ._packed import discounts, pack
-from .agents import (M_BEL_L, M_FEASIBLE, M_PSAFE_MIN, M_TRAJ, MPC_LOG, Q_L, mpc_init,
-                     mpc_step_buffers)
+from . import packing as slot
 from .config import Config, ConfigError
-from .game import predict_buffers
+from .game import build_buffers, predict_buffers
 from .library import lib_buffers
 from .mpc import D_EXPECTED, D_MIN_SAFE, D_P_LL, N_DIAG
+from .packing import discounts, pack
+from .policies import kinds as kd
+from .policies import kind_of, policy_params
+from .policies.step import policy_init, policy_step_buffers
 from .roles import FOLLOWER, LEADER
+from .scenarios import build_scenario
 
 State = tuple[float, float]
 
 
 @dataclass(frozen=True)
 class Plan:
-    """One decision of the planner."""
+    """One decision of the planner. Fields a kind does not compute are NaN."""
 
     accel_mps2: float  #: acceleration to apply now [m/s^2]
     candidate: int  #: index of the chosen candidate trajectory (library order)
@@ -52,84 +57,137 @@ class Plan:
 
 
 class Planner:
-    """The AV's persuasive branch-MPC planner.
+    """The AV's planner (the persuasive branch MPC unless ``config.av.kind`` says otherwise).
 
     Parameters
     ----------
     config : Config, optional
-        All parameters; default ``Config(mode="corrected")``.
+        All parameters; default ``Config(mode="corrected")``. ``config.av.kind`` selects the
+        planner: persuasive, passive, cv, yield or lfg; ``config.scenario`` the geometry.
+    seed : int, optional
+        Seed of the planner's own uniforms (only the ``lfg`` kind draws: its role changes).
     """
 
-    def __init__(self, config: Config | None = None):
+    def __init__(self, config: Config | None = None, seed: int | None = None):
         self.config = config if config is not None else Config(mode="corrected")
-        self._P, self._disc = pack(self.config), discounts(self.config)
+        self._spec = kind_of(self.config, kd.AV)
+        self._scenario = build_scenario(self.config)
+        self._P_av, self._P_hv = pack(self.config, self._scenario)
+        self._disc = discounts(self.config)
+        self._prm = policy_params(self.config, kd.AV)
         n, n_traj = self.config.library.n_samples, self.config.library.n_traj
         self._hv, self._av = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
-        self._idx = np.empty(4, np.int64)
-        self._diag = np.empty((n_traj, N_DIAG))
-        self._log = np.empty(len(MPC_LOG))
+        self._ahead_a, self._ahead_b = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
+        self._ahead = np.zeros((2, 3))
+        self._idx = np.zeros(4, np.int64)
+        self._q_values = np.zeros((4, n_traj))
+        self._diag = np.full((n_traj, N_DIAG), np.nan)
+        self._log = np.full(kd.LOG_SIZE, np.nan)
+        self.work = np.zeros(slot.N_WORK, np.int64)  #: the kernels' counters, summed over calls
         self._times = np.arange(1, n + 1) * self.config.library.sample_dt_s
+        self._rng = np.random.Generator(np.random.PCG64(seed))
+        self._draws = np.zeros(2)
+        self._state = np.zeros(kd.STATE_SIZE)
+        self._k = 0
         self.reset()
 
     def reset(self) -> None:
         """Forget the belief and the stored prediction (a new encounter)."""
-        self._state = mpc_init(float(self._P[K.PRIOR_L]))
+        policy_init(self._spec.kind, self._prm, self._state, float(self._P_av[slot.PRIOR_L]))
+        self._k = 0
+
+    @property
+    def kind(self) -> str:
+        """The planner's kind (``config.av.kind``)."""
+        return self._spec.name
 
     @property
     def belief_hv_leader(self) -> float:
-        """Current P(HV = leader)."""
-        return float(self._state[Q_L])
+        """Current P(HV = leader) (NaN for kinds without a belief)."""
+        if self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE):
+            return float(self._state[0])
+        return math.nan
 
     def plan(self, av: State, hv: State, human_role: str | None = None) -> Plan:
         """Decide the AV's acceleration at AV state ``av`` and HV state ``hv``.
 
-        ``av``, ``hv``: ``(s [m], v [m/s])`` along each vehicle's road, ``s < 0`` before the
+        ``av``, ``hv``: ``(s [m], v [m/s])`` along each vehicle's path, ``s < 0`` before the
         conflict point. ``human_role`` ("leader"/"follower") is needed only with quirk Q3 on
         (paper mode), where a belief tie reads the human's true role.
         """
         x_R, x_H = _state("av", av, self.config), _state("hv", hv, self.config)
-        tie_given = self.config.effective_quirks.q3_tie_break_leak
-        if tie_given and human_role not in ("leader", "follower"):
+        tie_given = self.config.effective_quirks.q3_tie_break_leak and \
+            self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE)
+        if human_role is not None and human_role not in ("leader", "follower"):
+            raise ConfigError(f"human_role = {human_role!r} is out of range; allowed: "
+                              "leader | follower")
+        if tie_given and human_role is None:
             raise ConfigError("human_role is required with quirk Q3 (paper mode); "
                               "allowed: leader | follower")
-        given = LEADER if human_role == "leader" else FOLLOWER
-        predict_buffers(x_H[0], x_H[1], x_R[0], x_R[1], self._P, self._disc, *self._hv,
-                        *self._av, self._idx)
-        accel = mpc_step_buffers(self._state, x_R[0], x_R[1], x_H[0], x_H[1], tie_given, given,
-                                 self.config.p_a_hat, *self._hv, *self._av, self._idx,
-                                 self._P, self._disc, self._diag, self._log)
-        k = int(self._log[M_TRAJ])
+        role = -1 if human_role is None else (LEADER if human_role == "leader" else FOLLOWER)
+        if self._spec.needs_game:
+            predict_buffers(x_H[0], x_H[1], x_R[0], x_R[1], self._P_hv, self._P_av, self._disc,
+                            *self._hv, *self._av, self._idx, self._q_values, self.work)
+        elif self._spec.needs_av_library:
+            build_buffers(x_R[0], x_R[1], self._P_av, self._disc, *self._av)
+        if self._spec.draws:
+            self._draws[:self._spec.draws] = self._rng.random(self._spec.draws)
+        self._log[:] = np.nan
+        accel = policy_step_buffers(
+            self._spec.kind, kd.AV, self._prm, self._state, self._k, x_R[0], x_R[1], x_H[0],
+            x_H[1], self._draws, role, *self._hv, *self._av, self._idx, self._q_values,
+            self._P_av, self._P_hv, self._disc, self.config.simulation.dt_s, self._diag,
+            *self._ahead_a, *self._ahead_b, self._ahead, self._log, self.work)
+        self._k += 1
+        return self._plan(float(accel))
+
+    def _plan(self, accel: float) -> Plan:
         n = self.config.library.n_samples
+        col = self._spec.log.index("trajectory")
+        k = int(self._log[col]) if not math.isnan(self._log[col]) else -1
         buf = self._av[0]
-        d = self._diag[k]
+        mpc = self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE, kd.CV)
+        d = self._diag[k] if mpc and k >= 0 else np.full(N_DIAG, np.nan)
+        traj = (lambda row: buf[row * n:(row + 1) * n, k].copy()) if k >= 0 else \
+            (lambda row: np.full(n, np.nan))
+        epsilon = self.config.mpc.epsilon
+        feasible = bool(self._log[1]) if mpc else True
         return Plan(
-            accel_mps2=float(accel),
+            accel_mps2=accel,
             candidate=k,
             t_s=self._times.copy(),
-            s_m=buf[0:n, k].copy(),
-            v_mps=buf[n:2 * n, k].copy(),
-            a_mps2=buf[2 * n:3 * n, k].copy(),
+            s_m=traj(0),
+            v_mps=traj(1),
+            a_mps2=traj(2),
             branch_probabilities={b: float(d[D_P_LL + i]) for i, b in
                                   enumerate(("LL", "LF", "FL", "FF"))},
             expected_reward=float(d[D_EXPECTED]),
             p_safe_min=float(d[D_MIN_SAFE]),
-            chance_margin=float(self._log[M_PSAFE_MIN] - (1.0 - self.config.mpc.epsilon)),
-            feasible=bool(self._log[M_FEASIBLE]),
-            belief_hv_leader=float(self._log[M_BEL_L]),
-            candidates=self._diag.copy(),
+            chance_margin=float(d[D_MIN_SAFE] - (1.0 - epsilon)),
+            feasible=feasible,
+            belief_hv_leader=self.belief_hv_leader,
+            candidates=self._diag.copy() if mpc else np.full_like(self._diag, np.nan),
         )
 
 
 def _state(name: str, x, config: Config) -> tuple[float, float]:
+    """A validated ``(s, v)`` of vehicle ``name`` ("av"/"hv")."""
+    return check_state(name, x, config.vehicle_of(name))
+
+
+def check_state(name: str, x, vehicle) -> tuple[float, float]:
+    """``x`` as ``(s [m], v [m/s])``, or :class:`ConfigError`: it must be a pair of finite
+    numbers with the speed inside the vehicle's ``[v_min, v_max]``."""
     try:
         s, v = (float(x[0]), float(x[1]))
+        if len(x) != 2:
+            raise ValueError
     except (TypeError, ValueError, IndexError):
         raise ConfigError(f"{name} = {x!r} is not a state (s [m], v [m/s])") from None
-    veh = config.vehicle
-    if not (np.isfinite(s) and np.isfinite(v)) or not veh.v_min_mps <= v <= veh.v_max_mps:
+    if not (np.isfinite(s) and np.isfinite(v)) or not vehicle.v_min_mps <= v <= vehicle.v_max_mps:
         raise ConfigError(f"{name} = ({s!r}, {v!r}) is out of range; allowed: finite s, "
-                          f"v in [{veh.v_min_mps:g}, {veh.v_max_mps:g}] m/s")
+                          f"v in [{vehicle.v_min_mps:g}, {vehicle.v_max_mps:g}] m/s")
     return s, v
 
 
-__all__ = ["Plan", "Planner"]
+__all__ = ["Plan", "Planner", "check_state"]

@@ -28,9 +28,11 @@ def _register() -> None:
     from .plots import animate, plot
     from .reproduce import reproduce
     from .simulate import simulate
+    from .sweep import plot_sweep, sweep
 
-    for command in (simulate, reproduce, bench, plot, animate):
+    for command in (simulate, reproduce, sweep, bench, plot, animate):
         cli.add_command(command)
+    plot.add_command(plot_sweep)
 
 
 _register()

@@ -14,7 +14,8 @@ from typing import Any, Callable
 
 import click
 
-from ..config import MODES, ROLES, Config, ConfigError
+from ..config import (AV_KIND_ALIASES, AV_KINDS, HV_KINDS, MODES, ROLES, SCENARIO_KINDS,
+                      Config, ConfigError)
 
 #: Seed of the run the paper shows in its Figs. 2 and 3 (the default of the figure commands).
 PAPER_SEED = 996
@@ -48,11 +49,20 @@ def build_config(config_file: str | None, sets: tuple[str, ...],
     return config.with_overrides(overrides) if overrides else config
 
 
-def run_explicit(av: str | None, hv_role: str | None, pa: float | None,
-                 pa_hat: float | None, mode: str | None) -> dict[str, Any]:
-    """The dotted fields set by the run options of :func:`run_options`."""
-    return {"mode": mode, "simulation.av": av, "simulation.hv_role": hv_role,
-            "roles.p_a": pa, "mpc.p_a_hat": pa_hat}
+#: Explicit run options and the fields they set.
+RUN_FIELDS = {"av": "av.kind", "hv": "hv.kind", "hv_role": "hv.role", "pa": "roles.p_a",
+              "pa_hat": "mpc.p_a_hat", "scenario": "scenario.kind", "mode": "mode"}
+
+
+def run_explicit(options: dict[str, Any]) -> dict[str, Any]:
+    """The dotted fields set by the run options of :func:`run_options` (given or not)."""
+    return {field: options.get(name) for name, field in RUN_FIELDS.items()}
+
+
+def config_of(options: dict[str, Any]) -> Config:
+    """The configuration the run options describe (see the precedence above)."""
+    return build_config(options.get("config_file"), options.get("sets", ()),
+                        run_explicit(options))
 
 
 def config_options(func: Callable) -> Callable:
@@ -72,13 +82,18 @@ def config_options(func: Callable) -> Callable:
 def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable:
     """The options that define one closed-loop run (shared by simulate, plot and animate)."""
     options = [
-        click.option("--av", type=click.Choice(["mpc", "lfg"]), default=None,
-                     help="AV planner: persuasive branch MPC or LFG (2-LFG case) [mpc]."),
+        click.option("--av", type=click.Choice([*AV_KINDS, *AV_KIND_ALIASES]), default=None,
+                     help="AV planner [persuasive; mpc is its old name]: persuasive, passive, "
+                          "cv, lfg (the 2-LFG case), yield (docs/method.md §11)."),
+        click.option("--hv", type=click.Choice(list(HV_KINDS)), default=None,
+                     help="Human model [lfg]: lfg, stubborn, noisy, idm, aggressive, replay."),
         click.option("--hv-role", type=click.Choice(list(ROLES)), default=None,
                      help="HV initial role [leader]."),
         click.option("--pa", type=float, default=None, help="Human's p_a in [0, 1] [1.0]."),
         click.option("--pa-hat", type=float, default=None,
                      help="AV's estimate of p_a in [0, 1] [equal to --pa]."),
+        click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default=None,
+                     help="Geometry [intersection]: intersection, crossing, left-turn, merge."),
         click.option("--seed", type=int, default=seed_default, show_default=True,
                      help=seed_help),
     ]

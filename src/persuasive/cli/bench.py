@@ -6,6 +6,7 @@ import json
 
 import click
 
+from ..config import AV_KINDS, SCENARIO_KINDS
 from ._common import compile_notice
 
 
@@ -18,13 +19,23 @@ from ._common import compile_notice
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Workers for --full [all cores].")
 @click.option("--reference", is_flag=True, help="Also time the plain NumPy reference path.")
+@click.option("--sweep", "sweep", is_flag=True,
+              help="Only compare a Dask sweep (2 workers, or --workers) with the process pool "
+                   "on the same 2,000 and 8,000 runs: runs/s and the client's peak memory.")
+@click.option("--av", type=click.Choice(list(AV_KINDS)), default="persuasive",
+              show_default=True, help="The AV planner whose decisions are timed.")
+@click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default="intersection",
+              show_default=True, help="The scenario the runs are drawn from.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def bench(n_runs, repeats, full, workers, reference, as_json) -> None:
+def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, as_json) -> None:
     """Time a game solve, an MPC decision, a run and (--full) the whole reproduction."""
     from ..bench import bench as run_bench
 
     compile_notice()
-    result = run_bench(n_runs, repeats, full, reference, workers)
+    if sweep:
+        _bench_sweep(workers or 2, repeats, as_json)
+        return
+    result = run_bench(n_runs, repeats, full, reference, workers, av, scenario)
     if as_json:
         click.echo(json.dumps(result))
         return
@@ -32,9 +43,12 @@ def bench(n_runs, repeats, full, workers, reference, as_json) -> None:
     click.echo(f"machine: {m['cpus']} cpus, {m['processor']}, Python {m['python']}")
     click.echo(f"game solve (libraries included): median {result['game_solve_us_median']:.1f} us,"
                f" p99 {result['game_solve_us_p99']:.1f} us")
-    click.echo(f"MPC decision: median {result['mpc_decision_ms_median']:.3f} ms, "
+    click.echo(f"{av} AV decision ({scenario}): median "
+               f"{result['mpc_decision_ms_median']:.3f} ms, "
                f"p99 {result['mpc_decision_ms_p99']:.3f} ms")
-    click.echo(f"closed-loop MPC run (61 steps): median {result['mpc_run_ms_median']:.2f} ms")
+    click.echo(f"closed-loop run (61 steps): median {result['mpc_run_ms_median']:.2f} ms")
+    work = ", ".join(f"{k} {v:.1f}" for k, v in result["work_per_decision"].items())
+    click.echo(f"work per decision: {work}")
     if reference:
         click.echo("reference NumPy path: game solve "
                    f"{result['reference_game_solve_us_median']:.0f} us, MPC decision "
@@ -43,3 +57,26 @@ def bench(n_runs, repeats, full, workers, reference, as_json) -> None:
         click.echo(f"reproduce all (16,000 runs, {result['reproduce_workers']} workers): "
                    f"{result['reproduce_all_s']:.1f} s, peak memory at most "
                    f"{result['reproduce_peak_rss_mb']:.0f} MB")
+
+
+def _bench_sweep(workers: int, repeats: int, as_json: bool) -> None:
+    """``bench --sweep``: the Dask sweep against the process pool (persuasive.sweep.bench),
+    each timed ``repeats`` times, the best time kept."""
+    from ..sweep import bench_sweep
+
+    result = bench_sweep(workers=workers, repeats=repeats)
+    if as_json:
+        click.echo(json.dumps(result))
+        return
+    click.echo(f"Table 1's runs (2-LFG), {workers} workers, best of {repeats}: process pool "
+               "(reproduce) vs Dask sweep (LocalCluster, Parquet parts written)")
+    for s in result["sizes"]:
+        click.echo(f"{s['runs']:>6} runs: pool {s['pool_runs_per_s']:.0f} runs/s "
+                   f"({s['pool_s']:.1f} s), sweep {s['sweep_runs_per_s']:.0f} runs/s "
+                   f"({s['sweep_s']:.1f} s, chunks of {s['sweep_chunk']}), "
+                   f"ratio {100 * s['ratio']:.0f} %; client memory "
+                   f"{s['client_rss_before_mb']:.0f} MB before, peak "
+                   f"{s['client_peak_rss_mb']:.0f} MB; same results: "
+                   f"{'yes' if s['same_results'] else 'NO'}")
+    click.echo(f"sweep throughput {100 * result['ratio']:.0f} % of the process pool's "
+               f"(target >= 90 %)")

@@ -16,7 +16,7 @@ from typing import Callable
 
 import click
 
-from ._common import PAPER_SEED, build_config, compile_notice, run_explicit, run_options
+from ._common import PAPER_SEED, compile_notice, config_of, run_options
 
 _SEED_HELP = f"Run seed [{PAPER_SEED}: the run shown in the paper's Figs. 2 and 3]."
 
@@ -31,20 +31,19 @@ def _plots():
     return plots
 
 
-def _runs(single: bool, av: str | None, hv_role, pa, pa_hat, seed, mode, config_file, sets):
-    """The run the options describe (``single``), or the LFG-AV and MPC-AV runs of Figs. 2-3."""
+def _runs(single: bool, run: dict):
+    """The run the options describe (``single``), or the LFG-AV and persuasive-AV runs of
+    Figs. 2-3."""
     from ..simulation import simulate
 
     compile_notice()
     if single:
-        return (simulate(build_config(config_file, sets,
-                                      run_explicit(av, hv_role, pa, pa_hat, mode)), seed),)
-    if av is not None:
+        return (simulate(config_of(run), run["seed"]),)
+    if run.get("av") is not None:
         raise click.UsageError("--av applies only with --single (without it both the LFG AV "
-                               "and the MPC AV are plotted)")
-    return tuple(simulate(build_config(config_file, sets,
-                                       run_explicit(kind, hv_role, pa, pa_hat, mode)), seed)
-                 for kind in ("lfg", "mpc"))
+                               "and the persuasive AV are plotted)")
+    return tuple(simulate(config_of({**run, "av": kind}), run["seed"])
+                 for kind in ("lfg", "persuasive"))
 
 
 def _out_option(help_text: str) -> Callable:
@@ -67,11 +66,11 @@ def _single_option(func: Callable) -> Callable:
 @run_options(seed_default=PAPER_SEED, seed_help=_SEED_HELP)
 @_single_option
 @_out_option("Figure file: .png, .svg or .pdf.")
-def profile(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, single, out) -> None:
+def profile(single, out, **run) -> None:
     """Roles, beliefs, speeds and accelerations over time (the paper's Fig. 2)."""
     plots = _plots()
     plots.check_figure_path(out)
-    runs = _runs(single, av, hv_role, pa, pa_hat, seed, mode, config_file, sets)
+    runs = _runs(single, run)
     fig = plots.profile_single(*runs) if single else plots.profile_figure(*runs)
     click.echo(f"wrote {plots.save_figure(fig, out)}")
 
@@ -82,12 +81,11 @@ def profile(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, single, out)
 @click.option("--every", "every_s", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
               show_default=True, metavar="SECONDS", help="Time between vehicle snapshots.")
 @_out_option("Figure file: .png, .svg or .pdf.")
-def topview(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, single, every_s,
-            out) -> None:
+def topview(single, every_s, out, **run) -> None:
     """The intersection from above with vehicle snapshots (the paper's Fig. 3)."""
     plots = _plots()
     plots.check_figure_path(out)
-    runs = _runs(single, av, hv_role, pa, pa_hat, seed, mode, config_file, sets)
+    runs = _runs(single, run)
     fig = (plots.topview_single(*runs, every_s=every_s) if single
            else plots.topview_figure(*runs, every_s=every_s))
     click.echo(f"wrote {plots.save_figure(fig, out)}")
@@ -112,13 +110,13 @@ def table(results: str, out: str) -> None:
 @click.option("--fps", type=click.IntRange(min=1), default=10, show_default=True,
               help="Frames per second (10 is real time).")
 @_out_option("Animation file: .mp4 or .gif.")
-def animate(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, fps, out) -> None:
+def animate(fps, out, **run) -> None:
     """Animate one run: the top view, with the beliefs and roles shown live."""
     plots = _plots()
     plots.check_animation_path(out)
-    (run,) = _runs(True, av, hv_role, pa, pa_hat, seed, mode, config_file, sets)
-    path = plots.animate(run, out, fps=fps)
-    click.echo(f"wrote {path} ({len(run.log['step'])} frames at {fps} fps)")
+    (record,) = _runs(True, run)
+    path = plots.animate(record, out, fps=fps)
+    click.echo(f"wrote {path} ({len(record.log['step'])} frames at {fps} fps)")
 
 
 __all__ = ["animate", "plot"]

@@ -7,7 +7,7 @@ import time
 
 import click
 
-from ._common import build_config, compile_notice, run_explicit, run_options
+from ._common import compile_notice, config_of, run_options
 
 #: Per-step log formats ``--out`` writes, by extension.
 LOG_EXTENSIONS = (".parquet", ".csv")
@@ -29,17 +29,17 @@ def write_log(frame, path: str) -> None:
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write the per-step log here: .parquet or .csv (the folder must exist).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def simulate(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, out, as_json) -> None:
-    """Simulate one closed-loop run of the intersection."""
+def simulate(out, as_json, **run) -> None:
+    """Simulate one closed-loop run (two vehicles, one conflict)."""
     from .._files import check_output_file
-    from ..simulation import ARRIVAL_LABELS, simulate as run
+    from ..simulation import ARRIVAL_LABELS, simulate as simulate_run
 
-    config = build_config(config_file, sets, run_explicit(av, hv_role, pa, pa_hat, mode))
+    config = config_of(run)
     if out:
         check_output_file(out, LOG_EXTENSIONS, "log")  # before any work
     compile_notice()
     t0 = time.perf_counter()
-    record = run(config, seed)
+    record = simulate_run(config, run["seed"])
     elapsed = time.perf_counter() - t0
     if out:
         write_log(record.frame(), out)
@@ -53,22 +53,22 @@ def simulate(av, hv_role, pa, pa_hat, seed, mode, config_file, sets, out, as_jso
     where = ""
     if o.first_at_line:
         where = f" (after step {o.idx_end}, t = {(o.idx_end + 1) * dt:.1f} s)"
-    pa_hat_text = f", p_a_hat = {config.p_a_hat:g}" if config.simulation.av == "mpc" else ""
-    click.echo(
-        f"{config.simulation.av.upper()} AV, HV starts as {config.simulation.hv_role}, "
-        f"p_a = {config.roles.p_a:g}{pa_hat_text}, seed {record.seed}, {config.mode} mode"
-    )
+    pa_hat_text = f", p_a_hat = {config.p_a_hat:g}" if config.av.kind == "persuasive" else ""
+    human = f"{config.hv.kind} HV" + (f" starting as {config.hv.role}"
+                                      if config.hv.kind in ("lfg", "stubborn", "noisy") else "")
+    click.echo(f"{config.av.kind} AV, {human}, p_a = {config.roles.p_a:g}{pa_hat_text}, "
+               f"{config.scenario.kind}, seed {record.seed}, {config.mode} mode")
     s0, v0 = record.hv_initial_state
     click.echo(f"HV initial state: s = {s0:.3f} m, v = {v0:.3f} m/s")
     click.echo(f"first at the crossing line: {line}{where}; "
                f"first at the conflict point: {ARRIVAL_LABELS[o.first_at_conflict_point]}")
     click.echo(f"collision: {'yes' if o.collision else 'no'}; minimum distance "
                f"{o.min_distance_to_line_m:.2f} m up to the line, {o.min_distance_m:.2f} m over "
-               f"the run (safe set {config.vehicle.min_dist_m:g} m)")
+               f"the run (safe set {record.scenario.min_dist_m:g} m)")
     changes = f"HV role changes: {o.hv_role_changes}"
-    if config.simulation.av == "lfg":
+    if config.av.kind == "lfg":
         changes += f"; AV role changes: {o.av_role_changes}"
-    else:
-        changes += f"; infeasible MPC steps: {o.infeasible_steps}"
+    elif config.av.kind in ("persuasive", "passive", "cv"):
+        changes += f"; steps where the chance constraint failed: {o.infeasible_steps}"
     click.echo(changes)
     click.echo(f"time: {elapsed:.3f} s" + (f"; per-step log written to {out}" if out else ""))

@@ -1,0 +1,172 @@
+"""``persuasive sweep`` (a grid of configurations times seeds, on Dask) and ``persuasive plot
+sweep`` (a metric of a sweep over one or two axes, with 95 % intervals)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any, Callable
+
+import click
+
+from ._common import check_workers, compile_notice
+
+_GRID_HELP = """Run every run of a grid of configurations times seeds, on Dask.
+
+\b
+GRID.toml:
+  seeds = 1000                 # seeds 1..1000, or [seeds] start = 1, stop = 1000
+                               # (both ends inclusive)
+  [base]                       # any configuration, as in a --config file
+  simulation.n_steps = 61
+  [axes]                       # dotted field = [values]; runs = product x seeds
+  "roles.p_a" = [0.3, 0.7, 1.0]
+  mode = ["paper", "corrected"]
+
+The runs are written in chunks to OUT/runs/part-*.parquet (one row per run; read them with
+persuasive.sweep.load(OUT) or pandas.read_parquet(OUT/runs)), failed runs to
+OUT/failed/*.json. Rerunning the same command resumes: finished chunks are skipped and chunks
+with failed runs are retried. A different grid into the same folder is refused unless
+--force. Exit status 1 when a run failed, 2 for bad input.
+"""
+
+
+def _default_out(grid_path: str, digest: str) -> Path:
+    return Path("results") / f"sweep-{Path(grid_path).stem}-{digest[:10]}"
+
+
+def _progress(quiet: bool) -> Callable[[int, int], None] | None:
+    if quiet:
+        return None
+    from tqdm import tqdm
+
+    bar: dict[str, Any] = {}
+
+    def update(done: int, total: int) -> None:
+        if "bar" not in bar:
+            if done >= total:
+                return  # nothing left to run: no bar
+            bar["bar"] = tqdm(total=total, initial=done, unit="run", file=sys.stderr,
+                              dynamic_ncols=True, smoothing=0.1)
+        b = bar["bar"]
+        b.update(done - b.n)
+        if done >= total:
+            b.close()
+
+    def close() -> None:
+        if "bar" in bar:
+            bar["bar"].close()
+
+    update.close = close  # type: ignore[attr-defined]
+    return update
+
+
+@click.command(help=_GRID_HELP)
+@click.argument("grid_file", metavar="GRID.toml", type=click.Path(dir_okay=False))
+@click.option("--out", type=click.Path(file_okay=False), default=None,
+              help="Sweep folder [results/sweep-<grid name>-<grid hash>/].")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes of the local Dask cluster [all cores; never more than "
+                   "the chunks to run]. Not with --scheduler.")
+@click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
+              help="Use a running Dask scheduler (dask scheduler / dask worker) instead of "
+                   "a local cluster.")
+@click.option("--chunk", type=click.IntRange(min=1), default=None,
+              help="Runs per chunk, one Parquet part each [about 32 chunks of 1 to 250 "
+                   "runs; when resuming, the folder's].")
+@click.option("--force", is_flag=True,
+              help="Replace a folder holding another sweep (clears its parts).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def sweep(grid_file, out, workers, scheduler, chunk, force, as_json, quiet) -> None:
+    from .. import sweep as sw
+    from ..config import ConfigError
+
+    grid = sw.Grid.from_toml(grid_file)  # validated whole before anything runs
+    if workers is not None and scheduler is not None:
+        raise ConfigError("--workers applies to the local cluster only; the workers of "
+                          "--scheduler are those started with 'dask worker'")
+    folder = Path(out) if out else _default_out(grid_file, grid.digest)
+    if scheduler is None:
+        n_chunks = -(-len(grid) // (chunk or sw.store.default_chunk(len(grid))))
+        workers = check_workers(workers, n_chunks)
+        compile_notice()
+    progress = _progress(quiet)
+    try:
+        summary = sw.run(grid, folder, workers=workers, scheduler=scheduler, chunk=chunk,
+                         force=force, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
+    if as_json:
+        click.echo(json.dumps(summary.to_dict()))
+    else:
+        ran = (f"{summary.ran} run now with {summary.workers} worker"
+               f"{'s' if summary.workers != 1 else ''}" if summary.ran else "none to run")
+        click.echo(f"{summary.runs} runs in {summary.chunks} chunks of up to {summary.chunk}: "
+                   f"{summary.skipped} finished earlier, {ran}, {summary.wall_time_s:.1f} s")
+        click.echo(f"{summary.finished} runs in {folder}/runs/ "
+                   f"(persuasive.sweep.load({str(folder)!r}))")
+    if summary.failures:
+        for f in summary.failures[:10]:
+            axes = ", ".join(f"{k} = {v!r}" for k, v in f["axes"].items())
+            click.echo(f"error: run {f['run']} failed (seed {f['seed']}"
+                       f"{', ' + axes if axes else ''}, config {f['config_hash']}): "
+                       f"{f['error']}", err=True)
+        if len(summary.failures) > 10:
+            click.echo(f"error: ... and {len(summary.failures) - 10} more", err=True)
+        click.echo(f"error: {len(summary.failures)} run(s) failed (listed in {folder}/failed/);"
+                   " rerun the same command to retry them (only their chunks run again)",
+                   err=True)
+        click.get_current_context().exit(1)
+
+
+def _parse_where(values: tuple[str, ...]) -> dict[str, Any]:
+    """``("axis=value", ...)`` as a dict; values are read as TOML, else as text."""
+    import tomllib
+
+    from ..config import ConfigError
+
+    out: dict[str, Any] = {}
+    for item in values:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--where {item!r} is not of the form AXIS=VALUE")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {raw.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key.strip()] = raw.strip()  # a bare word, e.g. mode=paper
+    return out
+
+
+@click.command("sweep")
+@click.option("--from", "folder", required=True, type=click.Path(file_okay=False),
+              help="Sweep folder written by 'persuasive sweep'.")
+@click.option("--x", "x", required=True, metavar="AXIS", help="Axis along x (dotted field).")
+@click.option("--y", "y", default=None, metavar="AXIS",
+              help="Axis along y: a heatmap instead of a line plot.")
+@click.option("--metric", required=True, metavar="NAME",
+              help="av_first_pct, hv_first_pct, same_step_pct, neither_pct, collision_pct, "
+                   "infeasible_pct (percent of runs, Wilson 95 % interval), min_distance_m, "
+                   "min_distance_to_line_m, hv_role_changes (means, normal 95 % interval).")
+@click.option("--where", "where", multiple=True, metavar="AXIS=VALUE",
+              help="Keep only runs with this value of another axis (repeatable); other "
+                   "axes are pooled.")
+@click.option("--out", required=True, type=click.Path(dir_okay=False),
+              help="Figure file: .png, .svg or .pdf.")
+def plot_sweep(folder, x, y, metric, where, out) -> None:
+    """A metric of a sweep over one axis (line) or two (heatmap), with 95 % intervals."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from ..plots.files import check_figure_path, save_figure
+    from ..plots.sweep import sweep_figure
+    from ..sweep.metrics import metric_grid
+
+    check_figure_path(out)  # before any work
+    data = metric_grid(folder, metric, x, y, _parse_where(where))
+    click.echo(f"wrote {save_figure(sweep_figure(data), out)}")
+
+
+__all__ = ["plot_sweep", "sweep"]

@@ -1,0 +1,268 @@
+"""Paths, the distance between two vehicles on them, and footprint collisions (docs/method.md §10).
+
+Each vehicle moves along its own **path**, a curve in the plane parameterised by arc length:
+``s`` [m] is the signed distance along the path to the path's reference point (negative
+before it), as in the paper's intersection. A path is at most three pieces:
+
+- a straight line before ``b1`` (direction ``u0``, through ``p1 = xy(b1)``);
+- a circular arc from ``b1`` to ``b2`` (centre ``c``, radius ``r``, polar angle ``phi1`` of
+  ``p1`` seen from ``c``, turning left (+1) or right (-1)); absent when ``r == 0``;
+- a straight line after ``b2`` (direction ``u2``, through ``p2 = xy(b2)``).
+
+Straight directions are stored as unit vectors, not angles, so that the axis directions are
+exact (``(1, 0)``, ``(0, 1)``) and a straight path adds and multiplies nothing it need not.
+
+The **conflict** between two paths decides the distance the game and the safety checks use
+(``persuasive.packing.CONFLICT_*``): ``ALONG_PATHS`` combines each vehicle's distance along its
+path to the conflict point, ``sqrt(s_a^2 + s_b^2)`` (the paper's intersection, where it is the
+distance between the centres, and the left turn, where the centres of two oncoming vehicles in
+adjacent lanes must not count as close); ``EUCLIDEAN`` (angled crossings, the merge) the
+distance between the vehicles' centres ``xy(s)``. Both are compared with the exact threshold of
+:func:`persuasive.packing.sqrt_threshold`.
+
+A **zone** is a conservative interval of positions per path outside which the vehicle is at
+least ``min_dist`` from every point of the other path (:func:`zone_interval`); the kernels
+only test pairs of samples inside it, so it may be a superset but never miss a sample.
+
+Collisions of the run's outcome are overlaps of the vehicles' footprints, oriented rectangles
+of the vehicle's length and width centred on ``xy(s)`` and aligned with the path's direction
+(:func:`footprints_overlap`, the separating-axis test).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from . import packing as slot
+
+# Offsets inside the path's slots (``slot.PATH_B1 ..``) and of :meth:`Path.geometry_vector`.
+_B1, _B2, _X1, _Y1, _UX0, _UY0, _CX, _CY, _R, _PHI1, _TURN, _X2, _Y2, _UX2, _UY2 = range(15)
+N_GEOMETRY = 15
+
+
+@njit(cache=True, inline="always")
+def path_point(G: np.ndarray, o: int, s: float) -> tuple[float, float]:
+    """``xy(s)`` [m] of the path whose geometry starts at ``G[o]`` (see the module docstring)."""
+    b1 = G[o + _B1]
+    if s < b1:
+        d = s - b1
+        return G[o + _X1] + d * G[o + _UX0], G[o + _Y1] + d * G[o + _UY0]
+    b2 = G[o + _B2]
+    if s < b2:
+        r = G[o + _R]
+        angle = G[o + _PHI1] + G[o + _TURN] * (s - b1) / r
+        return G[o + _CX] + r * math.cos(angle), G[o + _CY] + r * math.sin(angle)
+    d = s - b2
+    return G[o + _X2] + d * G[o + _UX2], G[o + _Y2] + d * G[o + _UY2]
+
+
+@njit(cache=True)
+def path_points(G: np.ndarray, s: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
+    """:func:`path_point` of every position in ``s`` (any shape) into ``x``, ``y``."""
+    sf, xf, yf = s.ravel(), x.ravel(), y.ravel()
+    for i in range(sf.size):
+        xf[i], yf[i] = path_point(G, 0, sf[i])
+
+
+@njit(cache=True, inline="always")
+def pair_unsafe_along(sq_a: float, sq_b: float, thr: float) -> bool:
+    """Conflict along the paths: ``sqrt(s_a^2 + s_b^2) < min_dist``, with the squares of the
+    distances along the paths to the conflict point given."""
+    return sq_a + sq_b < thr
+
+
+@njit(cache=True, inline="always")
+def pair_unsafe_xy(xa: float, ya: float, xb: float, yb: float, thr: float) -> bool:
+    """Euclidean conflict: ``sqrt((x_a - x_b)^2 + (y_a - y_b)^2) < min_dist``."""
+    dx = xa - xb
+    dy = ya - yb
+    return dx * dx + dy * dy < thr
+
+
+@dataclass(frozen=True)
+class VehicleShape:
+    """One vehicle's size and limits (its own, or the shared ``[vehicle]`` section's)."""
+
+    length_m: float
+    width_m: float
+    v_min_mps: float
+    v_max_mps: float
+    u_min_mps2: float
+    u_max_mps2: float
+
+
+@dataclass(frozen=True)
+class Path:
+    """One vehicle's path, its lines and its conflict zone (see the module docstring).
+
+    Build with :meth:`straight`, :meth:`bend` or :meth:`turn`; the lines and the zone are set
+    by the scenario (:func:`dataclasses.replace`).
+    """
+
+    vehicle: VehicleShape
+    b1: float
+    b2: float
+    p1: tuple[float, float]
+    u0: tuple[float, float]
+    arc: tuple[float, float, float, float, float]  #: (cx, cy, r, phi1, turn); r = 0: no arc
+    p2: tuple[float, float]
+    u2: tuple[float, float]
+    yield_s: float = -math.inf  #: stop target of the library's stop trajectory [m]
+    first_s: float = -math.inf  #: the line whose first arrival decides who went first [m]
+    clear_s: float = math.inf  #: past it the vehicle no longer conflicts [m]
+    zone: tuple[float, float] = (-math.inf, math.inf)  #: conservative conflict window [m]
+    _G: np.ndarray = field(default=None, repr=False, compare=False)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_G", np.array(self.geometry_vector_tuple(), dtype=np.float64))
+
+    # -- construction ------------------------------------------------------------------------
+
+    @classmethod
+    def straight(cls, vehicle: VehicleShape, point: tuple[float, float],
+                 direction: tuple[float, float]) -> Path:
+        """A straight path through ``point`` at ``s = 0`` with unit ``direction``."""
+        return cls(vehicle, 0.0, 0.0, point, direction, (0.0, 0.0, 0.0, 0.0, 0.0), point,
+                   direction)
+
+    @classmethod
+    def bend(cls, vehicle: VehicleShape, point: tuple[float, float],
+             before: tuple[float, float], after: tuple[float, float]) -> Path:
+        """Straight in direction ``before`` up to ``point`` (``s = 0``), then ``after``."""
+        return cls(vehicle, 0.0, 0.0, point, before, (0.0, 0.0, 0.0, 0.0, 0.0), point, after)
+
+    @classmethod
+    def turn(cls, vehicle: VehicleShape, start: tuple[float, float], heading_rad: float,
+             radius_m: float, angle_rad: float, s_start: float) -> Path:
+        """Straight until ``start`` (at ``s = s_start``) with ``heading_rad``, then an arc of
+        ``radius_m`` turning by ``angle_rad`` (> 0 left), then straight on."""
+        turn = 1.0 if angle_rad > 0 else -1.0
+        u0 = (_exact_cos(heading_rad), _exact_sin(heading_rad))
+        # the centre lies to the left (turn > 0) or right of the heading
+        cx = start[0] - turn * radius_m * u0[1]
+        cy = start[1] + turn * radius_m * u0[0]
+        phi1 = math.atan2(start[1] - cy, start[0] - cx)
+        phi2 = phi1 + angle_rad
+        p2 = (cx + radius_m * math.cos(phi2), cy + radius_m * math.sin(phi2))
+        h2 = heading_rad + angle_rad
+        u2 = (_exact_cos(h2), _exact_sin(h2))
+        b2 = s_start + radius_m * abs(angle_rad)
+        return cls(vehicle, s_start, b2, start, u0, (cx, cy, radius_m, phi1, turn), p2, u2)
+
+    # -- evaluation --------------------------------------------------------------------------
+
+    def geometry_vector_tuple(self) -> tuple[float, ...]:
+        cx, cy, r, phi1, turn = self.arc
+        return (self.b1, self.b2, *self.p1, *self.u0, cx, cy, r, phi1, turn, *self.p2, *self.u2)
+
+    def geometry_vector(self) -> np.ndarray:
+        """The path's kernel slots (``slot.PATH_B1 .. slot.PATH_UY2``)."""
+        return self._G.copy()
+
+    def xy(self, s: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Positions ``(x, y)`` [m] at path positions ``s`` (any shape)."""
+        s = np.asarray(s, dtype=np.float64)
+        x, y = np.empty_like(s), np.empty_like(s)
+        path_points(self._G, np.ascontiguousarray(s), x, y)
+        return x, y
+
+    def direction(self, s: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Unit direction of travel ``(ux, uy)`` at ``s`` (exact on straight pieces)."""
+        s = np.asarray(s, dtype=np.float64)
+        cx, cy, r, phi1, turn = self.arc
+        ux = np.where(s < self.b1, self.u0[0], self.u2[0]).astype(float)
+        uy = np.where(s < self.b1, self.u0[1], self.u2[1]).astype(float)
+        on_arc = (s >= self.b1) & (s < self.b2)
+        if r > 0 and np.any(on_arc):
+            angle = phi1 + turn * (s[on_arc] - self.b1) / r
+            ux[on_arc] = -turn * np.sin(angle)
+            uy[on_arc] = turn * np.cos(angle)
+        return ux, uy
+
+    def heading(self, s: Any) -> np.ndarray:
+        """Heading [rad] at ``s``, ``atan2(uy, ux)``."""
+        ux, uy = self.direction(s)
+        return np.arctan2(uy, ux)
+
+    def polyline(self, s_lo: float, s_hi: float, step_m: float = 0.05) -> np.ndarray:
+        """Points ``(k, 2)`` of the path every ``step_m`` from ``s_lo`` to ``s_hi``."""
+        s = np.linspace(s_lo, s_hi, max(2, int(math.ceil((s_hi - s_lo) / step_m)) + 1))
+        x, y = self.xy(s)
+        return np.stack([x, y], axis=1)
+
+
+def _exact_cos(angle: float) -> float:
+    """``cos`` with the quadrant angles exact (0, ±1)."""
+    q = angle / (math.pi / 2)
+    if q == round(q):
+        return (1.0, 0.0, -1.0, 0.0)[int(round(q)) % 4]
+    return math.cos(angle)
+
+
+def _exact_sin(angle: float) -> float:
+    q = angle / (math.pi / 2)
+    if q == round(q):
+        return (0.0, 1.0, 0.0, -1.0)[int(round(q)) % 4]
+    return math.sin(angle)
+
+
+def unit(angle_deg: float) -> tuple[float, float]:
+    """The unit vector at ``angle_deg`` [deg], exact at multiples of 90 deg."""
+    a = math.radians(angle_deg)
+    if angle_deg % 90 == 0:
+        return _exact_cos(math.pi / 2 * (angle_deg // 90)), _exact_sin(math.pi / 2 * (angle_deg // 90))
+    return math.cos(a), math.sin(a)
+
+
+def zone_interval(path: Path, other: Path, min_dist_m: float, reach_m: float = 150.0,
+                  step_m: float = 0.01) -> tuple[float, float]:
+    """A conservative interval of ``s`` on ``path`` outside which every point of ``other``
+    (within ``reach_m`` of its reference point) is at least ``min_dist_m`` away.
+
+    Computed numerically: ``path`` every ``step_m`` against ``other`` every ``step_m`` (a
+    k-d tree query), widened by a margin that covers both spacings. An end of the interval
+    that reaches the end of the scanned range is unbounded (e.g. two vehicles sharing a lane
+    after a merge).
+    """
+    from scipy.spatial import cKDTree
+
+    pts_other = other.polyline(-reach_m, reach_m, step_m)
+    s = np.arange(-reach_m, reach_m + step_m / 2, step_m)
+    x, y = path.xy(s)
+    d, _ = cKDTree(pts_other).query(np.stack([x, y], axis=1))
+    margin = 2.0 * step_m  # sampled distances over-estimate by at most step/2 on each curve
+    inside = np.flatnonzero(d < min_dist_m + margin)
+    if inside.size == 0:
+        return (math.inf, math.inf)  # never in conflict: an empty window
+    lo = -math.inf if inside[0] == 0 else float(s[inside[0]] - margin)
+    hi = math.inf if inside[-1] == s.size - 1 else float(s[inside[-1]] + margin)
+    return lo, hi
+
+
+def footprints_overlap(xa: np.ndarray, ya: np.ndarray, ua: tuple[np.ndarray, np.ndarray],
+                       la: float, wa: float, xb: np.ndarray, yb: np.ndarray,
+                       ub: tuple[np.ndarray, np.ndarray], lb: float, wb: float) -> np.ndarray:
+    """Whether two oriented rectangles overlap (touching counts), elementwise.
+
+    Rectangle A is centred at ``(xa, ya)`` with unit direction ``ua`` (its length along it) and
+    size ``la x wa`` [m]; likewise B. Separating-axis test over the four edge normals. For axis
+    directions ``(1, 0)`` and ``(0, 1)`` it is exactly the paper's test ``|s_a| <= (l + w)/2``
+    and ``|s_b| <= (l + w)/2``.
+    """
+    dx, dy = np.asarray(xb) - np.asarray(xa), np.asarray(yb) - np.asarray(ya)
+    axes = [ua, (-ua[1], ua[0]), ub, (-ub[1], ub[0])]
+    overlap = np.ones(np.broadcast(dx, dy).shape, dtype=bool)
+    for ax, ay in axes:
+        ra = (la / 2) * np.abs(ua[0] * ax + ua[1] * ay) + (wa / 2) * np.abs(-ua[1] * ax + ua[0] * ay)
+        rb = (lb / 2) * np.abs(ub[0] * ax + ub[1] * ay) + (wb / 2) * np.abs(-ub[1] * ax + ub[0] * ay)
+        overlap &= np.abs(dx * ax + dy * ay) <= ra + rb
+    return overlap
+
+
+__all__ = ["Path", "VehicleShape", "footprints_overlap", "path_point", "path_points",
+           "unit", "zone_interval"]

@@ -1,0 +1,149 @@
+"""Parameters packed into float64 vectors for the compiled kernels, one per vehicle.
+
+Numba kernels take plain arrays; this module fixes, once, which slot of a vehicle's parameter
+vector holds which parameter. The slot names are module constants, so inside the kernels they
+are compile-time constants: ``P[slot.V_MAX]``. Each vehicle has its own vector (its limits,
+its path and lines, its conflict-zone window); the shared parameters (library, rewards,
+roles, MPC, quirks, the conflict) hold the same value in both. Boolean quirks are 0.0 / 1.0.
+
+Kernels that build or score one vehicle's trajectories take that vehicle's vector; kernels
+that only need shared values take either.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_names: list[str] = []
+
+
+def _slots(*names: str) -> range:
+    start = len(_names)
+    _names.extend(names)
+    return range(start, len(_names))
+
+
+# -- shared by both vehicles -------------------------------------------------------------------
+# Trajectory library (docs/method.md §2)
+N_SAMPLES, SAMPLE_DT, N_MESH, ALPHA, BETA, KAPPA, H_ST, HORIZON = _slots(
+    "N_SAMPLES", "SAMPLE_DT", "N_MESH", "ALPHA", "BETA", "KAPPA", "H_ST", "HORIZON")
+# Rewards (§3)
+W_C, W_U = _slots("W_C", "W_U")
+# Roles (§5) and the MPC (§6)
+W_S, W_V, PRIOR_L, EPSILON = _slots("W_S", "W_V", "PRIOR_L", "EPSILON")
+# Quirks (§9): Q1, Q2, Q4, Q5, Q6
+(QUIRK_BRANCH_OFFSET, QUIRK_BELIEF_OFFSET, QUIRK_UNDISCOUNTED_COLLISION, QUIRK_LEADER_AGG_MAX,
+ QUIRK_TIME_LIKE_STOP_TEST) = _slots("Q1", "Q2", "Q4", "Q5", "Q6")
+# The conflict between the two paths (scenarios): its kind (``CONFLICT_*``), the safety
+# distance, and ``MIN_DIST_SQ``: ``sqrt(x) < min_dist`` exactly when ``x < MIN_DIST_SQ``
+# (see :func:`sqrt_threshold`)
+CONFLICT, MIN_DIST, MIN_DIST_SQ = _slots("CONFLICT", "MIN_DIST", "MIN_DIST_SQ")
+# 1.0 when the two paths share one lane past ``s = 0`` (a merge): a vehicle ahead there leads
+LANE_SHARED = _slots("LANE_SHARED")[0]
+
+# -- per vehicle -------------------------------------------------------------------------------
+# Limits and size (§1); ``H_GO = h_st + v_max / kappa`` of the OVM law (§2)
+V_MIN, V_MAX, U_MIN, U_MAX, LENGTH, WIDTH, H_GO = _slots(
+    "V_MIN", "V_MAX", "U_MIN", "U_MAX", "LENGTH", "WIDTH", "H_GO")
+# Lines along the path [m]: the stop target of the library's stop trajectory (the crossing
+# line, ``-stop_distance`` at the intersection), the line whose first arrival decides who
+# went first, and the position past which the vehicle no longer conflicts with the other path
+YIELD_S, FIRST_S, CLEAR_S = _slots("YIELD_S", "FIRST_S", "CLEAR_S")
+# The conservative window of positions ``ZONE_LO < s < ZONE_HI`` [m] outside which the vehicle
+# is at least ``min_dist`` from every point of the other path (euclidean conflicts)
+ZONE_LO, ZONE_HI = _slots("ZONE_LO", "ZONE_HI")
+# The path: ``xy(s)`` in three pieces (``persuasive.geometry``): straight before ``B1``
+# (direction ``U0``, through ``(X1, Y1)`` at ``B1``), an arc from ``B1`` to ``B2`` (centre,
+# radius, polar angle at ``B1``, +1 left / -1 right; none when ``R == 0``), straight after ``B2``
+# (direction ``U2`` through ``(X2, Y2)``)
+(PATH_B1, PATH_B2, PATH_X1, PATH_Y1, PATH_UX0, PATH_UY0, PATH_CX, PATH_CY, PATH_R, PATH_PHI1,
+ PATH_TURN, PATH_X2, PATH_Y2, PATH_UX2, PATH_UY2) = _slots(
+    "PATH_B1", "PATH_B2", "PATH_X1", "PATH_Y1", "PATH_UX0", "PATH_UY0", "PATH_CX", "PATH_CY",
+    "PATH_R", "PATH_PHI1", "PATH_TURN", "PATH_X2", "PATH_Y2", "PATH_UX2", "PATH_UY2")
+
+N_SLOTS = len(_names)
+
+#: Counters of the work the kernels do, in an int64 array ``work`` (``N_WORK``,) that the
+#: callers pass down and the benchmark reports: pair tests of the games' reward matrices, pair
+#: tests of the MPC (branch safety and the re-solve pruning), re-solves done and skipped by the
+#: pruning, libraries built and reused (the loop's look-ahead cache).
+(WORK_PAIRS_GAME, WORK_PAIRS_MPC, WORK_RESOLVES, WORK_RESOLVES_SKIPPED, WORK_LIBRARIES,
+ WORK_LIBRARIES_REUSED) = range(6)
+N_WORK = 6
+WORK_NAMES = ("pair_tests_game", "pair_tests_mpc", "resolves", "resolves_skipped",
+              "libraries_built", "libraries_reused")
+#: Slot names, by index (for messages and tests).
+SLOT_NAMES: tuple[str, ...] = tuple(_names)
+
+#: Conflict kinds. ``ALONG_PATHS``: the distance combines each vehicle's distance along its path
+#: to the conflict point, ``sqrt(s_a^2 + s_b^2)``, and the pair test is
+#: ``s_a^2 + s_b^2 < MIN_DIST_SQ`` (the paper's intersection, bit for bit, and the left turn).
+#: ``EUCLIDEAN``: the distance between the vehicles' centres ``xy(s)`` on their paths.
+CONFLICT_ALONG_PATHS, CONFLICT_EUCLIDEAN = 0, 1
+
+
+def sqrt_threshold(c: float) -> float:
+    """The smallest double ``x`` with ``sqrt(x) >= c``, for ``c > 0``.
+
+    IEEE ``sqrt`` is correctly rounded, hence monotone, so ``sqrt(x) < c`` holds exactly when
+    ``x < sqrt_threshold(c)``: distance tests can compare squares and still agree, bit for bit,
+    with ``d = sqrt(...) < min_dist``.
+    """
+    x = c * c
+    while math.sqrt(x) < c:
+        x = math.nextafter(x, math.inf)
+    while math.sqrt(math.nextafter(x, -math.inf)) >= c:
+        x = math.nextafter(x, -math.inf)
+    return x
+
+
+def pack(config, scenario=None) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel parameter vectors ``(P_av, P_hv)`` of ``config``: each ``(N_SLOTS,)``.
+
+    ``scenario``: the :class:`persuasive.scenarios.Scenario` built from ``config`` (built here
+    when not given); it supplies each vehicle's path, lines and window and the conflict kind.
+    """
+    if scenario is None:
+        from .scenarios import build_scenario
+
+        scenario = build_scenario(config)
+    lib, rw, roles, q = config.library, config.reward, config.roles, config.effective_quirks
+    shared = np.zeros(N_SLOTS)
+    shared[N_SAMPLES], shared[SAMPLE_DT], shared[N_MESH] = lib.n_samples, lib.sample_dt_s, lib.n_mesh
+    shared[ALPHA], shared[BETA], shared[KAPPA], shared[H_ST] = lib.alpha, lib.beta, lib.kappa, lib.h_st_m
+    shared[HORIZON] = lib.horizon_s
+    shared[W_C], shared[W_U] = rw.w_c, rw.w_u
+    shared[W_S], shared[W_V], shared[PRIOR_L] = roles.w_s_m2, roles.w_v_m2ps2, roles.prior_leader
+    shared[EPSILON] = config.mpc.epsilon
+    shared[QUIRK_BRANCH_OFFSET] = q.q1_branch_time_offset
+    shared[QUIRK_BELIEF_OFFSET] = q.q2_belief_offset
+    shared[QUIRK_UNDISCOUNTED_COLLISION] = q.q4_undiscounted_collision
+    shared[QUIRK_LEADER_AGG_MAX] = q.q5_leader_agg_max
+    shared[QUIRK_TIME_LIKE_STOP_TEST] = q.q6_time_like_stop_test
+    shared[CONFLICT] = scenario.conflict
+    shared[MIN_DIST] = scenario.min_dist_m
+    shared[MIN_DIST_SQ] = sqrt_threshold(scenario.min_dist_m)
+    shared[LANE_SHARED] = float(scenario.lane_shared)
+    out = []
+    for path in (scenario.av, scenario.hv):
+        P = shared.copy()
+        veh = path.vehicle
+        P[V_MIN], P[V_MAX], P[U_MIN], P[U_MAX] = (veh.v_min_mps, veh.v_max_mps, veh.u_min_mps2,
+                                                  veh.u_max_mps2)
+        P[LENGTH], P[WIDTH] = veh.length_m, veh.width_m
+        P[H_GO] = lib.h_st_m + veh.v_max_mps / lib.kappa
+        P[YIELD_S], P[FIRST_S], P[CLEAR_S] = path.yield_s, path.first_s, path.clear_s
+        P[ZONE_LO], P[ZONE_HI] = path.zone
+        P[PATH_B1:PATH_UY2 + 1] = path.geometry_vector()
+        out.append(P)
+    return out[0], out[1]
+
+
+def discounts(config) -> np.ndarray:
+    """``lambda ** (k - 1)`` for samples ``k = 1..n``: shape ``(n_samples,)``.
+
+    Computed once here and passed to every kernel so that all code paths use the same values.
+    """
+    return config.reward.discount ** np.arange(config.library.n_samples, dtype=np.float64)

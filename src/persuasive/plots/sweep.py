@@ -1,0 +1,142 @@
+"""A metric of a parameter sweep over one axis (a line) or two (a heatmap), with 95 % intervals.
+
+:func:`sweep_figure` draws a :class:`persuasive.sweep.metrics.MetricGrid` (computed by
+:func:`persuasive.sweep.metrics.metric_grid` from a sweep folder): with one axis, the metric
+against the axis values with its 95 % interval as error bars and a band; with two, a heatmap
+whose cells show the value and the interval ``[lo, hi]``. Proportions use Wilson score
+intervals, means the normal approximation (the figure says which). Numeric axes are drawn to
+scale on a line plot; other axes (strings, booleans) as evenly spaced categories.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from ..sweep.metrics import MetricGrid
+
+_COLOR = "#d62728"
+_FONT = {"label": 8.0, "tick": 7.0, "title": 8.5, "note": 6.5, "cell": 6.0}
+
+
+def _numeric(values: Sequence[Any]) -> bool:
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+
+
+def _fmt(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _fmt_metric(value: float) -> str:
+    return "n/a" if math.isnan(value) else f"{value:.1f}" if abs(value) >= 10 else \
+        f"{value:.2f}"
+
+
+def _note(data: MetricGrid) -> str:
+    parts = []
+    if data.where:
+        parts.append(", ".join(f"{k} = {_fmt(v)}" for k, v in data.where))
+    if data.pooled:
+        parts.append("pooled over " + ", ".join(data.pooled))
+    counts = np.unique(data.n)
+    parts.append(f"n = {counts[0]} runs per point" if counts.size == 1
+                 else f"n = {counts.min()}..{counts.max()} runs per point")
+    parts.append(f"95 % interval: {data.interval}")
+    if data.digest:
+        parts.append(f"sweep {data.digest}")
+    return "; ".join(parts)
+
+
+def _new_figure(width_in: float, height_in: float) -> Figure:
+    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _line(data: MetricGrid) -> Figure:
+    fig = _new_figure(4.5, 3.2)
+    ax = fig.subplots()
+    xs = list(data.x_values)
+    if _numeric(xs):
+        pos = np.asarray(xs, dtype=float)
+        order = np.argsort(pos, kind="stable")
+    else:
+        pos = np.arange(len(xs), dtype=float)
+        order = np.arange(len(xs))
+        ax.set_xticks(pos, [_fmt(v) for v in xs])
+    est, lo, hi = data.estimate[order], data.lo[order], data.hi[order]
+    p = pos[order]
+    ax.fill_between(p, lo, hi, color=_COLOR, alpha=0.15, linewidth=0, gid="sweep-interval")
+    yerr = np.vstack([est - lo, hi - est])
+    ax.errorbar(p, est, yerr=np.where(np.isnan(yerr), 0.0, yerr), color=_COLOR, marker="o",
+                ms=3.5, lw=1.2, capsize=2.5, gid="sweep-metric")
+    ax.set_xlabel(data.x, fontsize=_FONT["label"])
+    ax.set_ylabel(data.label, fontsize=_FONT["label"])
+    if data.kind == "proportion":
+        top = np.nanmax(hi) if np.any(np.isfinite(hi)) else 100.0
+        ax.set_ylim(-2.0, min(102.0, max(5.0, top * 1.1 + 1.0)))
+    ax.tick_params(labelsize=_FONT["tick"])
+    ax.grid(True, linewidth=0.4, alpha=0.35)
+    ax.set_title(data.metric, fontsize=_FONT["title"])
+    fig.text(0.5, 0.0, _note(data), ha="center", va="bottom", fontsize=_FONT["note"],
+             wrap=True)
+    fig.get_layout_engine().set(rect=(0, 0.06, 1, 0.94))
+    return fig
+
+
+def _heatmap(data: MetricGrid) -> Figure:
+    nx, ny = len(data.x_values), len(data.y_values)
+    fig = _new_figure(max(4.0, 1.2 + 0.75 * nx), max(3.0, 1.6 + 0.45 * ny))
+    ax = fig.subplots()
+    est = np.ma.masked_invalid(data.estimate)
+    image = ax.imshow(est, origin="lower", aspect="auto", cmap="viridis",
+                      interpolation="nearest", gid="sweep-heatmap")
+    bar = fig.colorbar(image, ax=ax, shrink=0.9)
+    bar.set_label(data.label, fontsize=_FONT["label"])
+    bar.ax.tick_params(labelsize=_FONT["tick"])
+    lo_c, hi_c = image.get_clim()
+    for i in range(ny):
+        for j in range(nx):
+            value = data.estimate[i, j]
+            text = _fmt_metric(value)
+            if not math.isnan(data.lo[i, j]):
+                text += f"\n[{_fmt_metric(data.lo[i, j])}, {_fmt_metric(data.hi[i, j])}]"
+            frac = 0.5 if hi_c == lo_c or math.isnan(value) else (value - lo_c) / (hi_c - lo_c)
+            ax.text(j, i, text, ha="center", va="center", fontsize=_FONT["cell"],
+                    color="black" if frac > 0.6 else "white", gid=f"sweep-cell-{i}-{j}")
+    ax.set_xticks(np.arange(nx), [_fmt(v) for v in data.x_values])
+    ax.set_yticks(np.arange(ny), [_fmt(v) for v in data.y_values])
+    ax.set_xlabel(data.x, fontsize=_FONT["label"])
+    ax.set_ylabel(data.y, fontsize=_FONT["label"])
+    ax.tick_params(labelsize=_FONT["tick"], length=2.5)
+    ax.set_title(f"{data.metric} (cells: value [95 % interval])", fontsize=_FONT["title"])
+    fig.text(0.5, 0.0, _note(data), ha="center", va="bottom", fontsize=_FONT["note"],
+             wrap=True)
+    fig.get_layout_engine().set(rect=(0, 0.06, 1, 0.94))
+    return fig
+
+
+def sweep_figure(data: MetricGrid) -> Figure:
+    """The metric of ``data`` as a line plot (one axis) or a heatmap (two axes).
+
+    Parameters
+    ----------
+    data : persuasive.sweep.metrics.MetricGrid
+        From :func:`persuasive.sweep.metrics.metric_grid`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Built with the object API (an Agg canvas, no pyplot); save it with
+        :func:`persuasive.plots.files.save_figure`.
+    """
+    if not isinstance(data, MetricGrid):
+        raise TypeError(f"expected a MetricGrid, got {type(data).__name__}")
+    return _line(data) if data.y is None else _heatmap(data)
+
+
+__all__ = ["sweep_figure"]

@@ -1,0 +1,226 @@
+"""Policies: what drives each vehicle (docs/method.md §11).
+
+A policy is one vehicle's decision rule, used through one protocol by both vehicles and by
+both loops:
+
+- the **compiled side** (``persuasive.policies.step``): a kind id (:mod:`.kinds`), a parameter
+  vector (:func:`policy_params`), a state vector and a log row; one cached compiled step that
+  dispatches on the kind, called by the compiled closed loop (``persuasive.world``);
+- the **Python side** (:class:`Policy`): ``reset(context, rng)``, ``act(observation) ->
+  acceleration`` and its ``log_columns``, called by the Python loop
+  (:func:`persuasive.world.run_python`) for policies that live outside the compiled code (a
+  person in the browser, a recorded trial, an external simulator). :class:`CompiledPolicy`
+  wraps any compiled kind in that protocol; the two loops give the same runs bit for bit.
+
+AV kinds: ``persuasive`` (the paper's branch MPC; alias ``mpc``), ``passive``, ``cv``,
+``lfg``, ``yield``. Human kinds: ``lfg``, ``stubborn``, ``noisy``, ``idm``, ``aggressive``,
+``replay``. Each module's docstring states the kind's definition and parameters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from .. import packing as slot
+from ..config import AV_KINDS, HV_KINDS, Config, ConfigError
+from ..roles import FOLLOWER, LEADER
+from . import kinds as kd
+from .kinds import KINDS, KindSpec
+
+#: The kinds each vehicle may use, by side.
+SIDE_KINDS = {kd.AV: AV_KINDS, kd.HV: HV_KINDS}
+
+
+def kind_of(config: Config, side: int) -> KindSpec:
+    """The :class:`~persuasive.policies.kinds.KindSpec` driving ``side`` in ``config``."""
+    return KINDS[(config.av if side == kd.AV else config.hv).kind]
+
+
+def _role(name: str) -> float:
+    return float(LEADER if name == "leader" else FOLLOWER)
+
+
+def policy_params(config: Config, side: int) -> np.ndarray:
+    """The compiled parameter vector of the policy driving ``side`` in ``config``."""
+    spec = kind_of(config, side)
+    if spec.kind in (kd.LFG, kd.STUBBORN, kd.NOISY):
+        from .lfg import PRM_ADAPT, PRM_BETA, PRM_P_A, PRM_ROLE
+
+        prm = np.zeros(4)
+        prm[PRM_P_A] = 0.0 if spec.kind == kd.STUBBORN else config.roles.p_a
+        prm[PRM_ADAPT] = float(config.roles.adapt_role)
+        prm[PRM_BETA] = config.hv.noisy.beta
+        if side == kd.HV:
+            prm[PRM_ROLE] = _role(config.hv.role)
+        else:  # an LFG AV starts in the role complementary to the human's, unless set
+            prm[PRM_ROLE] = _role(config.av.role) if config.av.role is not None else \
+                1.0 - _role(config.hv.role)
+        return prm
+    if spec.kind in (kd.PERSUASIVE, kd.PASSIVE):
+        from .planners import PRM_HUMAN_ROLE, PRM_MODEL_IS_HUMAN, PRM_P_A_HAT, PRM_TIE_GIVEN
+
+        prm = np.zeros(4)
+        prm[PRM_P_A_HAT] = config.p_a_hat
+        prm[PRM_TIE_GIVEN] = float(config.effective_quirks.q3_tie_break_leak)
+        # Q3: with p_a_hat == p_a the reference's human model *is* the simulated human
+        prm[PRM_MODEL_IS_HUMAN] = float(config.p_a_hat == config.roles.p_a)
+        prm[PRM_HUMAN_ROLE] = _role(config.hv.role)
+        return prm
+    if spec.kind == kd.IDM:
+        p = config.hv.idm
+        return np.array([p.desired_speed_mps, p.time_gap_s, p.max_accel_mps2,
+                         p.comfort_decel_mps2, p.delta, p.jam_gap_m, p.critical_gap_s,
+                         p.impatience_per_s])
+    if spec.kind == kd.REPLAY:
+        accel = load_replay(config).accel_mps2
+        return np.concatenate([[float(accel.size)], accel])
+    return np.zeros(1)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recorded trajectory for the ``replay`` human: initial state and accelerations."""
+
+    s0_m: float
+    v0_mps: float
+    accel_mps2: np.ndarray  #: one per step [m/s^2]
+    source: str
+
+
+def load_replay(config: Config) -> Recording:
+    """Read ``hv.replay.file`` (a per-step log, Parquet or CSV): the replayed vehicle's
+    initial state and its accelerations per step."""
+    import pandas as pd
+
+    path = Path(config.hv.replay.file)
+    who = config.hv.replay.vehicle
+    try:
+        frame = pd.read_csv(path) if path.suffix.lower() == ".csv" else pd.read_parquet(path)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"hv.replay.file = {str(path)!r} cannot be read: "
+                          f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") \
+            from None
+    need = (f"{who}_s_m", f"{who}_v_mps", f"{who}_accel_mps2")
+    missing = [c for c in need if c not in frame.columns]
+    if missing or len(frame) == 0:
+        raise ConfigError(f"hv.replay.file = {str(path)!r} is not a per-step log of the "
+                          f"{who.upper()} (missing columns: {', '.join(missing) or 'rows'})")
+    return Recording(float(frame[need[0]].iloc[0]), float(frame[need[1]].iloc[0]),
+                     frame[need[2]].to_numpy(dtype=np.float64), str(path))
+
+
+# -- the Python side ------------------------------------------------------------------------
+
+
+@dataclass
+class Observation:
+    """What a policy sees at one step (measured states, as the compiled policies do)."""
+
+    step: int  #: decision step k
+    t_s: float  #: time [s]
+    av: tuple[float, float]  #: the AV's measured (s [m], v [m/s])
+    hv: tuple[float, float]  #: the HV's measured (s [m], v [m/s])
+    game: Any = None  #: the full prediction of the joint state, human's view (GameView)
+    human_role: int = -1  #: the HV's current role if it has one (quirk Q3 only), else -1
+
+
+@dataclass
+class Context:
+    """What a policy is told at ``reset``: the run's configuration and shared machinery."""
+
+    config: Config
+    scenario: Any  #: :class:`persuasive.scenarios.Scenario`
+    P_av: np.ndarray
+    P_hv: np.ndarray
+    disc: np.ndarray
+    side: int  #: the vehicle it drives (``kinds.AV`` / ``kinds.HV``)
+    n_steps: int
+    draws: np.ndarray  #: (n_steps, k) uniforms of this agent, drawn by the world's streams
+    games: Any = None  #: :class:`persuasive.world.GameCache`, shared by the loop's policies
+    extra: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """The Python side of a policy."""
+
+    log_columns: tuple[str, ...]  #: names of the values of :attr:`last_log`
+    needs_game: bool  #: the loop must compute the full prediction for it
+
+    def reset(self, context: Context, rng: np.random.Generator | None) -> None:
+        """Start a run; ``rng`` is the agent's own random stream (after ``context.draws``)."""
+
+    def act(self, observation: Observation) -> float:
+        """The acceleration [m/s^2] at this step."""
+
+
+class CompiledPolicy:
+    """A compiled kind behind the Python protocol (the same step the compiled loop calls)."""
+
+    def __init__(self, kind: str, side: int):
+        if kind not in SIDE_KINDS[side]:
+            who = "av" if side == kd.AV else "hv"
+            raise ConfigError(f"{who}.kind = {kind!r} is out of range; allowed: "
+                              f"{' | '.join(SIDE_KINDS[side])}")
+        self.spec = KINDS[kind]
+        self.side = side
+        self.log_columns = self.spec.log
+        self.needs_game = self.spec.needs_game
+        self.needs_av_library = self.spec.needs_av_library
+        self.has_role = self.spec.has_role
+
+    def reset(self, context: Context, rng: np.random.Generator | None = None) -> None:
+        from .step import policy_init
+
+        self.context = context
+        self.prm = policy_params(context.config, self.side)
+        self.state = np.zeros(kd.STATE_SIZE)
+        policy_init(self.spec.kind, self.prm, self.state, float(context.P_av[slot.PRIOR_L]))
+        n_traj = context.config.library.n_traj
+        self.diag = np.zeros((n_traj, 10))
+        self.last_log = np.full(kd.LOG_SIZE, np.nan)
+        self._draws = context.draws
+
+    @property
+    def role(self) -> int:
+        """The current role (0 = L, 1 = F) of a role-holding kind, else -1."""
+        from .step import policy_role
+
+        return int(policy_role(self.spec.kind, self.state))
+
+    def act(self, observation: Observation) -> float:
+        from ..planner import check_state
+        from .step import policy_step_buffers
+
+        ctx = self.context
+        for name in ("av", "hv"):
+            check_state(f"observation.{name}", getattr(observation, name),
+                        ctx.config.vehicle_of(name))
+        games = ctx.games
+        view = observation.game
+        if view is None:
+            view = games.empty_view()
+        if self.needs_av_library and not self.needs_game and observation.game is None:
+            view = games.av_library(observation.av)
+        k = observation.step
+        draws = self._draws[k] if self._draws.shape[1] else np.zeros(2)
+        self.last_log[:] = np.nan
+        return float(policy_step_buffers(
+            self.spec.kind, self.side, self.prm, self.state, k, float(observation.av[0]),
+            float(observation.av[1]), float(observation.hv[0]), float(observation.hv[1]),
+            draws, int(observation.human_role), *view.hv, *view.av, view.idx, view.q_values,
+            ctx.P_av, ctx.P_hv, ctx.disc, ctx.config.simulation.dt_s, self.diag,
+            *games.ahead_a, *games.ahead_b, games.ahead, self.last_log, games.work))
+
+
+def make_policy(config: Config, side: int) -> CompiledPolicy:
+    """The :class:`CompiledPolicy` that ``config`` names for ``side``."""
+    return CompiledPolicy((config.av if side == kd.AV else config.hv).kind, side)
+
+
+__all__ = ["CompiledPolicy", "Context", "Observation", "Policy", "Recording", "kind_of",
+           "load_replay", "make_policy", "policy_params"]

@@ -1,0 +1,124 @@
+"""The AV's model-based planners (docs/method.md §6, §11): ``persuasive``, ``passive``, ``cv``.
+
+- ``persuasive``: the paper's branch MPC (``persuasive.mpc.decide``) with interactive
+  prediction and role persuasion; parameter ``p_a_hat``.
+- ``passive``: the same MPC, the same belief ``q`` and the same re-solves at T1, but the AV
+  assumes its plan does not change the human's role (``Pi_hat`` is the identity, as with
+  ``p_a_hat = 0``): it predicts, it does not persuade.
+- ``cv``: the same candidates and chance constraint against a human holding its current speed
+  (``persuasive.mpc.decide_cv``); it keeps no belief.
+
+The persuasive and passive planners hold the belief ``q`` on the human's role and the stored
+one-step prediction of the human per role (§6 step 6).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .. import packing as slot
+from ..game import EGO_FOLLOWER, EGO_LEADER
+from ..library import Lib
+from ..mpc import (D_BELIEF_L, D_EXPECTED, D_MAX_SAFE, D_MIN_SAFE, D_P_LL, D_PLAUSIBLE_L,
+                   decide, decide_cv)
+from ..roles import FOLLOWER, LEADER, bayes_update
+
+#: Slots of the MPC's state: belief q = (P(HV = L), P(HV = F)), the stored prediction of the
+#: HV's next state per HV role, and whether it has been initialised.
+BELIEF_L, BELIEF_F, PRED_L_S, PRED_L_V, PRED_F_S, PRED_F_V, READY = range(7)
+#: Slots of its parameter vector: the AV's estimate of p_a; quirk Q3 (belief ties read a given
+#: human role); whether that role is the simulated human's own (p_a_hat == p_a); the human's
+#: initial role (the Q3 fallback).
+PRM_P_A_HAT, PRM_TIE_GIVEN, PRM_MODEL_IS_HUMAN, PRM_HUMAN_ROLE = range(4)
+
+# Log columns (``persuasive.policies.kinds.MPC_LOG``; the cv planner's are its own).
+(COL_TRAJ, COL_FEASIBLE, COL_N_FEASIBLE, COL_PSAFE_MIN, COL_PSAFE_MAX, COL_EXPECTED,
+ COL_BELIEF_USED, COL_BELIEF_L, COL_BELIEF_F, COL_TIE, COL_HUMAN_BELIEF_L, COL_HUMAN_PLAUSIBLE,
+ COL_P_LL, COL_P_LF, COL_P_FL, COL_P_FF) = range(16)
+CV_COL_TRAJ, CV_COL_FEASIBLE, CV_COL_N_FEASIBLE, CV_COL_PSAFE_MIN, CV_COL_EXPECTED = range(5)
+
+
+@njit(cache=True)
+def mpc_init(st: np.ndarray, prior_l: float) -> None:
+    """A fresh MPC state in ``st``: belief ``(prior_l, 1 - prior_l)``, no prediction yet."""
+    st[:] = 0.0
+    st[BELIEF_L] = prior_l
+    st[BELIEF_F] = 1.0 - prior_l
+
+
+@njit(cache=True)
+def _n_feasible(diag: np.ndarray, threshold: float) -> int:
+    count = 0
+    for c in range(diag.shape[0]):
+        if diag[c, D_MIN_SAFE] > threshold:
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def mpc_step(st: np.ndarray, prm: np.ndarray, persuade: bool, s_R: float, v_R: float,
+             s_H: float, v_H: float, human_role: int, lib_h: Lib, lib_r: Lib,
+             idx: np.ndarray, P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray,
+             diag: np.ndarray, log: np.ndarray, lib_h1a: Lib, lib_h1b: Lib,
+             ahead: np.ndarray, work: np.ndarray) -> float:
+    """One step of the persuasive (or, ``persuade=False``, passive) MPC; returns the
+    acceleration.
+
+    ``lib_h, lib_r, idx``: the full prediction of ``z = (x_H, x_R)`` from the human's view. The
+    human model's own role (for belief ties) is, with quirk Q3, ``human_role`` (the simulated
+    human's current role, -1 when it has none) when the model is the human, else the human's
+    initial role; without Q3, the most likely HV role under ``q`` (ties: L). ``diag``, ``log``,
+    ``lib_h1a``, ``lib_h1b``, ``ahead``: see :func:`persuasive.mpc.decide`.
+    """
+    if st[READY] == 0.0:
+        st[PRED_L_S], st[PRED_L_V] = s_H, v_H
+        st[PRED_F_S], st[PRED_F_V] = s_H, v_H
+        st[READY] = 1.0
+    q_l, q_f = st[BELIEF_L], st[BELIEF_F]
+    if prm[PRM_TIE_GIVEN] != 0.0:  # Q3
+        tie = human_role if (prm[PRM_MODEL_IS_HUMAN] != 0.0 and human_role >= 0) \
+            else int(prm[PRM_HUMAN_ROLE])
+    else:
+        tie = LEADER if q_l >= q_f else FOLLOWER
+    c, feasible = decide(s_R, v_R, s_H, v_H, lib_h, lib_r, idx, q_l, q_f, tie == LEADER,
+                         prm[PRM_P_A_HAT], persuade, P_av, P_hv, disc, diag, lib_h1a, lib_h1b,
+                         ahead, work)
+    # 6. update q against the stored prediction, then store the new one
+    b_l, b_f = bayes_update(
+        q_l, q_f,
+        abs(s_H - st[PRED_L_S]), abs(v_H - st[PRED_L_V]),
+        abs(s_H - st[PRED_F_S]), abs(v_H - st[PRED_F_V]),
+        P_av[slot.W_S], P_av[slot.W_V],
+    )
+    h_l, h_f = idx[EGO_LEADER], idx[EGO_FOLLOWER]
+    st[BELIEF_L], st[BELIEF_F] = b_l, b_f
+    st[PRED_L_S], st[PRED_L_V] = lib_h.S[0, h_l], lib_h.V[0, h_l]
+    st[PRED_F_S], st[PRED_F_V] = lib_h.S[0, h_f], lib_h.V[0, h_f]
+    log[COL_TRAJ] = c
+    log[COL_FEASIBLE] = 1.0 if feasible else 0.0
+    log[COL_N_FEASIBLE] = _n_feasible(diag, 1.0 - P_av[slot.EPSILON])
+    log[COL_PSAFE_MIN] = diag[c, D_MIN_SAFE]
+    log[COL_PSAFE_MAX] = diag[c, D_MAX_SAFE]
+    log[COL_EXPECTED] = diag[c, D_EXPECTED]
+    log[COL_BELIEF_USED] = q_l
+    log[COL_BELIEF_L], log[COL_BELIEF_F] = b_l, b_f
+    log[COL_TIE] = tie
+    log[COL_HUMAN_BELIEF_L] = diag[c, D_BELIEF_L]
+    log[COL_HUMAN_PLAUSIBLE] = diag[c, D_PLAUSIBLE_L]
+    for b in range(4):
+        log[COL_P_LL + b] = diag[c, D_P_LL + b]
+    return lib_r.A[0, c]
+
+
+@njit(cache=True)
+def cv_step(s_H: float, v_H: float, lib_r: Lib, P_av: np.ndarray, P_hv: np.ndarray,
+            diag: np.ndarray, log: np.ndarray, work: np.ndarray) -> float:
+    """One step of the constant-velocity planner; returns the acceleration."""
+    c, feasible = decide_cv(s_H, v_H, lib_r, P_av, P_hv, diag, work)
+    log[CV_COL_TRAJ] = c
+    log[CV_COL_FEASIBLE] = 1.0 if feasible else 0.0
+    log[CV_COL_N_FEASIBLE] = _n_feasible(diag, 1.0 - P_av[slot.EPSILON])
+    log[CV_COL_PSAFE_MIN] = diag[c, D_MIN_SAFE]
+    log[CV_COL_EXPECTED] = diag[c, D_EXPECTED]
+    return lib_r.A[0, c]

@@ -1,0 +1,293 @@
+"""Running a sweep on Dask: a local cluster of worker processes, or any Dask scheduler.
+
+The client (this process) validates the grid, opens the folder (:class:`SweepStore`), then
+keeps a bounded number of chunks in flight (twice the cluster's threads): each finished chunk
+comes back as the bytes of its Parquet part plus its failure records, is written at once and
+dropped, and the next chunk is submitted (``distributed.as_completed``). The client never
+holds more than those few chunks, whatever the number of runs, and the workers need no shared
+file system: only the client writes.
+
+By default a :class:`distributed.LocalCluster` is started with ``workers`` processes of one
+thread each (the compiled kernels hold the GIL, so threads would not run in parallel), on
+127.0.0.1 only, no dashboard, no profiler, quiet logs. The kernels are loaded in this process
+first and, on Linux, the workers are forked from it (:func:`start_method`), so they start
+with the kernels loaded instead of importing and loading them again. ``scheduler`` connects
+to a running scheduler instead (``dask scheduler`` / ``dask worker``), and ``client`` uses a
+client you made (e.g. of a ``dask_jobqueue.SLURMCluster``). Every run is a pure function of
+its configuration and seed, so the results do not depend on the cluster, the number of
+workers or the order in which chunks finish.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from ..config import ConfigError
+from .grid import Grid
+from .records import _error_line, failure_record, run_pickled_chunk
+from .store import Chunk, SweepStore, iter_failures
+
+#: Chunks in flight per worker thread: one running, one queued, so no worker waits on the
+#: client between chunks.
+IN_FLIGHT_PER_THREAD = 2
+#: How long to try to reach a scheduler given by address [s].
+CONNECT_TIMEOUT_S = 20.0
+
+
+@dataclass(frozen=True)
+class SweepSummary:
+    """What a call of :func:`run` did."""
+
+    folder: Path  #: the sweep folder
+    grid_digest: str  #: identity of the grid (see :attr:`Grid.digest`)
+    runs: int  #: runs in the grid
+    chunks: int  #: chunks in the grid
+    chunk: int  #: runs per chunk
+    skipped: int  #: runs finished by an earlier call (their chunks were not run again)
+    ran: int  #: runs computed by this call (failed ones included)
+    failures: tuple[dict[str, Any], ...] = field(default=())  #: every failed run, in order
+    workers: int = 0  #: worker threads of the cluster when the sweep started (0: none ran)
+    wall_time_s: float = 0.0  #: time of this call [s]
+
+    @property
+    def ok(self) -> bool:
+        """True when every run of the grid has finished without error."""
+        return not self.failures
+
+    @property
+    def finished(self) -> int:
+        """Runs of the grid that have a row in the dataset."""
+        return self.runs - len(self.failures)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "folder": str(self.folder), "grid_digest": self.grid_digest, "runs": self.runs,
+            "chunks": self.chunks, "chunk": self.chunk, "skipped": self.skipped,
+            "ran": self.ran, "finished": self.finished, "failed": len(self.failures),
+            "failures": list(self.failures), "workers": self.workers,
+            "wall_time_s": self.wall_time_s,
+        }
+
+
+def _check_int(name: str, value: Any) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ConfigError(f"{name} = {value!r} is out of range; allowed: integer >= 1")
+
+
+@contextlib.contextmanager
+def _quiet_logs() -> Iterator[None]:
+    """Only errors from Dask's loggers while a sweep runs (restored afterwards)."""
+    loggers = [logging.getLogger(name) for name in ("distributed", "dask")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(max(lg.getEffectiveLevel(), logging.ERROR))
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
+
+
+def start_method() -> str:
+    """How the local cluster starts its worker processes: Dask's
+    ``distributed.worker.multiprocessing-method`` when set to other than its default
+    (``spawn``); else ``fork`` on Linux, ``spawn`` elsewhere.
+
+    A forked worker inherits this process's loaded modules and compiled kernels, so it is
+    ready at once; a spawned one imports Dask and the package and loads the kernels first
+    (1.5 to 2 s on the 2-core machine CI uses, the time of a few thousand 2-LFG runs).
+    Set ``distributed.worker.multiprocessing-method`` to ``forkserver`` in Dask's
+    configuration to avoid forking this process.
+    """
+    import sys
+
+    import dask
+
+    method = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
+    if method != "spawn":
+        return method
+    return "fork" if sys.platform.startswith("linux") else "spawn"
+
+
+def _warm_up(grid: Grid) -> None:
+    """Load the compiled kernels here (compiling them once if they are not cached) so that
+    forked workers inherit them, and so that workers never compile at the same time."""
+    from ..experiments import warm_up
+    from ..simulation import simulate
+
+    warm_up()
+    try:  # the grid's own kind of run, in case it uses kernels warm_up does not
+        simulate(grid.config(0).with_overrides({"simulation.n_steps": 1}), grid.seed_start)
+    except Exception:  # noqa: BLE001 - only a warm-up; the sweep reports real failures
+        pass
+
+
+@contextlib.contextmanager
+def local_client(workers: int) -> Iterator[Any]:
+    """A client of a new :class:`distributed.LocalCluster`: ``workers`` processes, one thread
+    each, started by :func:`start_method`, listening on 127.0.0.1 only, no dashboard, no
+    profiler, quiet logs; closed on exit."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    settings = {"distributed.worker.multiprocessing-method": start_method(),
+                "distributed.worker.profile.enabled": False}
+    with dask.config.set(settings):
+        # the scheduler's HTTP server (health checks only: no dashboard) on any free port
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None,
+                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                               silence_logs=logging.ERROR)
+    try:
+        with Client(cluster, set_as_default=False) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+@contextlib.contextmanager
+def remote_client(address: str) -> Iterator[Any]:
+    """A client of the running scheduler at ``address`` (e.g. ``tcp://host:8786``)."""
+    from distributed import Client
+
+    try:
+        client = Client(address, set_as_default=False, timeout=f"{CONNECT_TIMEOUT_S}s")
+    except (OSError, TimeoutError) as exc:
+        raise ConfigError(f"scheduler {address!r} cannot be reached: "
+                          f"{_error_line(exc)}") from None
+    with client:
+        yield client
+
+
+def _threads(client: Any) -> int:
+    return sum(client.nthreads().values())
+
+
+def _execute(client: Any, grid: Grid, store: SweepStore, pending: list[Chunk],
+             progress: Callable[[int, int], None] | None, done: int) -> None:
+    """Run ``pending`` on ``client``, writing each chunk as it finishes."""
+    import pickle
+
+    from distributed import as_completed
+
+    total = len(grid)
+    todo = iter(pending)
+    in_flight: dict[str, Chunk] = {}
+    queue = as_completed(loop=client.loop, with_results=False)
+    digest, grid_pickle = grid.digest, pickle.dumps(grid)
+    threads = {"n": _threads(client), "at": time.monotonic()}
+
+    def submit_more() -> None:
+        if time.monotonic() - threads["at"] > 1.0:  # workers may come and go
+            threads["n"], threads["at"] = _threads(client), time.monotonic()
+        while len(in_flight) < IN_FLIGHT_PER_THREAD * max(1, threads["n"]):
+            chunk = next(todo, None)
+            if chunk is None:
+                return
+            future = client.submit(run_pickled_chunk, digest, grid_pickle, chunk.start,
+                                   chunk.stop, key=f"persuasive-sweep-{digest}-{chunk.id}",
+                                   pure=False, retries=0)
+            in_flight[future.key] = chunk
+            queue.add(future)
+
+    submit_more()
+    for future in queue:
+        chunk = in_flight.pop(future.key)
+        try:
+            part, failures = future.result()
+        except Exception as exc:  # noqa: BLE001 - e.g. a worker died: the chunk is retried
+            error = f"chunk failed: {_error_line(exc)}"
+            part, failures = None, [failure_record(grid, i, error)
+                                    for i in range(chunk.start, chunk.stop)]
+        future.release()
+        del future
+        store.record(chunk, part, failures)
+        done += chunk.size
+        if progress is not None:
+            progress(done, total)
+        submit_more()
+
+
+def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
+        scheduler: str | None = None, client: Any = None, chunk: int | None = None,
+        force: bool = False,
+        progress: Callable[[int, int], None] | None = None) -> SweepSummary:
+    """Run every run of ``grid`` not yet in the sweep folder ``out``; see the module docstring.
+
+    Parameters
+    ----------
+    grid : Grid or path
+        The grid, or a grid TOML file.
+    out : path
+        The sweep folder (:mod:`persuasive.sweep.store` describes it). A folder holding the
+        same sweep is resumed: finished chunks are skipped, chunks with failures rerun.
+    workers : int, optional
+        Processes of the local cluster [all cores, never more than the chunks to run].
+        Not with ``scheduler`` or ``client``.
+    scheduler : str, optional
+        Address of a running Dask scheduler to use instead of a local cluster.
+    client : distributed.Client, optional
+        A client to use as it is (it is not closed).
+    chunk : int, optional
+        Runs per chunk (one Parquet part each) [about 32 chunks of 1 to 250 runs; when
+        resuming, the folder's].
+    force : bool
+        Replace a folder holding another sweep (or other files) instead of refusing.
+    progress : callable, optional
+        ``progress(done_runs, total_runs)``, called once at the start and after every chunk.
+
+    Returns
+    -------
+    SweepSummary
+        Counts, the failed runs (all of them, from this call or earlier ones) and the time.
+
+    Raises
+    ------
+    ConfigError
+        Bad arguments, an invalid grid, or a folder that cannot be used (before any run).
+    """
+    t0 = time.perf_counter()
+    if not isinstance(grid, Grid):
+        grid = Grid.from_toml(grid)
+    if chunk is not None:
+        _check_int("chunk", chunk)
+    if workers is not None:
+        _check_int("workers", workers)
+    given = [name for name, v in (("workers", workers), ("scheduler", scheduler),
+                                  ("client", client)) if v is not None]
+    if len(given) > 1:
+        raise ConfigError(f"{' and '.join(given)} exclude each other: workers sizes the local "
+                          "cluster, scheduler or client name another one")
+    store = SweepStore.open(out, grid, chunk, force)
+    pending = store.pending()
+    todo = sum(c.size for c in pending)
+    done = len(grid) - todo
+    if progress is not None:
+        progress(done, len(grid))
+    threads = 0
+    if pending:
+        with _quiet_logs():
+            if client is not None:
+                context = contextlib.nullcontext(client)
+            elif scheduler is not None:
+                context = remote_client(scheduler)
+            else:
+                n = min(workers or os.cpu_count() or 1, len(pending))
+                _warm_up(grid)
+                context = local_client(n)
+            with context as active:
+                threads = _threads(active)
+                _execute(active, grid, store, pending, progress, done)
+    return SweepSummary(folder=store.folder, grid_digest=grid.digest, runs=len(grid),
+                        chunks=len(store.chunks), chunk=store.chunk, skipped=done, ran=todo,
+                        failures=tuple(iter_failures(store.folder)), workers=threads,
+                        wall_time_s=time.perf_counter() - t0)
+
+
+__all__ = ["SweepSummary", "local_client", "remote_client", "run"]

@@ -1,0 +1,369 @@
+"""The closed loop (docs/method.md §7): measure, decide (HV first, then AV), advance.
+
+One run is a pure function of its configuration and seed. The world owns what the two
+policies share and nothing of what they decide:
+
+- the **random streams** (:func:`draw_streams`): the initial state, each agent's uniforms and
+  the world's noise, in one of two layouts (``Config.streams``): ``legacy``, the reference's
+  single MT19937 stream (``numpy.random.RandomState(seed)``) in the spec's order, used by paper
+  mode so that the published tables stay exact; ``per-agent``, independent streams from
+  ``numpy.random.SeedSequence(seed).spawn(4)`` (initial state, HV, AV, world noise), so that the
+  human's draws and the initial state do not depend on which AV drives (what ``compare``
+  needs). None of the draws depends on the state, so they are drawn up front;
+- **measuring** and **advancing** (:func:`measure_states`, :func:`advance_states`): additive
+  measurement noise (speeds clipped to each vehicle's limits), acceleration noise, the
+  saturated step of each vehicle;
+- the **game cache**: the full prediction of the joint state from the human's view, computed
+  once per step for every policy that needs it (the LFG human's own game *is* the persuasive
+  MPC's prediction of the human), and the MPC's look-ahead libraries of the HV one sample
+  ahead, reused when the HV's next measured state is one of them (exact equality).
+
+The same two functions drive :func:`run_loop` (compiled, over compiled policies) and
+:func:`run_python` (Python, over :class:`~persuasive.policies.Policy` objects: a person, a
+replay, an external simulator); a test keeps the two bit-identical.
+
+States are indexed ``x_0 .. x_N`` (``N = n_steps``): step ``k`` decides at ``x_k`` and advances
+to ``x_{k+1}``. The run never stops early.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit, objmode
+
+from . import packing as slot
+from .config import Config
+from .game import build, predict_into
+from .kinematics import saturated_step
+from .library import lib_buffers, new_lib
+from .mpc import AHEAD_S, AHEAD_V, AHEAD_VALID, N_DIAG
+from .policies import kinds as kd
+from .policies.step import policy_init, policy_role, policy_step
+
+# Columns of the world's own per-step log.
+WORLD_LOG = ("av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m", "hv_meas_v_mps", "av_accel_mps2",
+             "hv_accel_mps2")
+(W_AV_S, W_AV_V, W_HV_S, W_HV_V, W_AV_A, W_HV_A) = range(len(WORLD_LOG))
+
+
+# -- random streams ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Streams:
+    """Every random number of a run, drawn up front."""
+
+    layout: str  #: "legacy" or "per-agent"
+    x_av: tuple[float, float]  #: initial (s [m], v [m/s])
+    x_hv: tuple[float, float]
+    draws_av: np.ndarray  #: (n_steps, k_av) uniforms of the AV's policy
+    draws_hv: np.ndarray  #: (n_steps, k_hv) uniforms of the HV's policy
+    meas_noise: np.ndarray  #: (n_steps, 4): AV s, v, HV s, v
+    accel_noise: np.ndarray  #: (n_steps, 2): AV, HV
+    noisy: bool  #: whether any noise is on
+    av_rng: Any = None  #: the AV's own generator after its draws (per-agent layout)
+    hv_rng: Any = None
+
+
+def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int) -> Streams:
+    """The random numbers of a run (see the module docstring for the two layouts).
+
+    Legacy order (one ``RandomState(seed)``): the initial state's uniforms; then per step the
+    measurement noise (AV s, v, HV s, v, when enabled), the HV policy's ``k_hv`` uniforms, the
+    AV policy's ``k_av``, the acceleration noise (AV, HV, when enabled). Per-agent: the initial
+    state from child 0; the HV's uniforms from child 1 and the AV's from child 2, one column
+    (all steps) after the other, so that a policy's first column does not depend on how many it
+    draws; the noise from child 3, measurement then acceleration.
+    """
+    sim = config.simulation
+    n = sim.n_steps
+    layout = config.streams
+    kind, w_acc = sim.measurement_noise, sim.accel_noise_mps2
+    noisy = kind != "none" or w_acc > 0.0
+    widths = (sim.noise_s_m, sim.noise_v_mps) * 2
+    meas, accel = np.zeros((n, 4)), np.zeros((n, 2))
+    if layout == "legacy":
+        rng = np.random.RandomState(seed)
+        x_av, x_hv = scenario.initial_states(rng.random_sample)
+        draws = np.zeros((n, k_hv + k_av))
+        if not noisy:
+            if k_hv + k_av:
+                draws[:] = rng.random_sample((n, k_hv + k_av))
+        else:
+            for k in range(n):
+                if kind == "uniform":
+                    meas[k] = [-w + 2.0 * w * rng.random_sample() for w in widths]
+                elif kind == "gaussian":
+                    meas[k] = [w * rng.standard_normal() for w in widths]
+                draws[k] = [rng.random_sample() for _ in range(k_hv + k_av)]
+                if w_acc > 0.0:
+                    accel[k] = [-w_acc + 2.0 * w_acc * rng.random_sample() for _ in range(2)]
+        return Streams(layout, x_av, x_hv, draws[:, k_hv:].copy(), draws[:, :k_hv].copy(),
+                       meas, accel, noisy)
+    init, hv, av, world = (np.random.Generator(np.random.PCG64(s))
+                           for s in np.random.SeedSequence(seed).spawn(4))
+    x_av, x_hv = scenario.initial_states(init.random)
+    draws_hv = np.stack([hv.random(n) for _ in range(k_hv)], axis=1) if k_hv else np.zeros((n, 0))
+    draws_av = np.stack([av.random(n) for _ in range(k_av)], axis=1) if k_av else np.zeros((n, 0))
+    if kind == "uniform":
+        meas[:] = -np.array(widths) + (2.0 * np.array(widths)) * world.random((n, 4))
+    elif kind == "gaussian":
+        meas[:] = np.array(widths) * world.standard_normal((n, 4))
+    if w_acc > 0.0:
+        accel[:] = -w_acc + (2.0 * w_acc) * world.random((n, 2))
+    return Streams(layout, x_av, x_hv, draws_av, draws_hv, meas, accel, noisy, av, hv)
+
+
+# -- measuring and advancing (shared by both loops) --------------------------------------------
+
+
+@njit(cache=True)
+def measure_states(x: np.ndarray, k: int, noisy: bool, meas_noise: np.ndarray,
+                   P_av: np.ndarray, P_hv: np.ndarray) -> tuple[float, float, float, float]:
+    """The measured ``(s_av, v_av, s_hv, v_hv)`` of the true state ``x`` at step ``k``."""
+    ms_av, mv_av, ms_hv, mv_hv = x[0], x[1], x[2], x[3]
+    if noisy:
+        ms_av += meas_noise[k, 0]
+        mv_av = min(max(mv_av + meas_noise[k, 1], P_av[slot.V_MIN]), P_av[slot.V_MAX])
+        ms_hv += meas_noise[k, 2]
+        mv_hv = min(max(mv_hv + meas_noise[k, 3], P_hv[slot.V_MIN]), P_hv[slot.V_MAX])
+    return ms_av, mv_av, ms_hv, mv_hv
+
+
+@njit(cache=True)
+def advance_states(x: np.ndarray, a_av: float, a_hv: float, k: int, noisy: bool,
+                   accel_noise: np.ndarray, dt: float, P_av: np.ndarray, P_hv: np.ndarray,
+                   out: np.ndarray) -> tuple[float, float]:
+    """Advance the true state ``x`` by one step into ``out``; returns the applied
+    accelerations (with their noise)."""
+    if noisy:
+        a_av += accel_noise[k, 0]
+        a_hv += accel_noise[k, 1]
+    out[0], out[1] = saturated_step(x[0], x[1], a_av, dt, P_av[slot.V_MIN], P_av[slot.V_MAX])
+    out[2], out[3] = saturated_step(x[2], x[3], a_hv, dt, P_hv[slot.V_MIN], P_hv[slot.V_MAX])
+    return a_av, a_hv
+
+
+@njit(cache=True)
+def _clock_ns() -> int:
+    with objmode(t="int64"):
+        t = time.perf_counter_ns()
+    return t
+
+
+# -- the compiled loop -------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarray, dt: float,
+             av_kind: int, av_prm: np.ndarray, hv_kind: int, hv_prm: np.ndarray,
+             av_draws: np.ndarray, hv_draws: np.ndarray, needs: np.ndarray, noisy: bool,
+             meas_noise: np.ndarray, accel_noise: np.ndarray, timed: bool,
+             states: np.ndarray, world_log: np.ndarray, av_log: np.ndarray,
+             hv_log: np.ndarray, av_time_ns: np.ndarray, work: np.ndarray) -> None:
+    """The closed loop, compiled: fills ``states`` ``(n_steps + 1, 4)`` and the logs.
+
+    ``needs`` (3,) bool: compute the full prediction of the joint state (some policy reads
+    it); build only the AV's library (a policy reads it, none the game); the AV's timing
+    includes that work. ``av_time_ns`` (n_steps,): the AV's decision time per step when
+    ``timed``. ``work``: the kernels' counters (``persuasive.packing.WORK_*``), added to.
+    """
+    n, n_traj = int(P_av[slot.N_SAMPLES]), int(P_av[slot.N_MESH]) + 1
+    lib_h, lib_r = new_lib(n, n_traj), new_lib(n, n_traj)
+    # The MPC builds the HV's libraries one sample ahead (ahead[0] into lib_h1a, ahead[1] into
+    # lib_h1b). Unless noise moved the HV, its next measured state is one of them and that
+    # library is reused as the next step's HV library.
+    lib_h1a, lib_h1b = new_lib(n, n_traj), new_lib(n, n_traj)
+    ahead = np.zeros((2, 3))
+    idx = np.zeros(4, np.int64)
+    q_values = np.zeros((4, n_traj))
+    diag = np.empty((n_traj, N_DIAG))
+    av_st, hv_st = np.zeros(kd.STATE_SIZE), np.zeros(kd.STATE_SIZE)
+    policy_init(av_kind, av_prm, av_st, P_av[slot.PRIOR_L])
+    policy_init(hv_kind, hv_prm, hv_st, P_hv[slot.PRIOR_L])
+    need_game, need_av_lib, av_uses_libs = needs[0], needs[1], needs[2]
+    no_draws = np.zeros(2)
+    x = np.empty(4)
+    x[:] = x0
+    states[0, :] = x
+    for k in range(states.shape[0] - 1):
+        ms_av, mv_av, ms_hv, mv_hv = measure_states(x, k, noisy, meas_noise, P_av, P_hv)
+        t0 = _clock_ns() if timed else 0
+        if need_game:
+            built = False
+            for i in range(2):
+                if (not built and ahead[i, AHEAD_VALID] != 0.0 and ahead[i, AHEAD_S] == ms_hv
+                        and ahead[i, AHEAD_V] == mv_hv):
+                    if i == 0:
+                        lib_h, lib_h1a = lib_h1a, lib_h
+                    else:
+                        lib_h, lib_h1b = lib_h1b, lib_h
+                    built = True
+            ahead[:, AHEAD_VALID] = 0.0  # the scratch libraries are stale from here
+            predict_into(ms_hv, mv_hv, ms_av, mv_av, P_hv, P_av, disc, lib_h, lib_r, idx,
+                         q_values, work, built)
+        elif need_av_lib:
+            build(ms_av, mv_av, P_av, disc, lib_r)
+            work[slot.WORK_LIBRARIES] += 1
+        t_libs = (_clock_ns() - t0) if timed else 0
+        hv_draw = hv_draws[k] if hv_draws.shape[1] else no_draws
+        a_hv = policy_step(hv_kind, kd.HV, hv_prm, hv_st, k, ms_av, mv_av, ms_hv, mv_hv,
+                           hv_draw, -1, lib_h, lib_r, idx, q_values, P_av, P_hv, disc, dt, diag,
+                           lib_h1a, lib_h1b, ahead, hv_log[k], work)
+        av_draw = av_draws[k] if av_draws.shape[1] else no_draws
+        t1 = _clock_ns() if timed else 0
+        a_av = policy_step(av_kind, kd.AV, av_prm, av_st, k, ms_av, mv_av, ms_hv, mv_hv,
+                           av_draw, policy_role(hv_kind, hv_st), lib_h, lib_r, idx, q_values,
+                           P_av, P_hv, disc, dt, diag, lib_h1a, lib_h1b, ahead, av_log[k], work)
+        if timed:
+            av_time_ns[k] = (_clock_ns() - t1) + (t_libs if av_uses_libs else 0)
+        row = world_log[k]
+        row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
+        row[W_AV_A], row[W_HV_A] = advance_states(x, a_av, a_hv, k, noisy, accel_noise, dt,
+                                                  P_av, P_hv, x)
+        states[k + 1, :] = x
+
+
+# -- the Python loop ---------------------------------------------------------------------------
+
+
+class GameView:
+    """One full prediction of the joint state from the human's view, as buffers.
+
+    ``hv``, ``av``: each library as its ``(buf, win)`` storage
+    (:func:`persuasive.library.lib_buffers`); ``idx``: (HV-L, HV-F, AV-L, AV-F);
+    ``q_values`` ``(4, n_traj)``.
+    """
+
+    __slots__ = ("hv", "av", "idx", "q_values")
+
+    def __init__(self, hv, av, idx, q_values):
+        self.hv, self.av, self.idx, self.q_values = hv, av, idx, q_values
+
+
+class GameCache:
+    """The Python loop's game cache: full predictions keyed on the exact joint state, and the
+    MPC's look-ahead libraries (reused like the compiled loop does)."""
+
+    def __init__(self, P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray):
+        from .game import predict_buffers
+
+        self._predict = predict_buffers
+        self.P_av, self.P_hv, self.disc = P_av, P_hv, disc
+        self._shape = (int(P_av[slot.N_SAMPLES]), int(P_av[slot.N_MESH]) + 1)
+        self.ahead_a, self.ahead_b = lib_buffers(*self._shape), lib_buffers(*self._shape)
+        self.ahead = np.zeros((2, 3))
+        self._key: tuple | None = None
+        self._view: GameView | None = None
+        self.solves = 0  #: number of games actually solved
+        self.work = np.zeros(slot.N_WORK, np.int64)  #: the kernels' counters
+
+    def empty_view(self) -> GameView:
+        n, n_traj = self._shape
+        return GameView(lib_buffers(n, n_traj), lib_buffers(n, n_traj), np.zeros(4, np.int64),
+                        np.zeros((4, n_traj)))
+
+    def __call__(self, x_av, x_hv) -> GameView:
+        """The full prediction at measured ``x_av``, ``x_hv`` (each ``(s, v)``)."""
+        from .game import build_buffers
+
+        key = (float(x_hv[0]), float(x_hv[1]), float(x_av[0]), float(x_av[1]))
+        if key == self._key:
+            return self._view
+        n, n_traj = self._shape
+        hv, av = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
+        built = False
+        for i, scratch in enumerate((self.ahead_a, self.ahead_b)):
+            a = self.ahead[i]
+            if not built and a[AHEAD_VALID] != 0.0 and a[AHEAD_S] == key[0] and a[AHEAD_V] == key[1]:
+                hv[0][:], hv[1][:] = scratch[0], scratch[1]
+                built = True
+        self.ahead[:, AHEAD_VALID] = 0.0
+        idx, q_values = np.empty(4, np.int64), np.empty((4, n_traj))
+        if not built:
+            build_buffers(key[0], key[1], self.P_hv, self.disc, *hv)
+        build_buffers(key[2], key[3], self.P_av, self.disc, *av)
+        from .game import solve_buffers
+
+        solve_buffers(*hv, *av, self.P_hv, idx, q_values, self.work)
+        self.solves += 1
+        self._key, self._view = key, GameView(hv, av, idx, q_values)
+        return self._view
+
+    def av_library(self, x_av) -> GameView:
+        """A view holding only the AV's library at ``x_av`` (for policies that need no game)."""
+        from .game import build_buffers
+
+        view = self.empty_view()
+        build_buffers(float(x_av[0]), float(x_av[1]), self.P_av, self.disc, *view.av)
+        return view
+
+
+def run_python(config: Config, seed: int, av=None, hv=None, timed: bool = False):
+    """One run of the Python loop over :class:`~persuasive.policies.Policy` objects.
+
+    ``av``, ``hv``: the policies (default: the configuration's kinds, as
+    :class:`~persuasive.policies.CompiledPolicy`; then the record equals
+    :func:`persuasive.simulation.simulate`'s bit for bit). A policy may declare
+    ``draws_per_step`` (default: its kind's, or 0) uniforms of the run's streams. Returns a
+    :class:`~persuasive.simulation.RunRecord`.
+    """
+    from .policies import Context, Observation, make_policy
+    from .simulation import make_record, setup
+
+    av = av if av is not None else make_policy(config, kd.AV)
+    hv = hv if hv is not None else make_policy(config, kd.HV)
+    k_av, k_hv = (_draws_per_step(p) for p in (av, hv))
+    s = setup(config, seed, k_av, k_hv)
+    n = config.simulation.n_steps
+    dt = config.simulation.dt_s
+    games = GameCache(s.P_av, s.P_hv, s.disc)
+    st = s.streams
+    for policy, side, draws, rng in ((av, kd.AV, st.draws_av, st.av_rng),
+                                     (hv, kd.HV, st.draws_hv, st.hv_rng)):
+        policy.reset(Context(config, s.scenario, s.P_av, s.P_hv, s.disc, side, n, draws, games),
+                     rng)
+    need_game = getattr(av, "needs_game", False) or getattr(hv, "needs_game", False)
+    states = np.empty((n + 1, 4))
+    world_log = np.full((n, len(WORLD_LOG)), np.nan)
+    av_log, hv_log = np.full((n, kd.LOG_SIZE), np.nan), np.full((n, kd.LOG_SIZE), np.nan)
+    av_ms = np.zeros(n)
+    x = s.x0.copy()
+    states[0] = x
+    for k in range(n):
+        ms_av, mv_av, ms_hv, mv_hv = measure_states(x, k, st.noisy, st.meas_noise, s.P_av, s.P_hv)
+        t0 = time.perf_counter_ns()
+        game = games((ms_av, mv_av), (ms_hv, mv_hv)) if need_game else None
+        t_game = time.perf_counter_ns() - t0
+        obs = Observation(k, k * dt, (ms_av, mv_av), (ms_hv, mv_hv), game)
+        a_hv = float(hv.act(obs))
+        hv_log[k, :len(hv.log_columns)] = _last_log(hv)
+        obs.human_role = int(getattr(hv, "role", -1))
+        t1 = time.perf_counter_ns()
+        a_av = float(av.act(obs))
+        av_ms[k] = (time.perf_counter_ns() - t1 + (t_game if getattr(av, "needs_game", False)
+                                                     else 0)) / 1e6
+        av_log[k, :len(av.log_columns)] = _last_log(av)
+        row = world_log[k]
+        row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
+        row[W_AV_A], row[W_HV_A] = advance_states(x, a_av, a_hv, k, st.noisy, st.accel_noise,
+                                                  dt, s.P_av, s.P_hv, x)
+        states[k + 1] = x
+    return make_record(s, states, world_log, av_log, hv_log, av_ms if timed else None,
+                       tuple(av.log_columns), tuple(hv.log_columns), games.work)
+
+
+def _draws_per_step(policy) -> int:
+    if hasattr(policy, "draws_per_step"):
+        return int(policy.draws_per_step)
+    spec = getattr(policy, "spec", None)
+    return spec.draws if spec is not None else 0
+
+
+def _last_log(policy) -> np.ndarray:
+    values = np.asarray(getattr(policy, "last_log", ()), dtype=np.float64)
+    return values[:len(policy.log_columns)]
