@@ -16,6 +16,10 @@ The method as implemented is described in ``docs/method.md``.
 
 __version__ = "0.1.0"
 
+from ._compile import ensure_fresh_cache  # noqa: E402
+
+ensure_fresh_cache()  # before any compiled kernel is loaded (see persuasive._compile)
+
 from .config import Config, ConfigError  # noqa: E402
 from .experiments import reproduce  # noqa: E402
 from .planner import Plan, Planner  # noqa: E402

@@ -1,14 +1,74 @@
-"""Whether the compiled kernels are in Numba's on-disk cache (so a first use can say so).
+"""The compiled kernels' on-disk cache: is it warm, and is it up to date?
 
 The kernels are compiled with ``cache=True``: the first process compiles them (about 20 s on
 the 2-core machine CI uses) and writes them next to the sources (or into
-``NUMBA_CACHE_DIR``); every later process loads them. A missing or older index file of the
-closed loop's entry point means a cold cache.
+``NUMBA_CACHE_DIR``); every later process loads them.
+
+Numba checks a cached function against its own source file only. A cached function carries
+the code of every function it calls, so after an edit in a *called* function in another file
+it would load stale code (wrong results, not an error). :func:`ensure_fresh_cache` closes
+that gap: it keeps a stamp of the package's sources and clears the package's cached kernels
+when any source changed, before anything is loaded. A user who extends the method by editing
+a kernel therefore always runs what they wrote.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
+from pathlib import Path
+
+_PACKAGE = Path(__file__).resolve().parent
+_STAMP = "persuasive-kernels.stamp"
+_SUFFIXES = (".nbi", ".nbc")
+
+
+def sources_digest() -> str:
+    """A hash of every Python source of the package (path and content)."""
+    h = hashlib.sha256()
+    for path in sorted(_PACKAGE.rglob("*.py")):
+        h.update(str(path.relative_to(_PACKAGE)).encode() + b"\0" + path.read_bytes())
+    return h.hexdigest()
+
+
+def _cache_dirs() -> list[Path]:
+    dirs = [p for p in _PACKAGE.rglob("__pycache__") if p.is_dir()]
+    custom = os.environ.get("NUMBA_CACHE_DIR")
+    if custom and Path(custom).is_dir():
+        dirs += [p for p in Path(custom).rglob("*") if p.is_dir() and "persuasive" in str(p)]
+    return dirs
+
+
+def _stamp_path() -> Path:
+    custom = os.environ.get("NUMBA_CACHE_DIR")
+    return Path(custom) / _STAMP if custom else _PACKAGE / "__pycache__" / _STAMP
+
+
+def ensure_fresh_cache() -> bool:
+    """Clear the package's cached kernels if any source changed since they were cached.
+
+    Returns True when it cleared them. Errors (a read-only install, a race with another
+    process doing the same) leave the cache as it is: Numba's own checks still apply.
+    """
+    digest = sources_digest()
+    stamp = _stamp_path()
+    try:
+        if stamp.read_text(encoding="ascii").strip() == digest:
+            return False
+    except OSError:
+        pass
+    try:
+        for folder in _cache_dirs():
+            for entry in folder.iterdir():
+                if entry.suffix in _SUFFIXES:
+                    entry.unlink(missing_ok=True)
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        tmp = stamp.with_name(f".{stamp.name}.{os.getpid()}")
+        tmp.write_text(digest + "\n", encoding="ascii")
+        os.replace(tmp, stamp)
+    except OSError:
+        return False
+    return True
 
 
 def kernels_cached() -> bool:

@@ -12,6 +12,7 @@ own in :class:`Quirks` (``None`` means "as the mode says").
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import tomllib
@@ -332,7 +333,7 @@ class AVParams:
 class NoisyParams:
     """The Boltzmann-rational LFG human (``hv.kind = "noisy"``)."""
 
-    beta: float = 1.0  #: rationality [1/reward]: P(trajectory) ~ exp(beta Q); large = the LFG
+    beta: float = 0.5  #: rationality [1/reward]: P(trajectory) ~ exp(beta Q); large = the LFG
 
     def __post_init__(self) -> None:
         _in_range("hv.noisy.beta", self.beta, 0.0)
@@ -493,14 +494,18 @@ class Config:
 
     # -- derived -----------------------------------------------------------------------------
 
-    @property
+    @functools.cached_property
     def effective_quirks(self) -> Quirks:
         """The quirks in force: the mode's, with any explicit switch applied."""
         return self.quirks.resolved(self.mode)
 
+    @functools.cached_property
+    def _vehicles(self) -> dict[str, VehicleParams]:
+        return {who: getattr(self, who).vehicle.resolve(self.vehicle, who) for who in ("av", "hv")}
+
     def vehicle_of(self, who: str) -> VehicleParams:
         """The size and limits of the ``"av"`` or ``"hv"``: ``[vehicle]`` with its overrides."""
-        return getattr(self, who).vehicle.resolve(self.vehicle, who)
+        return self._vehicles[who]
 
     @property
     def streams(self) -> str:

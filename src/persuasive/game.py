@@ -38,7 +38,7 @@ EGO_LEADER, EGO_FOLLOWER, OTHER_LEADER, OTHER_FOLLOWER = 0, 1, 2, 3
 Q_EGO_LEADS_LEADER, Q_EGO_LEADS_FOLLOWER, Q_EGO_FOLLOWS_LEADER, Q_EGO_FOLLOWS_FOLLOWER = 0, 1, 2, 3
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def leader_follower(R_lead: np.ndarray, R_fol: np.ndarray, agg_max: bool,
                     Ql: np.ndarray, Qf: np.ndarray) -> tuple[int, int]:
     """Solve one leader-follower game; return ``(leader pick, follower pick)``.
@@ -75,7 +75,7 @@ def leader_follower(R_lead: np.ndarray, R_fol: np.ndarray, agg_max: bool,
     return pick_l, first_f
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def solve_both(R_ego: np.ndarray, R_other: np.ndarray, agg_max: bool, out: np.ndarray,
                q_values: np.ndarray) -> None:
     """Both role assignments: ``out = (ego-L, ego-F, other-L, other-F)`` trajectory indices.

@@ -73,7 +73,7 @@ N_DIAG = 10
 AHEAD_VALID, AHEAD_S, AHEAD_V = 0, 1, 2
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def any_unsafe(pos_r: np.ndarray, win_r: np.ndarray, c: int, pos_h: np.ndarray,
                win_h: np.ndarray, off: int, thr: float,
                along_paths: bool) -> tuple[bool, int]:
@@ -91,10 +91,11 @@ def any_unsafe(pos_r: np.ndarray, win_r: np.ndarray, c: int, pos_h: np.ndarray,
         hi_h = max(hi_h, win_h[h, 1])
     lo, hi = max(win_r[c, 0], off + lo_h), min(win_r[c, 1], off + hi_h)
     if along_paths:
+        sq_r, sq_h = pos_r[0], pos_h[0]
         for m in range(lo, hi):
-            own = pos_r[0, m, c]
+            own = sq_r[m, c]
             for h in range(n_traj):
-                if pair_unsafe_along(own, pos_h[0, m - off, h], thr):
+                if pair_unsafe_along(own, sq_h[m - off, h], thr):
                     return True, (m - lo) * n_traj + h + 1
         return False, max(hi - lo, 0) * n_traj
     for m in range(lo, hi):
@@ -106,7 +107,7 @@ def any_unsafe(pos_r: np.ndarray, win_r: np.ndarray, c: int, pos_h: np.ndarray,
     return False, max(hi - lo, 0) * n_traj
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def branch_unsafe_xy(lib_r: Lib, c: int, m: int, lib_h: Lib, h: int, k: int,
                      thr: float) -> bool:
     """Euclidean conflicts: candidate ``c`` at its sample ``m`` against HV trajectory ``h`` of
@@ -263,6 +264,7 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, lib_h: Lib, lib_r: Li
     # sample still sums the branches in order (LL, LF, FL, FF), as the reference does.
     Cb = np.empty(4)
     p_safe = np.empty(n)
+    sq_r, sq_h1a, sq_h1b = lib_r.pos[0], lib_h1a.pos[0], lib_h1b.pos[0]  # s^2 (along paths)
     best_feasible, best_any = -1, -1
     for c in range(n_traj):
         all_safe = 0.0
@@ -279,19 +281,19 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, lib_h: Lib, lib_r: Li
             i, j = b // 2, b % 2
             src = hv_src[i]
             # single arrays, not the library tuple: selecting a whole library per branch costs
-            sq_h = lib_h1a.pos if src == 0 else lib_h1b.pos
+            sq_h = sq_h1a if src == 0 else sq_h1b
             h = answer[src, av_src[c], j]
             p = probs[c, b]
             cb = 0.0
             for m in range(lo_c, hi_c):
                 if m < off:  # samples before the re-solve: the HV's own states
                     if along_paths:
-                        ok = not pair_unsafe_along(lib_r.pos[0, m, c], early_sq[i, m], thr)
+                        ok = not pair_unsafe_along(sq_r[m, c], early_sq[i, m], thr)
                     else:
                         ok = not pair_unsafe_xy(lib_r.pos[0, m, c], lib_r.pos[1, m, c],
                                                 early_x[i, m], early_y[i, m], thr)
                 elif along_paths:
-                    ok = not pair_unsafe_along(lib_r.pos[0, m, c], sq_h[0, m - off, h], thr)
+                    ok = not pair_unsafe_along(sq_r[m, c], sq_h[m - off, h], thr)
                 else:
                     ok = not branch_unsafe_xy(lib_r, c, m, lib_h1a if src == 0 else lib_h1b,
                                               h, m - off, thr)

@@ -34,7 +34,7 @@ from . import packing as slot
 from .geometry import pair_unsafe_along, pair_unsafe_xy, path_point
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def reward_terms(S: np.ndarray, V: np.ndarray, A: np.ndarray, s0: float, disc: np.ndarray,
                  P: np.ndarray, base: np.ndarray, coll: np.ndarray, pos: np.ndarray,
                  win: np.ndarray) -> None:
@@ -50,6 +50,7 @@ def reward_terms(S: np.ndarray, V: np.ndarray, A: np.ndarray, s0: float, disc: n
     n, n_traj = S.shape
     w_u = P[slot.W_U]
     along_paths = P[slot.CONFLICT] == slot.CONFLICT_ALONG_PATHS
+    sq = pos[0]
     for m in range(n_traj):
         base[m] = 0.0
     for k in range(n):
@@ -57,7 +58,7 @@ def reward_terms(S: np.ndarray, V: np.ndarray, A: np.ndarray, s0: float, disc: n
             base[m] += disc[k] * ((S[k, m] - s0) - w_u * abs(A[k, m]))
             coll[k, m] = disc[k] * (1.0 + V[k, m])
             if along_paths:
-                pos[0, k, m] = S[k, m] * S[k, m]
+                sq[k, m] = S[k, m] * S[k, m]
     if along_paths:
         zone_windows(pos, P[slot.MIN_DIST_SQ], win)
     else:
@@ -107,7 +108,7 @@ def zone_windows_s(S: np.ndarray, lo_s: float, hi_s: float, win: np.ndarray) -> 
         win[m, 1] = hi
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def reward_matrix(base: np.ndarray, coll: np.ndarray, pos: np.ndarray, win: np.ndarray,
                   pos_other: np.ndarray, win_other: np.ndarray, w_c: float, thr: float,
                   along_paths: bool, C: np.ndarray, out: np.ndarray) -> int:
@@ -123,6 +124,7 @@ def reward_matrix(base: np.ndarray, coll: np.ndarray, pos: np.ndarray, win: np.n
     """
     n_own = win.shape[0]
     n_other = win_other.shape[0]
+    sq, sq_other = pos[0], pos_other[0]  # s^2 along the paths (2-D: cheaper to index)
     tests = 0
     lo_o, hi_o = pos.shape[1], 0
     for b in range(n_other):
@@ -136,9 +138,9 @@ def reward_matrix(base: np.ndarray, coll: np.ndarray, pos: np.ndarray, win: np.n
         if along_paths:
             tests += max(hi - lo, 0) * n_other
             for k in range(lo, hi):
-                own, weight = pos[0, k, m], coll[k, m]
+                own, weight = sq[k, m], coll[k, m]
                 for b in range(n_other):
-                    C[m, b] += weight if pair_unsafe_along(own, pos_other[0, k, b], thr) else 0.0
+                    C[m, b] += weight if pair_unsafe_along(own, sq_other[k, b], thr) else 0.0
         else:
             tests += collision_sums_xy(m, lo, hi, coll, pos, win_other, pos_other, thr, C)
         for b in range(n_other):

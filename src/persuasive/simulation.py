@@ -16,6 +16,7 @@ clipped to the vehicle's ``[v_min, v_max]`` before a policy sees them.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -126,6 +127,65 @@ class RunRecord:
 
         return pd.DataFrame(self.log)
 
+    def save(self, path) -> None:
+        """Write the per-step log as Parquet, atomically, with what :func:`load_record` needs
+        to rebuild the record in the file's metadata: the configuration (TOML), the seed, the
+        random-stream layout, the last state and the package version."""
+        import json
+
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        from ._files import atomic_write
+
+        table = pa.Table.from_pandas(self.frame(), preserve_index=False)
+        meta = {"config_toml": self.config.to_toml(), "seed": self.seed,
+                "streams": self.streams, "final_state": [float(x) for x in self.states[-1]],
+                "version": self.version}
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                               RECORD_METADATA: json.dumps(meta)})
+        atomic_write(path, lambda p: pq.write_table(table, p))
+
+
+#: Key of a saved run's metadata in its Parquet schema.
+RECORD_METADATA = b"persuasive.run"
+
+
+def load_record(path) -> RunRecord:
+    """The :class:`RunRecord` saved by :meth:`RunRecord.save` (``simulate --out x.parquet``, a
+    recorded trial of the browser page): states, log, outcome and configuration."""
+    import json
+    import tomllib
+    from pathlib import Path
+
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    try:
+        table = pq.read_table(path)
+    except OSError as exc:
+        reason = (exc.strerror or "no such file or directory").lower()
+        raise ConfigError(f"run file {str(path)!r} cannot be read: {reason}") from None
+    except ValueError as exc:
+        raise ConfigError(f"run file {str(path)!r} cannot be read: "
+                          f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") \
+            from None
+    raw = (table.schema.metadata or {}).get(RECORD_METADATA)
+    if raw is None:
+        raise ConfigError(f"run file {str(path)!r} holds no run record (write it with "
+                          "'persuasive simulate --out FILE.parquet' or the browser page)")
+    meta = json.loads(raw)
+    config = Config.from_dict(tomllib.loads(meta["config_toml"]))
+    frame = table.to_pandas()
+    log = {name: frame[name].to_numpy() for name in frame.columns}
+    states = np.vstack([frame[["av_s_m", "av_v_mps", "hv_s_m", "hv_v_mps"]].to_numpy(float),
+                        np.asarray(meta["final_state"], float)[None, :]])
+    scenario = static_setup(config)[0]
+    return RunRecord(config, int(meta["seed"]), (float(states[0, 0]), float(states[0, 1])),
+                     (float(states[0, 2]), float(states[0, 3])), states, log,
+                     outcome(scenario, states, log), scenario, meta.get("streams", "legacy"),
+                     version=meta.get("version", __version__))
+
 
 def check_seed(seed: Any) -> int:
     """The seed as an int, or :class:`ConfigError` if it is not an integer in [0, 2^32 - 1]."""
@@ -148,6 +208,18 @@ class Setup:
     x0: np.ndarray
 
 
+@functools.lru_cache(maxsize=32)
+def static_setup(config: Config) -> tuple[Scenario, np.ndarray, np.ndarray, np.ndarray]:
+    """The scenario, both parameter vectors and the discounts of ``config`` (they depend on
+    the configuration only; kept for the last few configurations, since building a scenario
+    can take milliseconds). The arrays are shared by every run of the configuration: do not
+    change them (they are not marked read-only, which would give the kernels another type
+    to compile for)."""
+    scenario = build_scenario(config)
+    P_av, P_hv = pack(config, scenario)
+    return scenario, P_av, P_hv, discounts(config)
+
+
 def setup(config: Config, seed: int, k_av: int | None = None,
           k_hv: int | None = None) -> Setup:
     """The scenario, parameter vectors, random streams and initial state of a run.
@@ -158,8 +230,7 @@ def setup(config: Config, seed: int, k_av: int | None = None,
     from .world import draw_streams
 
     seed = check_seed(seed)
-    scenario = build_scenario(config)
-    P_av, P_hv = pack(config, scenario)
+    scenario, P_av, P_hv, disc = static_setup(config)
     k_av = kind_of(config, kd.AV).draws if k_av is None else k_av
     k_hv = kind_of(config, kd.HV).draws if k_hv is None else k_hv
     streams = draw_streams(config, seed, scenario, k_av, k_hv)
@@ -168,7 +239,7 @@ def setup(config: Config, seed: int, k_av: int | None = None,
         rec = load_replay(config)
         x_hv = (rec.s0_m, rec.v0_mps)
     x0 = np.array([*streams.x_av, *x_hv], dtype=np.float64)
-    return Setup(config, seed, scenario, P_av, P_hv, discounts(config), streams, x0)
+    return Setup(config, seed, scenario, P_av, P_hv, disc, streams, x0)
 
 
 def simulate(config: Config, seed: int, timed: bool = False) -> RunRecord:

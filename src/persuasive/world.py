@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, objmode
 
 from . import packing as slot
-from .config import Config
+from .config import Config, ConfigError
 from .game import build, predict_into
 from .kinematics import saturated_step
 from .library import lib_buffers, new_lib
@@ -303,58 +303,104 @@ class GameCache:
         return view
 
 
-def run_python(config: Config, seed: int, av=None, hv=None, timed: bool = False):
-    """One run of the Python loop over :class:`~persuasive.policies.Policy` objects.
+class PythonWorld:
+    """The Python loop, one step at a time, over :class:`~persuasive.policies.Policy` objects.
 
     ``av``, ``hv``: the policies (default: the configuration's kinds, as
-    :class:`~persuasive.policies.CompiledPolicy`; then the record equals
-    :func:`persuasive.simulation.simulate`'s bit for bit). A policy may declare
-    ``draws_per_step`` (default: its kind's, or 0) uniforms of the run's streams. Returns a
-    :class:`~persuasive.simulation.RunRecord`.
+    :class:`~persuasive.policies.CompiledPolicy`). A policy may declare ``draws_per_step``
+    (default: its kind's, or 0) uniforms of the run's streams. :meth:`step` decides and
+    advances once (the HV decides first, then the AV, as in :func:`run_loop`); :meth:`record`
+    is the :class:`~persuasive.simulation.RunRecord` of the steps taken so far. Drives the
+    browser page (a person as the HV), the gymnasium environment and :func:`run_python`.
     """
-    from .policies import Context, Observation, make_policy
-    from .simulation import make_record, setup
 
-    av = av if av is not None else make_policy(config, kd.AV)
-    hv = hv if hv is not None else make_policy(config, kd.HV)
-    k_av, k_hv = (_draws_per_step(p) for p in (av, hv))
-    s = setup(config, seed, k_av, k_hv)
-    n = config.simulation.n_steps
-    dt = config.simulation.dt_s
-    games = GameCache(s.P_av, s.P_hv, s.disc)
-    st = s.streams
-    for policy, side, draws, rng in ((av, kd.AV, st.draws_av, st.av_rng),
-                                     (hv, kd.HV, st.draws_hv, st.hv_rng)):
-        policy.reset(Context(config, s.scenario, s.P_av, s.P_hv, s.disc, side, n, draws, games),
-                     rng)
-    need_game = getattr(av, "needs_game", False) or getattr(hv, "needs_game", False)
-    states = np.empty((n + 1, 4))
-    world_log = np.full((n, len(WORLD_LOG)), np.nan)
-    av_log, hv_log = np.full((n, kd.LOG_SIZE), np.nan), np.full((n, kd.LOG_SIZE), np.nan)
-    av_ms = np.zeros(n)
-    x = s.x0.copy()
-    states[0] = x
-    for k in range(n):
-        ms_av, mv_av, ms_hv, mv_hv = measure_states(x, k, st.noisy, st.meas_noise, s.P_av, s.P_hv)
+    def __init__(self, config: Config, seed: int, av=None, hv=None, timed: bool = False):
+        from .policies import Context, make_policy
+        from .simulation import setup
+
+        self.config = config
+        self.av = av if av is not None else make_policy(config, kd.AV)
+        self.hv = hv if hv is not None else make_policy(config, kd.HV)
+        self.timed = timed
+        k_av, k_hv = (_draws_per_step(p) for p in (self.av, self.hv))
+        self.setup = s = setup(config, seed, k_av, k_hv)
+        self.scenario = s.scenario
+        self.n_steps = n = config.simulation.n_steps
+        self.dt = config.simulation.dt_s
+        self.games = GameCache(s.P_av, s.P_hv, s.disc)
+        st = s.streams
+        for policy, side, draws, rng in ((self.av, kd.AV, st.draws_av, st.av_rng),
+                                         (self.hv, kd.HV, st.draws_hv, st.hv_rng)):
+            policy.reset(Context(config, s.scenario, s.P_av, s.P_hv, s.disc, side, n, draws,
+                                 self.games), rng)
+        self._need_game = getattr(self.av, "needs_game", False) or \
+            getattr(self.hv, "needs_game", False)
+        self.states = np.empty((n + 1, 4))
+        self.world_log = np.full((n, len(WORLD_LOG)), np.nan)
+        self.av_log = np.full((n, kd.LOG_SIZE), np.nan)
+        self.hv_log = np.full((n, kd.LOG_SIZE), np.nan)
+        self.av_ms = np.zeros(n)
+        self.x = s.x0.copy()
+        self.states[0] = self.x
+        self.k = 0  #: steps taken
+
+    @property
+    def done(self) -> bool:
+        """All ``n_steps`` steps have been taken."""
+        return self.k >= self.n_steps
+
+    def step(self) -> np.ndarray:
+        """Decide and advance one step; returns the new true state ``(s_av, v_av, s_hv,
+        v_hv)``."""
+        from .policies import Observation
+
+        if self.done:
+            raise ConfigError(f"the run has ended after {self.n_steps} steps "
+                              "(simulation.n_steps)")
+        s, st, k = self.setup, self.setup.streams, self.k
+        ms_av, mv_av, ms_hv, mv_hv = measure_states(self.x, k, st.noisy, st.meas_noise, s.P_av,
+                                                    s.P_hv)
         t0 = time.perf_counter_ns()
-        game = games((ms_av, mv_av), (ms_hv, mv_hv)) if need_game else None
+        game = self.games((ms_av, mv_av), (ms_hv, mv_hv)) if self._need_game else None
         t_game = time.perf_counter_ns() - t0
-        obs = Observation(k, k * dt, (ms_av, mv_av), (ms_hv, mv_hv), game)
-        a_hv = float(hv.act(obs))
-        hv_log[k, :len(hv.log_columns)] = _last_log(hv)
-        obs.human_role = int(getattr(hv, "role", -1))
+        obs = Observation(k, k * self.dt, (ms_av, mv_av), (ms_hv, mv_hv), game)
+        a_hv = float(self.hv.act(obs))
+        self.hv_log[k, :len(self.hv.log_columns)] = _last_log(self.hv)
+        obs.human_role = int(getattr(self.hv, "role", -1))
         t1 = time.perf_counter_ns()
-        a_av = float(av.act(obs))
-        av_ms[k] = (time.perf_counter_ns() - t1 + (t_game if getattr(av, "needs_game", False)
-                                                     else 0)) / 1e6
-        av_log[k, :len(av.log_columns)] = _last_log(av)
-        row = world_log[k]
+        a_av = float(self.av.act(obs))
+        own = t_game if getattr(self.av, "needs_game", False) else 0
+        self.av_ms[k] = (time.perf_counter_ns() - t1 + own) / 1e6
+        self.av_log[k, :len(self.av.log_columns)] = _last_log(self.av)
+        row = self.world_log[k]
         row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
-        row[W_AV_A], row[W_HV_A] = advance_states(x, a_av, a_hv, k, st.noisy, st.accel_noise,
-                                                  dt, s.P_av, s.P_hv, x)
-        states[k + 1] = x
-    return make_record(s, states, world_log, av_log, hv_log, av_ms if timed else None,
-                       tuple(av.log_columns), tuple(hv.log_columns), games.work)
+        row[W_AV_A], row[W_HV_A] = advance_states(self.x, a_av, a_hv, k, st.noisy,
+                                                  st.accel_noise, self.dt, s.P_av, s.P_hv,
+                                                  self.x)
+        self.states[k + 1] = self.x
+        self.k += 1
+        return self.x.copy()
+
+    def record(self):
+        """The :class:`~persuasive.simulation.RunRecord` of the steps taken so far (all of
+        them once :attr:`done`)."""
+        from .simulation import make_record
+
+        k = self.k
+        return make_record(self.setup, self.states[:k + 1], self.world_log[:k], self.av_log[:k],
+                           self.hv_log[:k], self.av_ms[:k] if self.timed else None,
+                           tuple(self.av.log_columns), tuple(self.hv.log_columns),
+                           self.games.work)
+
+
+def run_python(config: Config, seed: int, av=None, hv=None, timed: bool = False):
+    """One whole run of the Python loop (:class:`PythonWorld`); returns its
+    :class:`~persuasive.simulation.RunRecord`. With the configuration's own kinds it equals
+    :func:`persuasive.simulation.simulate` bit for bit."""
+    world = PythonWorld(config, seed, av, hv, timed)
+    while not world.done:
+        world.step()
+    return world.record()
 
 
 def _draws_per_step(policy) -> int:

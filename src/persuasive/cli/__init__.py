@@ -25,14 +25,16 @@ def cli() -> None:
 
 def _register() -> None:
     from .bench import bench
-    from .plots import animate, plot
+    from .compare import compare
+    from .plots import animate, plot, plot_compare
     from .reproduce import reproduce
     from .simulate import simulate
     from .sweep import plot_sweep, sweep
 
-    for command in (simulate, reproduce, sweep, bench, plot, animate):
+    for command in (simulate, reproduce, compare, sweep, bench, plot, animate):
         cli.add_command(command)
     plot.add_command(plot_sweep)
+    plot.add_command(plot_compare)
 
 
 _register()

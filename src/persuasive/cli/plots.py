@@ -32,10 +32,13 @@ def _plots():
 
 
 def _runs(single: bool, run: dict):
-    """The run the options describe (``single``), or the LFG-AV and persuasive-AV runs of
-    Figs. 2-3."""
-    from ..simulation import simulate
+    """The run the options describe (``single``), the run saved in ``--from``, or the LFG-AV
+    and persuasive-AV runs of Figs. 2-3."""
+    from ..simulation import load_record, simulate
 
+    source = run.pop("source", None)
+    if source is not None:
+        return (load_record(source),)
     compile_notice()
     if single:
         return (simulate(config_of(run), run["seed"]),)
@@ -62,16 +65,23 @@ def _single_option(func: Callable) -> Callable:
                              "(LFG AV and MPC AV).")(func)
 
 
+def _from_option(func: Callable) -> Callable:
+    return click.option("--from", "source", type=click.Path(dir_okay=False), default=None,
+                        help="Plot a saved run instead of simulating one: a Parquet log of "
+                             "'simulate --out' or a recorded trial of 'drive'.")(func)
+
+
 @plot.command()
 @run_options(seed_default=PAPER_SEED, seed_help=_SEED_HELP)
 @_single_option
+@_from_option
 @_out_option("Figure file: .png, .svg or .pdf.")
 def profile(single, out, **run) -> None:
     """Roles, beliefs, speeds and accelerations over time (the paper's Fig. 2)."""
     plots = _plots()
     plots.check_figure_path(out)
     runs = _runs(single, run)
-    fig = plots.profile_single(*runs) if single else plots.profile_figure(*runs)
+    fig = plots.profile_single(*runs) if len(runs) == 1 else plots.profile_figure(*runs)
     click.echo(f"wrote {plots.save_figure(fig, out)}")
 
 
@@ -80,13 +90,14 @@ def profile(single, out, **run) -> None:
 @_single_option
 @click.option("--every", "every_s", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
               show_default=True, metavar="SECONDS", help="Time between vehicle snapshots.")
+@_from_option
 @_out_option("Figure file: .png, .svg or .pdf.")
 def topview(single, every_s, out, **run) -> None:
     """The intersection from above with vehicle snapshots (the paper's Fig. 3)."""
     plots = _plots()
     plots.check_figure_path(out)
     runs = _runs(single, run)
-    fig = (plots.topview_single(*runs, every_s=every_s) if single
+    fig = (plots.topview_single(*runs, every_s=every_s) if len(runs) == 1
            else plots.topview_figure(*runs, every_s=every_s))
     click.echo(f"wrote {plots.save_figure(fig, out)}")
 
@@ -105,10 +116,28 @@ def table(results: str, out: str) -> None:
     click.echo(f"wrote {plots.save_figure(fig, out)}")
 
 
+@click.command("compare")
+@click.option("--from", "results", required=True, type=click.Path(file_okay=False),
+              help="Folder of 'persuasive compare' (holds summary.json).")
+@_out_option("Figure file: .png, .svg or .pdf.")
+def plot_compare(results: str, out: str) -> None:
+    """A comparison: AV-first shares and collisions per pair, and the delays' spread."""
+    from .. import sweep
+    from ..studies.compare import load_summary
+
+    plots = _plots()
+    plots.check_figure_path(out)
+    summary = load_summary(Path(results))
+    runs = sweep.load(Path(results))
+    fig = plots.compare_figure(summary, runs)
+    click.echo(f"wrote {plots.save_figure(fig, out)}")
+
+
 @click.command()
 @run_options(seed_default=PAPER_SEED, seed_help=_SEED_HELP)
 @click.option("--fps", type=click.IntRange(min=1), default=10, show_default=True,
               help="Frames per second (10 is real time).")
+@_from_option
 @_out_option("Animation file: .mp4 or .gif.")
 def animate(fps, out, **run) -> None:
     """Animate one run: the top view, with the beliefs and roles shown live."""
@@ -119,4 +148,4 @@ def animate(fps, out, **run) -> None:
     click.echo(f"wrote {path} ({len(record.log['step'])} frames at {fps} fps)")
 
 
-__all__ = ["animate", "plot"]
+__all__ = ["animate", "plot", "plot_compare"]

@@ -13,15 +13,17 @@ from ._common import compile_notice, config_of, run_options
 LOG_EXTENSIONS = (".parquet", ".csv")
 
 
-def write_log(frame, path: str) -> None:
-    """Write a per-step log: Parquet or CSV by extension, atomically."""
+def write_log(record, path: str) -> None:
+    """Write a run's per-step log: Parquet (with the record's metadata, so that ``plot
+    --from`` and the replay human can read it back) or CSV, by extension, atomically."""
     from .._files import atomic_write, check_output_file
 
     ext = check_output_file(path, LOG_EXTENSIONS, "log")
     if ext == ".csv":
+        frame = record.frame()
         atomic_write(path, lambda p: frame.to_csv(p, index=False))
     else:
-        atomic_write(path, lambda p: frame.to_parquet(p, index=False))
+        record.save(path)
 
 
 @click.command()
@@ -42,7 +44,7 @@ def simulate(out, as_json, **run) -> None:
     record = simulate_run(config, run["seed"])
     elapsed = time.perf_counter() - t0
     if out:
-        write_log(record.frame(), out)
+        write_log(record, out)
     summary = record.summary()
     if as_json:
         click.echo(json.dumps(summary))

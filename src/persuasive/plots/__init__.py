@@ -36,13 +36,17 @@ message naming it.
 from ._common import (AV_COLOR, DOUBLE_COLUMN_IN, HV_COLOR, SINGLE_COLUMN_IN, belief_column,
                       case_title, crossing_time, run_label)
 from .animation import animate, animation_frames
+from .compare import compare_figure
 from .files import (ANIMATION_EXTENSIONS, FIGURE_EXTENSIONS, check_animation_path,
                     check_figure_path, save_figure)
 from .profile import PROFILE_ROWS, profile_figure, profile_single
 from .table import table_figure, table_row_label
-from .topview import draw_intersection, snapshot_indices, topview_figure, topview_single
+from .topview import (draw_intersection, draw_scene, snapshot_indices, topview_figure,
+                      topview_single)
 
 __all__ = [
+    "compare_figure",
+    "draw_scene",
     "ANIMATION_EXTENSIONS",
     "AV_COLOR",
     "DOUBLE_COLUMN_IN",

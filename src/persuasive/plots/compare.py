@@ -1,0 +1,89 @@
+"""A comparison of planners and humans (``persuasive compare``) as one figure.
+
+:func:`compare_figure` draws, from a comparison's summary and runs: left, the outcome matrix,
+AV planners by human models, each cell coloured by the share of runs in which the AV reached
+its line first and labelled with that share, its 95 % interval and the number of collisions;
+right, box plots of the AV's and the human's delays per pair (time to leave the conflict zone
+minus the free-flow time; runs where a vehicle never cleared are left out and counted).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ._common import _FONT, AV_COLOR, DOUBLE_COLUMN_IN, HV_COLOR, _new_figure, _style
+
+
+def compare_figure(summary: dict[str, Any], runs) -> Figure:
+    """The comparison's figure (see the module docstring).
+
+    Parameters
+    ----------
+    summary : dict
+        ``summary.json`` of a comparison (:func:`persuasive.studies.compare.load_summary`).
+    runs : pandas.DataFrame
+        Its runs (:func:`persuasive.sweep.load` of the same folder).
+    """
+    avs, hvs = summary["av_kinds"], summary["hv_kinds"]
+    rows = {(r["av"], r["hv"]): r for r in summary["rows"]}
+    fig = _new_figure(DOUBLE_COLUMN_IN, 1.6 + 0.5 * max(len(avs), 3))
+    ax_m, ax_b = fig.subplots(1, 2, width_ratios=(1.0, 1.25))
+    share = np.full((len(avs), len(hvs)), np.nan)
+    for i, av in enumerate(avs):
+        for j, hv in enumerate(hvs):
+            if (av, hv) in rows:
+                share[i, j] = rows[(av, hv)]["av_first_pct"]
+    image = ax_m.imshow(share, cmap="RdBu_r", vmin=0.0, vmax=100.0, aspect="auto",
+                        gid="outcome-matrix")
+    for i, av in enumerate(avs):
+        for j, hv in enumerate(hvs):
+            r = rows.get((av, hv))
+            if r is None:
+                continue
+            lo, hi = r["av_first_pct_ci"]
+            text = f"{r['av_first_pct']:.0f}%\n[{lo:.0f}, {hi:.0f}]"
+            if r["collisions"]:
+                text += f"\n{r['collisions']} coll."
+            dark = abs(r["av_first_pct"] - 50.0) > 30.0
+            ax_m.text(j, i, text, ha="center", va="center", fontsize=_FONT["note"] - 0.5,
+                      color="white" if dark else "black", gid=f"cell-{av}-{hv}")
+    ax_m.set_xticks(range(len(hvs)), hvs, fontsize=_FONT["tick"], rotation=30, ha="right")
+    ax_m.set_yticks(range(len(avs)), avs, fontsize=_FONT["tick"])
+    ax_m.set_xlabel("human model", fontsize=_FONT["label"])
+    ax_m.set_ylabel("AV planner", fontsize=_FONT["label"])
+    ax_m.set_title("AV first at its line [% of runs]", fontsize=_FONT["title"])
+    bar = fig.colorbar(image, ax=ax_m, fraction=0.05, pad=0.02)
+    bar.ax.tick_params(labelsize=_FONT["tick"])
+
+    labels, data, colors = [], [], []
+    for av in avs:
+        for hv in hvs:
+            mine = runs[(runs["av.kind"] == av) & (runs["hv.kind"] == hv)]
+            for who, color in (("av", AV_COLOR), ("hv", HV_COLOR)):
+                d = mine[f"{who}_delay_s"].to_numpy(dtype=float, na_value=np.nan)
+                data.append(d[np.isfinite(d)])
+                colors.append(color)
+            labels.append(f"{av} / {hv}")
+    positions = np.arange(len(labels) * 2, dtype=float)
+    positions += np.repeat(np.arange(len(labels)), 2) * 0.6  # a gap between pairs
+    box = ax_b.boxplot([d if d.size else [np.nan] for d in data], positions=positions,
+                       vert=False, widths=0.7, patch_artist=True, showfliers=False,
+                       medianprops={"color": "black", "lw": 0.8})
+    for patch, color in zip(box["boxes"], colors):
+        patch.set_facecolor(color)
+        patch.set_alpha(0.6)
+        patch.set_gid("delay-box")
+    ax_b.set_yticks(positions[::2] + 0.5, labels, fontsize=_FONT["note"])
+    ax_b.invert_yaxis()
+    ax_b.set_xlabel("delay against free flow [s]", fontsize=_FONT["label"])
+    ax_b.set_title("delays (AV red, human blue)", fontsize=_FONT["title"])
+    _style(ax_b)
+    fig.suptitle(f"compare: {summary['scenario']}, {summary['mode']} mode, seeds "
+                 f"1..{summary['seeds']}", fontsize=_FONT["title"])
+    return fig
+
+
+__all__ = ["compare_figure"]
