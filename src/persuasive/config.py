@@ -1,11 +1,11 @@
 """One validated, frozen configuration for the method, the scenario and the simulation.
 
 Every concern has its own frozen dataclass; :class:`Config` groups them. Defaults are the
-paper's values (spec sections 1-8). Units are in the field names (``_m``, ``_mps``, ``_mps2``,
+paper's values (docs/method.md §1-8). Units are in the field names (``_m``, ``_mps``, ``_mps2``,
 ``_s``) and in each field's comment. Validation happens once, at construction, and raises
 :class:`ConfigError` with a one-line message naming the field, its value and the allowed range.
 
-Two execution modes exist (spec section 9): ``"paper"`` keeps the reference implementation's
+Two execution modes exist (docs/method.md §9): ``"paper"`` keeps the reference implementation's
 quirks Q1..Q7, ``"corrected"`` fixes Q1, Q2, Q3 and Q5. Each quirk can also be switched on its
 own in :class:`Quirks` (``None`` means "as the mode says").
 """
@@ -94,7 +94,7 @@ def _flag(name: str, value: Any) -> None:
 
 @dataclass(frozen=True)
 class VehicleParams:
-    """Vehicle geometry and actuation limits (spec section 1)."""
+    """Vehicle geometry and actuation limits (docs/method.md §1)."""
 
     length_m: float = 5.0  #: vehicle length [m]
     width_m: float = 2.5  #: vehicle width [m]
@@ -134,7 +134,7 @@ class VehicleParams:
 
 @dataclass(frozen=True)
 class LibraryParams:
-    """The OVM trajectory library, the action set U (spec section 2)."""
+    """The OVM trajectory library, the action set U (docs/method.md §2)."""
 
     n_samples: int = 50  #: samples per trajectory [-]
     sample_dt_s: float = 0.1  #: time between samples [s]
@@ -167,7 +167,7 @@ class LibraryParams:
 
 @dataclass(frozen=True)
 class RewardParams:
-    """Step rewards and discounting (spec section 3)."""
+    """Step rewards and discounting (docs/method.md §3)."""
 
     w_c: float = 100.0  #: weight of the collision term [-]
     w_u: float = 0.1  #: weight of the acceleration effort [s^2]
@@ -181,7 +181,7 @@ class RewardParams:
 
 @dataclass(frozen=True)
 class RoleParams:
-    """Role adaptation of an LFG player (spec section 5)."""
+    """Role adaptation of an LFG player (docs/method.md §5)."""
 
     p_a: float = 1.0  #: the human's willingness to change role [-], in [0, 1]
     adapt_role: bool = True  #: False fixes every LFG player's role
@@ -199,7 +199,7 @@ class RoleParams:
 
 @dataclass(frozen=True)
 class MPCParams:
-    """The persuasive branch MPC of the AV (spec section 6)."""
+    """The persuasive branch MPC of the AV (docs/method.md §6)."""
 
     epsilon: float = 0.02  #: chance-constraint level: P(safe) > 1 - epsilon at every sample [-]
     p_a_hat: float | None = None  #: the AV's estimate of p_a [-]; None means equal to roles.p_a
@@ -400,7 +400,7 @@ class HVParams:
             raise ConfigError("hv.replay.file is required with hv.kind = 'replay'")
 
 
-#: Quirk values of each mode (spec section 9). Q4, Q6 and Q7 are kept in both modes.
+#: Quirk values of each mode (docs/method.md §9). Q4, Q6 and Q7 are kept in both modes.
 _MODE_QUIRKS: dict[str, dict[str, Any]] = {
     "paper": dict(
         q1_branch_time_offset=True,
@@ -425,7 +425,7 @@ _MODE_QUIRKS: dict[str, dict[str, Any]] = {
 
 @dataclass(frozen=True)
 class Quirks:
-    """Reference-implementation quirks Q1..Q7 (spec section 9); ``None`` follows the mode."""
+    """Reference-implementation quirks Q1..Q7 (docs/method.md §9); ``None`` follows the mode."""
 
     q1_branch_time_offset: bool | None = None  #: Q1: the MPC's HV branches lag by one sample
     q2_belief_offset: bool | None = None  #: Q2: the human's belief at T1 compares shifted samples

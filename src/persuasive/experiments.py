@@ -29,7 +29,7 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from . import __version__
-from ._files import OutputError, atomic_folder
+from ._files import OutputError, atomic_folder, atomic_write
 from .config import Config, ConfigError
 from .simulation import simulate
 
@@ -47,14 +47,18 @@ class Row:
     published_av_first_pct: float
     published_hv_first_pct: float
 
-    def config(self, base: Config) -> Config:
-        """``base`` with this row's agents and parameters."""
-        return base.with_overrides({
+    def overrides(self) -> dict[str, Any]:
+        """This row's agents and parameters, as dotted fields."""
+        return {
             "av.kind": self.av,
             "hv.role": self.hv_role,
             "roles.p_a": self.pa,
             "mpc.p_a_hat": self.pa if self.pa_hat is None else self.pa_hat,
-        })
+        }
+
+    def config(self, base: Config) -> Config:
+        """``base`` with this row's agents and parameters."""
+        return base.with_overrides(self.overrides())
 
 
 #: The published rows (docs/method.md §8), in the paper's order.
@@ -83,6 +87,9 @@ PUBLISHED: dict[str, tuple[Row, ...]] = {
         )
     ),
 }
+
+#: The sweep's name of the cases' axis (a table's row).
+CASE = "case"
 
 #: Per-run columns kept in the results table, in order.
 RUN_COLUMNS = (
@@ -296,7 +303,9 @@ def summarize(runs: list[dict[str, Any]], table: str, base: Config | None = None
     if seeds is None:
         seeds = max((r["seed"] for r in runs if r["table"] == table), default=0)
     out: dict[str, Any] = {"table": table, "mode": mode, "seeds": seeds,
-                           "seed_range": [1, seeds], "rows": rows}
+                           "seed_range": [1, seeds], "rows": rows,
+                           "scenario": base.scenario.kind if base is not None else
+                           "intersection"}
     if base is not None:
         out["config_hash"] = settings_digest(base, table, seeds)
         out["config_toml"] = base.to_toml()
@@ -315,12 +324,12 @@ def default_folder(base: Config, table: str, seeds: int) -> Path:
     return Path("results") / f"{table}-{base.mode}-{settings_digest(base, table, seeds)}"
 
 
-def check_folder(folder: str | Path, digest: str, force: bool = False) -> None:
-    """Refuse (:class:`ConfigError`) to replace results made with other settings.
+def check_folder(folder: str | Path, grid, force: bool = False) -> None:
+    """Refuse (:class:`ConfigError`), before any run, a results folder holding something else
+    than this reproduction: another sweep's runs, or files that are not a sweep's. ``grid``:
+    the table's sweep grid (:func:`table_grid`). Nothing is refused with ``force``."""
+    from .sweep import read_manifest
 
-    A folder holding a ``summary.json`` whose ``config_hash`` differs from ``digest`` is
-    only replaced with ``force``; so is a folder that holds other files.
-    """
     folder = Path(folder)
     if force or not folder.exists():
         return
@@ -329,15 +338,14 @@ def check_folder(folder: str | Path, digest: str, force: bool = False) -> None:
     if not any(folder.iterdir()):
         return
     try:
-        old = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        manifest = read_manifest(folder)
+    except ConfigError:
         raise OutputError(f"results folder {str(folder)!r} holds other files; choose another "
                           "--out or pass --force to replace it") from None
-    if old.get("config_hash") != digest:
+    if manifest.get("grid_digest") != grid.digest:
         raise OutputError(
-            f"results folder {str(folder)!r} holds results made with other settings "
-            f"(config {old.get('config_hash')}, {old.get('mode')} mode, seeds "
-            f"1..{old.get('seeds')}); choose another --out or pass --force to replace them")
+            f"results folder {str(folder)!r} holds results made with other settings; choose "
+            "another --out or pass --force to replace them")
 
 
 def matches_published(summary: dict[str, Any]) -> bool:
@@ -352,6 +360,9 @@ def matches_published(summary: dict[str, Any]) -> bool:
 def verdict(summary: dict[str, Any], base: Config) -> str:
     """One sentence on how a summary relates to the published table."""
     n = summary["seeds"]
+    if base.scenario.kind != "intersection":
+        return (f"the {base.scenario.kind} scenario: the paper published no values for it "
+                "(its table is for the intersection).")
     if base.mode != "paper":
         return (f"{base.mode} mode: the published values (paper mode) are shown for "
                 "comparison only.")
@@ -369,11 +380,16 @@ def verdict(summary: dict[str, Any], base: Config) -> str:
 def to_markdown(summary: dict[str, Any]) -> str:
     """The summary as a Markdown table (one line per row)."""
     t2 = summary["table"] == "table2"
+    scenario = summary.get("scenario", "intersection")
+    published = scenario == "intersection"  # the paper's values are for its intersection
     head = ["HV initial role", "p_a"] + (["p_a_hat"] if t2 else []) + [
-        "AV first %", "HV first %", "published AV/HV %", "diff AV/HV", "same step", "neither",
-        "collisions", "runs infeasible", "violations to line", "violations whole run"]
+        "AV first %", "HV first %"] + (["published AV/HV %", "diff AV/HV"] if published
+                                        else []) + [
+        "same step", "neither", "collisions", "runs infeasible", "violations to line",
+        "violations whole run"]
+    where = "" if published else f", {scenario} scenario"
     lines = [
-        f"**{summary['table']}**, {summary['mode']} mode, seeds 1..{summary['seeds']}",
+        f"**{summary['table']}**{where}, {summary['mode']} mode, seeds 1..{summary['seeds']}",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
@@ -382,10 +398,11 @@ def to_markdown(summary: dict[str, Any]) -> str:
         cells = ["L" if r["hv_role"] == "leader" else "F", f"{r['pa']:.2f}"]
         if t2:
             cells.append(f"{r['pa_hat']:.2f}")
+        cells += [f"{r['av_first_pct']:.1f}", f"{r['hv_first_pct']:.1f}"]
+        if published:
+            cells += [f"{r['published_av_first_pct']:.1f} / {r['published_hv_first_pct']:.1f}",
+                      f"{r['diff_av_first_pct']:+.1f} / {r['diff_hv_first_pct']:+.1f}"]
         cells += [
-            f"{r['av_first_pct']:.1f}", f"{r['hv_first_pct']:.1f}",
-            f"{r['published_av_first_pct']:.1f} / {r['published_hv_first_pct']:.1f}",
-            f"{r['diff_av_first_pct']:+.1f} / {r['diff_hv_first_pct']:+.1f}",
             str(r["same_step"]), str(r["neither"]), str(r["collisions"]),
             str(r["runs_with_infeasible"]), str(r["violations_to_line"]),
             str(r["violations_whole_run"]),
@@ -403,16 +420,58 @@ class Reproduction:
     wall_time_s: float
     failures: tuple[RunFailure, ...] = ()  #: runs that raised (left out of ``runs``)
     base: Config | None = None  #: the base configuration of every row
+    folders: dict[str, Path] | None = None  #: per table, its results folder (when saved)
+
+
+def table_grid(table: str, base: Config, seeds: int):
+    """A table as a sweep grid: its rows as cases (``case`` = row), seeds ``1..seeds``."""
+    from .sweep import Grid
+
+    if table not in PUBLISHED:
+        raise ConfigError(f"table = {table!r} is out of range; allowed: {' | '.join(TABLES)}")
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    return Grid(base, (), 1, seeds, cases=tuple(row.overrides() for row in PUBLISHED[table]))
+
+
+def runs_of(table: str, frame) -> list[dict[str, Any]]:
+    """A table's sweep dataset as results rows (``RUN_COLUMNS``), in (row, seed) order."""
+    out = []
+    for rec in frame.sort_values("run").to_dict("records"):
+        row = {"table": table, "row": int(rec["case"])}
+        for key in RUN_COLUMNS[2:]:
+            if key in rec:
+                row[key] = rec[key]
+        row["av_s0_m"], row["av_v0_mps"] = rec["av_initial_state.0"], rec["av_initial_state.1"]
+        row["hv_s0_m"], row["hv_v0_mps"] = rec["hv_initial_state.0"], rec["hv_initial_state.1"]
+        if row.get("av") == "lfg":
+            row["pa_hat"] = None
+        for key in ("first_at_line", "first_at_conflict_point", "idx_end", "infeasible_steps",
+                    "hv_role_changes", "av_role_changes", "seed", "row"):
+            row[key] = int(row[key])
+        row["collision"] = bool(row["collision"])
+        out.append({key: row.get(key) for key in RUN_COLUMNS})
+    return out
 
 
 def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
               mode: str | None = None, base: Config | None = None,
-              progress: Callable[[int, int, int], None] | None = None) -> Reproduction:
+              progress: Callable[[int, int, int], None] | None = None,
+              out: str | Path | None = None, force: bool = False,
+              scheduler: str | None = None) -> Reproduction:
     """Rerun the paper's tables: ``table`` is "table1", "table2" or "all".
 
-    ``mode`` overrides ``base.mode`` when given (``base`` defaults to the paper's values).
+    The runs go through the sweep runner (``persuasive.sweep``, Dask): each table is a sweep
+    whose cases are its rows, so a reproduction into a folder resumes where it stopped. ``out``:
+    the results folder (with ``"all"``, one subfolder per table); without it the runs go to a
+    temporary folder. ``mode`` overrides ``base.mode`` when given (``base`` defaults to the
+    paper's values). A folder holding another reproduction is refused unless ``force``.
     """
+    import tempfile
+
     import pandas as pd
+
+    from . import sweep
 
     if table not in (*TABLES, "all"):
         raise ConfigError(f"table = {table!r} is out of range; allowed: "
@@ -421,34 +480,75 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
     base = base or Config()
     if mode is not None:
         base = base.with_overrides({"mode": mode})
-    failures: list[RunFailure] = []
+    grids = {t: table_grid(t, base, seeds) for t in tables}  # checks everything first
+    total = sum(len(g) for g in grids.values())
+    finished: dict[str, int] = {t: 0 for t in tables}
+    rows_of = {t: len(PUBLISHED[t]) for t in tables}
+
+    def tracker(t):
+        def update(done: int, _total: int) -> None:
+            finished[t] = done
+            if progress is not None:
+                rows = sum(finished[u] // seeds for u in tables if u in finished)
+                progress(sum(finished.values()), total, min(rows, sum(rows_of.values())))
+        return update
+
     t0 = time.perf_counter()
-    runs = run_tables(tables, seeds, workers, None, base, progress=progress, failures=failures)
+    runs: list[dict[str, Any]] = []
+    failures: list[RunFailure] = []
+    folders: dict[str, Path] = {}
+    with tempfile.TemporaryDirectory(prefix="persuasive-reproduce-") as scratch:
+        for t in tables:
+            if out is not None:
+                folder = Path(out) / t if table == "all" else Path(out)
+            else:
+                folder = Path(scratch) / t
+            result = sweep.run(grids[t], folder, workers=workers, scheduler=scheduler,
+                               force=force, progress=tracker(t))
+            runs += runs_of(t, sweep.load(folder))
+            for f in result.failures:
+                failures.append(RunFailure(t, int(f["axes"][CASE]), int(f["seed"]),
+                                           f["config_hash"], f["error"]))
+            if out is not None:
+                folders[t] = folder
     wall = time.perf_counter() - t0
     summaries = {t: summarize(runs, t, base, seeds, failures) for t in tables}
     frame = pd.DataFrame(runs, columns=list(RUN_COLUMNS))
-    return Reproduction(frame, summaries, wall, tuple(failures), base)
+    return Reproduction(frame, summaries, wall, tuple(failures), base, folders or None)
 
 
 def save(result: Reproduction, table: str, out: str | Path, force: bool = True) -> Path:
-    """Write ``table``'s runs (Parquet), summary (JSON, Markdown) and configuration (TOML)
-    into the folder ``out`` as a set: all files or none (temporary folder, then rename).
+    """Write ``table``'s summary (JSON, Markdown), configuration (TOML) and, when the runs are
+    not there already, the runs (Parquet) into the folder ``out``, each file atomically.
 
     Without ``force``, a folder holding results made with other settings is refused
-    (:func:`check_folder`).
+    (:func:`check_folder`). After :func:`reproduce` with ``out``, the folder is already the
+    table's sweep folder (its runs in ``runs/``) and this adds the summary beside them.
     """
     out = Path(out)
     summary = result.summaries[table]
-    check_folder(out, summary.get("config_hash", ""), force)
-    runs = result.runs[result.runs["table"] == table]
-    with atomic_folder(out) as tmp:
-        runs.to_parquet(tmp / "runs.parquet", index=False)
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n",
-                                          encoding="utf-8")
-        (tmp / "summary.md").write_text(to_markdown(summary), encoding="utf-8")
-        if "config_toml" in summary:
-            (tmp / "config.toml").write_text(summary["config_toml"], encoding="utf-8")
+    own = result.folders is not None and result.folders.get(table) == out
+    if not own:
+        check_folder(out, summary.get("config_hash", ""), force)
+        runs = result.runs[result.runs["table"] == table]
+        with atomic_folder(out) as tmp:
+            runs.to_parquet(tmp / "runs.parquet", index=False)
+            _write_summary(tmp, summary)
+        return out
+    _write_summary(out, summary, atomic=True)
     return out
+
+
+def _write_summary(folder: Path, summary: dict[str, Any], atomic: bool = False) -> None:
+    files = {"summary.json": json.dumps(summary, indent=2) + "\n",
+             "summary.md": to_markdown(summary)}
+    if "config_toml" in summary:
+        files["config.toml"] = summary["config_toml"]
+    for name, text in files.items():
+        if atomic:
+            atomic_write(folder / name, lambda p, text=text: p.write_text(text, encoding="utf-8"))
+        else:
+            (folder / name).write_text(text, encoding="utf-8")
 
 
 def load_summary(folder: str | Path) -> dict[str, Any]:

@@ -1,4 +1,4 @@
-"""Longitudinal kinematics: the constant-acceleration step with speed saturation (spec section 1).
+"""Longitudinal kinematics: the constant-acceleration step with speed saturation (docs/method.md §1).
 
 A vehicle is a 1-D state ``(s, v)``: ``s`` [m] the signed distance along its own road to the
 conflict point (negative before it), ``v`` [m/s] its speed. One step of length ``dt`` [s] with

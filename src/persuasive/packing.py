@@ -84,6 +84,10 @@ SLOT_NAMES: tuple[str, ...] = tuple(_names)
 CONFLICT_ALONG_PATHS, CONFLICT_EUCLIDEAN = 0, 1
 
 
+#: Relative widening of each zone for the kernels' windows (a window may be a superset).
+ZONE_MARGIN = 1e-9
+
+
 def sqrt_threshold(c: float) -> float:
     """The smallest double ``x`` with ``sqrt(x) >= c``, for ``c > 0``.
 
@@ -135,7 +139,10 @@ def pack(config, scenario=None) -> tuple[np.ndarray, np.ndarray]:
         P[LENGTH], P[WIDTH] = veh.length_m, veh.width_m
         P[H_GO] = lib.h_st_m + veh.v_max_mps / lib.kappa
         P[YIELD_S], P[FIRST_S], P[CLEAR_S] = path.yield_s, path.first_s, path.clear_s
-        P[ZONE_LO], P[ZONE_HI] = path.zone
+        lo, hi = path.zone
+        # the kernels' window may be wider than the zone, never narrower: rounding in xy(s)
+        P[ZONE_LO] = lo - ZONE_MARGIN * (1.0 + abs(lo)) if math.isfinite(lo) else lo
+        P[ZONE_HI] = hi + ZONE_MARGIN * (1.0 + abs(hi)) if math.isfinite(hi) else hi
         P[PATH_B1:PATH_UY2 + 1] = path.geometry_vector()
         out.append(P)
     return out[0], out[1]

@@ -9,7 +9,7 @@ decision) and meant for tests, teaching and the benchmark's "before". It covers 
 agents (the LFG human, possibly stubborn; the LFG or persuasive/passive MPC AV) in every
 scenario.
 
-Arrays here are trajectory-major, ``(n_traj, n_samples)``, the natural reading of the spec.
+Arrays here are trajectory-major, ``(n_traj, n_samples)``, the natural reading of docs/method.md.
 """
 
 from __future__ import annotations

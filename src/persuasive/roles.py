@@ -1,4 +1,4 @@
-"""Role adaptation: Bayes belief on the other's role, plausible role, transition (spec sec. 5).
+"""Role adaptation: Bayes belief on the other's role, plausible role, transition (docs/method.md §5).
 
 A belief is the pair ``b = (P(other = L), P(other = F))``, kept as two numbers (its sum may
 differ from 1 by rounding; ties are tested on the two numbers exactly).

@@ -108,6 +108,7 @@ class RunRecord:
         for name in OUTCOME_FIELDS:
             value = getattr(o, name)
             out[name] = None if isinstance(value, float) and math.isnan(value) else value
+        out["min_dist_m"] = self.scenario.min_dist_m if self.scenario is not None else None
         out["quirks"] = dict(vars(c.effective_quirks))
         out["config_hash"] = c.digest()
         out["version"] = self.version

@@ -5,7 +5,7 @@ policies share and nothing of what they decide:
 
 - the **random streams** (:func:`draw_streams`): the initial state, each agent's uniforms and
   the world's noise, in one of two layouts (``Config.streams``): ``legacy``, the reference's
-  single MT19937 stream (``numpy.random.RandomState(seed)``) in the spec's order, used by paper
+  single MT19937 stream (``numpy.random.RandomState(seed)``) in the order of docs/method.md §7.5, used by paper
   mode so that the published tables stay exact; ``per-agent``, independent streams from
   ``numpy.random.SeedSequence(seed).spawn(4)`` (initial state, HV, AV, world noise), so that the
   human's draws and the initial state do not depend on which AV drives (what ``compare``

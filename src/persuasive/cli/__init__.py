@@ -26,12 +26,13 @@ def cli() -> None:
 def _register() -> None:
     from .bench import bench
     from .compare import compare
+    from .drive import drive
     from .plots import animate, plot, plot_compare
     from .reproduce import reproduce
     from .simulate import simulate
     from .sweep import plot_sweep, sweep
 
-    for command in (simulate, reproduce, compare, sweep, bench, plot, animate):
+    for command in (simulate, reproduce, compare, sweep, bench, plot, animate, drive):
         cli.add_command(command)
     plot.add_command(plot_sweep)
     plot.add_command(plot_compare)

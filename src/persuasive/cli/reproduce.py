@@ -16,6 +16,9 @@ from ._common import build_config, check_workers, compile_notice, config_options
               help="Seeds 1..N per row (the published tables use 1000).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes [all cores; never more than the chunks of work].")
+@click.option("--scenario", type=click.Choice(["intersection", "crossing", "left-turn",
+                                               "merge"]), default=None,
+              help="Run the tables in another scenario [intersection, the paper's].")
 @config_options
 @click.option("--out", type=click.Path(file_okay=False), default=None,
               help="Results folder [results/<table>-<mode>-<settings hash>/]; with 'all', one "
@@ -24,18 +27,20 @@ from ._common import build_config, check_workers, compile_notice, config_options
               help="Replace a results folder made with other settings.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def reproduce(table, seeds, workers, mode, config_file, sets, out, force, as_json,
+def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, force, as_json,
               quiet) -> None:
     """Rerun the paper's Table 1 and/or Table 2 beside the published numbers.
 
     Each row sets its own agents, p_a and p_a_hat on top of the base configuration
-    (--config, --set, --mode).
+    (--config, --set, --mode). The runs go through the sweep runner (Dask): a reproduction
+    stopped midway resumes when the same command runs again into the same folder.
     """
     from .. import experiments as ex
     from .._files import check_output_folder
 
-    base = build_config(config_file, sets, {"mode": mode})
+    base = build_config(config_file, sets, {"mode": mode, "scenario.kind": scenario})
     tables = ex.TABLES if table == "all" else (table,)
+    grids = {t: ex.table_grid(t, base, seeds) for t in tables}
     folders = {}
     for t in tables:
         if out:
@@ -43,30 +48,44 @@ def reproduce(table, seeds, workers, mode, config_file, sets, out, force, as_jso
         else:
             folder = ex.default_folder(base, t, seeds)
         check_output_folder(folder)
-        ex.check_folder(folder, ex.settings_digest(base, t, seeds), force)  # before any work
+        ex.check_folder(folder, grids[t], force)  # before any work
         folders[t] = folder
     n_rows = sum(len(ex.PUBLISHED[t]) for t in tables)
-    n_chunks = sum(len(ex.PUBLISHED[t]) for t in tables) * -(-seeds // 25)
-    workers = check_workers(workers, n_chunks)
+    total = sum(len(g) for g in grids.values())
+    from ..sweep.store import default_chunk
+
+    workers = check_workers(workers, max(-(-len(g) // default_chunk(len(g)))
+                                         for g in grids.values()))
     compile_notice()
     progress = None if quiet else ex.tqdm_progress(n_rows)
-    result = ex.reproduce(table, seeds, workers, None, base, progress=progress)
+    offset = 0
+    results = []
     for t in tables:
-        ex.save(result, t, folders[t], force=True)
-    if result.failures:
-        for f in result.failures:
-            click.echo(f"error: run failed: {f.describe()}", err=True)
+        def shifted(done, _total, _rows, offset=offset):
+            if progress is not None:
+                progress(offset + done, total, (offset + done) // seeds)
+        results.append(ex.reproduce(t, seeds, workers, None, base, progress=shifted,
+                                    out=folders[t], force=force))
+        offset += len(grids[t])
+    summaries = {t: r.summaries[t] for t, r in zip(tables, results)}
+    failures = [f for r in results for f in r.failures]
+    for t, r in zip(tables, results):
+        ex.save(r, t, folders[t])
+    for f in failures:
+        click.echo(f"error: run failed: {f.describe()}", err=True)
     if as_json:
-        payload = result.summaries[table] if table != "all" else dict(result.summaries)
+        payload = summaries[table] if table != "all" else dict(summaries)
         click.echo(json.dumps(payload))
     else:
         for t in tables:
-            click.echo(ex.to_markdown(result.summaries[t]))
-            click.echo(f"{ex.verdict(result.summaries[t], base)}")
+            click.echo(ex.to_markdown(summaries[t]))
+            click.echo(f"{ex.verdict(summaries[t], base)}")
             click.echo(f"written to {folders[t]}/\n")
-        click.echo(f"{len(result.runs)} runs in {result.wall_time_s:.1f} s with "
+        wall = sum(r.wall_time_s for r in results)
+        click.echo(f"{total - len(failures)} runs in {wall:.1f} s with "
                    f"{workers} worker{'s' if workers > 1 else ''}")
-    if result.failures:
-        click.echo(f"error: {len(result.failures)} run(s) failed and are left out of the "
-                   "results (listed above and in summary.json)", err=True)
+    if failures:
+        click.echo(f"error: {len(failures)} run(s) failed and are left out of the results "
+                   "(listed above and in summary.json); run the same command again to retry "
+                   "them", err=True)
         click.get_current_context().exit(1)

@@ -24,8 +24,11 @@ class InitialStateError(ConfigError):
 
 
 #: Distance [m] of the nominal start before the yield line when ``scenario.*_s0_m`` is unset:
-#: the paper starts 13.5 m before its crossing line (-20 m with the line at -6.5 m).
+#: the paper starts 13.5 m before its crossing line (-20 m with the line at -6.5 m)...
 NOMINAL_LEAD_M = 13.5
+#: ... which is 12.5 m before its safety zone (-7.5 m): the start is never closer than that to
+#: the conflict zone (shallow crossings have long zones).
+NOMINAL_ZONE_LEAD_M = 12.5
 
 
 @dataclass(frozen=True)
@@ -57,9 +60,14 @@ class Scenario:
                          0.0, 0.0, self.nominal_s0("hv"), sc.hv_v0_mps])
 
     def nominal_s0(self, who: str) -> float:
-        """The nominal initial position of ``"av"`` or ``"hv"`` [m]."""
+        """The nominal initial position of ``"av"`` or ``"hv"`` [m]: as configured, else
+        13.5 m before its yield line or 12.5 m before its conflict zone, whichever is further
+        (-20 m at the paper's intersection)."""
         s0 = getattr(self.config.scenario, f"{who}_s0_m")
-        return getattr(self, who).yield_s - NOMINAL_LEAD_M if s0 is None else s0
+        if s0 is not None:
+            return s0
+        path = getattr(self, who)
+        return min(path.yield_s - NOMINAL_LEAD_M, path.zone[0] - NOMINAL_ZONE_LEAD_M)
 
     def can_stop(self, who: str, s: float, v: float) -> bool:
         """Whether the vehicle ``who`` at ``(s, v)`` can stop before its conflict zone.

@@ -34,7 +34,7 @@ def build(config: Config, perpendicular_at_90: bool = True) -> Scenario:
         return replace(intersection.build(config), kind="crossing")
     min_dist = pair_min_dist(config)
     sin = 1.0 if angle == 90.0 else math.sin(math.radians(angle))
-    reach = min_dist / sin * (1.0 + 1e-9) + 1e-9  # conservative: the window may be wider
+    reach = min_dist / sin  # the kernels' window is widened a little (persuasive.packing)
     paths = {}
     for who, direction in (("av", (1.0, 0.0)), ("hv", unit(angle))):
         veh = shape(config, who)

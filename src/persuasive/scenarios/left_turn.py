@@ -37,9 +37,10 @@ def build(config: Config) -> Scenario:
     # west at y = y0 + r; choose y0 so that it ends in the westbound lane (y = w/2).
     y0 = w / 2 - r
     cx, cy = w / 2 - r, y0
-    # where the arc meets the HV's lane centre x = -w/2
+    # where the arc meets the HV's lane centre x = -w/2: the quarter circle spans x from w/2
+    # down to w/2 - r, so it crosses that lane only when r > w
     dx = -w / 2 - cx
-    if not abs(dx) < r:
+    if not r > w:
         from ..config import ConfigError
 
         raise ConfigError(f"scenario.turn_radius_m = {r:g} is out of range; allowed: above "

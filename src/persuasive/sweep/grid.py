@@ -17,6 +17,11 @@ A grid file is TOML with three top-level keys and nothing else::
     "roles.p_a" = [0.3, 0.7, 1.0]
     mode = ["paper", "corrected"]
 
+    [[cases]]                     # optional: a list of cases, each a set of overrides
+    "av.kind" = "lfg"             # (runs as an axis named ``case`` of values 0, 1, ...,
+    [[cases]]                     # the slowest of all: e.g. the rows of a table)
+    "mpc.p_a_hat" = 0.95
+
 ``[base]`` is read by :meth:`Config.from_dict`; every axis is a dotted field that
 :meth:`Config.with_overrides` accepts (``mode``, ``section.field``, ``section.sub.field``).
 Unquoted dotted keys in ``[axes]`` (``roles.p_a = [...]``) mean the same as quoted ones.
@@ -42,7 +47,9 @@ from typing import Any, Iterator, Mapping
 from ..config import Config, ConfigError
 
 #: The keys a grid file may hold.
-GRID_KEYS = ("seeds", "base", "axes")
+GRID_KEYS = ("seeds", "base", "axes", "cases")
+#: The name of the pseudo-axis of a grid's cases.
+CASE = "case"
 #: Column names of a sweep's dataset that an axis may not take.
 RESERVED_COLUMNS = ("run", "seed", "config_hash")
 #: Largest seed :func:`persuasive.simulation.simulate` accepts.
@@ -127,9 +134,13 @@ class Grid:
     """
 
     def __init__(self, base: Config, axes: tuple[tuple[str, tuple[Any, ...]], ...],
-                 seed_start: int, seed_stop: int, *, _validate: bool = True):
+                 seed_start: int, seed_stop: int, *, cases: tuple[dict[str, Any], ...] = (),
+                 _validate: bool = True):
         self.base = base
-        self.axes = axes
+        self.cases = tuple(dict(c) for c in cases)
+        # the cases run as the slowest axis, named "case", of values 0, 1, ...
+        self.axes = (((CASE, tuple(range(len(self.cases)))),) if self.cases else ()) + \
+            tuple(axes)
         self.seed_start = seed_start
         self.seed_stop = seed_stop
         self._configs: dict[int, tuple[Config, str]] = {}
@@ -179,7 +190,15 @@ class Grid:
             raise ConfigError("grid: axes must be a table of dotted field = [values]")
         axes = tuple(cls._check_axis(base, name, values)
                      for name, values in _flat_axes(axes_table))
-        return cls(base, axes, start, stop)
+        cases_list = data.get("cases", [])
+        if not isinstance(cases_list, list) or not all(isinstance(c, Mapping)
+                                                       for c in cases_list):
+            raise ConfigError("grid: cases must be a list of tables ([[cases]]) of dotted "
+                              "field = value")
+        if CASE in dict(axes):
+            raise ConfigError(f"grid: axes.{CASE}: {CASE!r} is the name of the cases' axis")
+        cases = tuple(dict(_flat_axes(c)) for c in cases_list)
+        return cls(base, axes, start, stop, cases=cases)
 
     @staticmethod
     def _check_axis(base: Config, name: str, values: Any) -> tuple[str, tuple[Any, ...]]:
@@ -269,7 +288,10 @@ class Grid:
     def _config(self, index: int) -> tuple[Config, str]:
         cached = self._configs.get(index)
         if cached is None:
-            config = self.base.with_overrides(dict(zip(self.names, self.combination(index))))
+            overrides = dict(zip(self.names, self.combination(index)))
+            if self.cases:
+                overrides = {**self.cases[overrides.pop(CASE)], **overrides}
+            config = self.base.with_overrides(overrides)
             cached = self._configs[index] = (config, config.digest())
         return cached
 
@@ -300,11 +322,15 @@ class Grid:
 
         ``Grid.from_dict(g.to_dict())`` equals ``g`` (same digest, same runs).
         """
-        return {
+        out = {
             "seeds": {"start": self.seed_start, "stop": self.seed_stop},
             "base": self.base.to_dict(),
-            "axes": {name: list(values) for name, values in self.axes},
+            "axes": {name: list(values) for name, values in self.axes if name != CASE or
+                     not self.cases},
         }
+        if self.cases:
+            out["cases"] = [dict(c) for c in self.cases]
+        return out
 
     def to_toml(self) -> str:
         """:meth:`to_dict` as TOML text (axes as quoted dotted keys), canonical."""
@@ -324,6 +350,8 @@ class Grid:
         # the base enters as its canonical TOML so that equal configurations hash equally
         data["base"] = self.base.to_toml()
         data["axes"] = [[name, list(values)] for name, values in self.axes]
+        if self.cases:
+            data["cases"] = [sorted(c.items()) for c in self.cases]
         text = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
@@ -342,7 +370,7 @@ class Grid:
 
     def __getstate__(self) -> dict[str, Any]:
         return {"base": self.base, "axes": self.axes, "seed_start": self.seed_start,
-                "seed_stop": self.seed_stop}
+                "seed_stop": self.seed_stop, "cases": self.cases}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
