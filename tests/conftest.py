@@ -45,6 +45,16 @@ def corrected() -> Packed:
     return Packed(Config(mode="corrected"))
 
 
+@pytest.fixture(scope="session")
+def unequal() -> Packed:
+    """Paper mode with vehicles of different size and limits: the HV 4 m long with
+    ``v_max = 8 m/s`` and ``u_min = -3 m/s^2`` (crossing line -6 m, h_go = 5 + 8 / 0.6 m),
+    the AV with the defaults; the pair's safety distance is 1.5 (5 + 4) / 2 = 6.75 m."""
+    return Packed(Config().with_overrides({"hv.vehicle.length_m": 4.0,
+                                           "hv.vehicle.v_max_mps": 8.0,
+                                           "hv.vehicle.u_min_mps2": -3.0}))
+
+
 @pytest.fixture(scope="session", params=["paper", "corrected"])
 def packed(request) -> Packed:
     """Both modes, one after the other."""

@@ -12,9 +12,10 @@ from persuasive.cli import main
 from persuasive.simulation import simulate
 from persuasive.config import Config
 
-REQUIRED = ("mode", "av", "hv_role", "pa", "pa_hat", "seed", "hv_initial_state", "first_at_line",
-            "first_at_conflict_point", "collision", "min_distance_to_line_m", "min_distance_m",
-            "idx_end", "infeasible_steps", "hv_role_changes")
+REQUIRED = ("mode", "scenario", "av", "hv", "hv_role", "pa", "pa_hat", "seed", "streams",
+            "hv_initial_state", "first_at_line", "first_at_conflict_point", "collision",
+            "min_distance_to_line_m", "min_distance_m", "idx_end", "infeasible_steps",
+            "hv_role_changes")
 
 
 def run(capsys, *args):
@@ -29,7 +30,9 @@ def test_simulate_json_in_both_modes(capsys, mode):
     assert code == 0 and err == ""
     payload = json.loads(out)  # exactly one JSON object
     assert set(REQUIRED) <= set(payload)
-    assert payload["mode"] == mode and payload["seed"] == 7 and payload["av"] == "mpc"
+    assert payload["mode"] == mode and payload["seed"] == 7 and payload["av"] == "persuasive"
+    assert (payload["hv"], payload["scenario"]) == ("lfg", "intersection")
+    assert payload["streams"] == ("legacy" if mode == "paper" else "per-agent")
     assert payload["pa_hat"] == payload["pa"] == 1.0
     expected = simulate(Config(mode=mode), 7).summary()
     assert payload == json.loads(json.dumps(expected))
@@ -40,9 +43,28 @@ def test_simulate_options_reach_the_configuration(capsys):
                        "--pa", "0.7", "--seed", "3", "--set", "mpc.epsilon=0.05")
     payload = json.loads(out)
     assert (payload["av"], payload["hv_role"], payload["pa"]) == ("lfg", "follower", 0.7)
-    cfg = Config().with_overrides({"simulation.av": "lfg", "simulation.hv_role": "follower",
-                                   "roles.p_a": 0.7})
-    assert payload["first_at_line"] == simulate(cfg, 3).outcome.first_at_line
+    cfg = Config().with_overrides({"av.kind": "lfg", "hv.role": "follower", "roles.p_a": 0.7,
+                                   "mpc.epsilon": 0.05})
+    assert payload == json.loads(json.dumps(simulate(cfg, 3).summary()))
+
+
+def test_simulate_agent_and_scenario_options(capsys):
+    # --av mpc is the persuasive planner's old name; --hv and --scenario pick the human model
+    # and the geometry
+    _, out, _ = run(capsys, "simulate", "--json", "--av", "mpc", "--seed", "3")
+    assert json.loads(out) == json.loads(json.dumps(simulate(Config(), 3).summary()))
+    code, out, _ = run(capsys, "simulate", "--json", "--av", "passive", "--hv", "stubborn",
+                       "--scenario", "crossing", "--mode", "corrected", "--seed", "3")
+    payload = json.loads(out)
+    assert code == 0
+    assert (payload["av"], payload["hv"], payload["scenario"]) == ("passive", "stubborn",
+                                                                   "crossing")
+    cfg = Config(mode="corrected").with_overrides({"av.kind": "passive", "hv.kind": "stubborn",
+                                                   "scenario.kind": "crossing"})
+    assert payload == json.loads(json.dumps(simulate(cfg, 3).summary()))
+    # the explicit option beats --set
+    _, out, _ = run(capsys, "simulate", "--json", "--set", "av.kind=cv", "--av", "lfg")
+    assert json.loads(out)["av"] == "lfg"
 
 
 def test_simulate_text_and_parquet(capsys, tmp_path):
@@ -50,6 +72,7 @@ def test_simulate_text_and_parquet(capsys, tmp_path):
     code, out, _ = run(capsys, "simulate", "--seed", "996", "--out", str(out_file))
     assert code == 0
     assert "first at the crossing line: AV" in out and "collision: no" in out
+    assert "persuasive AV, lfg HV starting as leader" in out and "safe set 7.5 m" in out
     log = pd.read_parquet(out_file)
     record = simulate(Config(), 996)
     assert len(log) == 61
@@ -89,6 +112,13 @@ BAD = [
     (["simulate", "--set", "roles.w_s_m2=inf"], "roles.w_s_m2"),
     (["simulate", "--mode", "exact"], "--mode"),
     (["simulate", "--hv-role", "boss"], "--hv-role"),
+    (["simulate", "--av", "human"], "--av"),
+    (["simulate", "--hv", "robot"], "--hv"),
+    (["simulate", "--scenario", "roundabout"], "--scenario"),
+    (["simulate", "--set", "simulation.av=lfg"], "simulation.av moved to av.kind"),
+    (["simulate", "--set", "simulation.hv_role=follower"], "simulation.hv_role moved to hv.role"),
+    (["simulate", "--set", "scenario.av_s0_m=-5"], "scenario.av_s0_m"),
+    (["simulate", "--set", "hv.kind=replay"], "hv.replay.file"),
     (["simulate", "--set", "nonsense"], "--set"),
     (["simulate", "--set", "mpc.horizon=3"], "mpc.horizon"),
     (["simulate", "--seed", "-4"], "seed"),
@@ -226,16 +256,25 @@ def test_precedence_reproduce(capsys, tmp_path):
     assert modes == ["corrected", "paper", "corrected"]
 
 
+def _files(folder):
+    """Every file under ``folder`` with its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
 def test_reproduce_refuses_to_replace_other_settings(capsys, tmp_path):
+    from persuasive import sweep
+
     args = ["reproduce", "table1", "--workers", "1", "--quiet", "--out", str(tmp_path / "r")]
     assert run(capsys, *args, "--seeds", "2")[0] == 0
-    before = (tmp_path / "r" / "runs.parquet").read_bytes()
+    before = _files(tmp_path / "r")
     code, out, err = run(capsys, *args, "--seeds", "1")
     assert code == 2 and "other settings" in err and "--force" in err and out == ""
-    assert (tmp_path / "r" / "runs.parquet").read_bytes() == before
-    assert run(capsys, *args, "--seeds", "2")[0] == 0  # same settings: replaced in place
+    assert _files(tmp_path / "r") == before
+    assert run(capsys, *args, "--seeds", "2")[0] == 0  # same settings: taken up in place
+    assert len(sweep.load(tmp_path / "r")) == 4
     code, _, _ = run(capsys, *args, "--seeds", "1", "--force")
-    assert code == 0 and len(pd.read_parquet(tmp_path / "r" / "runs.parquet")) == 2
+    assert code == 0 and len(sweep.load(tmp_path / "r")) == 2
+    assert json.loads((tmp_path / "r" / "summary.json").read_text())["seeds"] == 1
 
 
 def test_reproduce_default_folder_names_the_settings(capsys, tmp_path, monkeypatch):
@@ -257,10 +296,10 @@ def test_reproduce_caps_workers_at_the_chunks_and_warns_above_the_cores(capsys, 
     import os
 
     cores = os.cpu_count()
-    code, out, err = run(capsys, "reproduce", "table1", "--seeds", "2", "--quiet",
+    code, out, err = run(capsys, "reproduce", "table1", "--seeds", "1", "--quiet",
                          "--workers", str(cores + 1), "--out", str(tmp_path / "r"))
     assert code == 0 and "warning:" in err and f"on {cores} cores" in err
-    assert out.rstrip().endswith("with 2 workers")  # 2 rows of 2 seeds: two chunks
+    assert out.rstrip().endswith("with 2 workers")  # 2 rows of 1 seed: two chunks
 
 
 def test_reproduce_json_and_files(capsys, tmp_path):
@@ -278,9 +317,17 @@ def test_reproduce_json_and_files(capsys, tmp_path):
                 "violations_to_line", "violations_whole_run"):
         assert key in row
     assert payload["table1"]["rows"][0]["pa_hat"] is None
-    for t in ("table1", "table2"):
-        assert {p.name for p in (tmp_path / t).iterdir()} == {
-            "runs.parquet", "summary.json", "summary.md", "config.toml"}
+    from persuasive import sweep
+
+    for t, rows in (("table1", 2), ("table2", 14)):
+        # each table's folder is its sweep (manifest, runs; failed runs when any) with the
+        # summary and configuration beside it
+        names = {p.name for p in (tmp_path / t).iterdir()}
+        assert {"manifest.json", "runs", "summary.json", "summary.md", "config.toml"} <= names
+        assert names <= {"manifest.json", "runs", "failed", "summary.json", "summary.md",
+                         "config.toml"}
+        assert len(sweep.load(tmp_path / t)) == 3 * rows
+        assert json.loads((tmp_path / t / "summary.json").read_text()) == payload[t]
 
 
 def test_reproduce_text_table(capsys, tmp_path):

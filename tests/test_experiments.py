@@ -38,6 +38,7 @@ def test_table2_pinned_seeds(row):
     spec = ex.PUBLISHED["table2"][row["row"]]
     assert (spec.hv_role, spec.pa, spec.pa_hat) == (row["hv_role"], row["pa"], row["pa_hat"])
     config = spec.config(Config())
+    assert spec.av == config.av.kind == "persuasive"
     for seed, expected in row["runs"].items():
         o = simulate(config, int(seed)).outcome
         got = {k: getattr(o, k) for k in expected}
@@ -45,6 +46,18 @@ def test_table2_pinned_seeds(row):
         for key in ("min_distance_to_line_m", "min_distance_m"):
             assert got.pop(key) == pytest.approx(expected[key], abs=1e-9)
         assert got == {k: v for k, v in expected.items() if not k.startswith("min_")}, seed
+
+
+def test_rows_name_their_agents():
+    assert [r.av for r in ex.PUBLISHED["table1"]] == ["lfg", "lfg"]
+    assert {r.av for r in ex.PUBLISHED["table2"]} == {"persuasive"}
+    lfg = ex.PUBLISHED["table1"][1].config(Config(mode="corrected"))
+    assert (lfg.mode, lfg.av.kind, lfg.hv.role, lfg.roles.p_a) == ("corrected", "lfg",
+                                                                    "follower", 1.0)
+    row = ex.PUBLISHED["table2"][2]
+    mpc = row.config(Config())
+    assert (mpc.av.kind, mpc.hv.role, mpc.roles.p_a, mpc.p_a_hat) == (
+        "persuasive", row.hv_role, row.pa, row.pa_hat)
 
 
 def test_pinned_seeds_cover_every_kind_of_run():
@@ -67,6 +80,8 @@ def test_reproduce_rows_equal_simulate_summaries():
     for r in runs:
         spec = ex.PUBLISHED[r["table"]][r["row"]]
         s = simulate(spec.config(Config()), r["seed"]).summary()
+        assert r["av"] == s["av"] == spec.av
+        assert r["pa_hat"] == (None if spec.av == "lfg" else s["pa_hat"])
         for key in ("first_at_line", "first_at_conflict_point", "collision", "idx_end",
                     "min_distance_to_line_m", "min_distance_m", "infeasible_steps",
                     "hv_role_changes", "av_role_changes"):
@@ -101,6 +116,14 @@ def test_violations_use_each_runs_own_safety_distance():
         sum(r["min_distance_m"] < 7.5 for r in runs[1:])
 
 
+def test_each_run_carries_the_safety_distance_it_was_run_with():
+    # the HV 4 m long: the scenario (and every kernel) uses 1.5 (5 + 4) / 2 = 6.75 m
+    config = ex.PUBLISHED["table2"][0].config(Config().with_overrides(
+        {"hv.vehicle.length_m": 4.0}))
+    assert simulate(config, 1).scenario.min_dist_m == 6.75
+    assert ex.run_record("table2", 0, config, 1)["min_dist_m"] == 6.75
+
+
 def test_save_writes_the_folder_as_a_set(tmp_path, monkeypatch):
     target = tmp_path / "results"
     result = ex.reproduce("table1", seeds=3, workers=1)
@@ -109,15 +132,11 @@ def test_save_writes_the_folder_as_a_set(tmp_path, monkeypatch):
     assert list(runs.columns) == list(ex.RUN_COLUMNS) and len(runs) == 6
     assert json.loads((target / "summary.json").read_text()) == result.summaries["table1"]
     assert Config.from_toml(target / "config.toml") == Config()
-    # a second run with the same settings replaces the folder
-    ex.save(ex.reproduce("table1", seeds=3, workers=1), "table1", target)
-    # other settings are refused without force, and the folder is untouched
-    bigger = ex.reproduce("table1", seeds=5, workers=1)
-    with pytest.raises(ConfigError, match="other settings"):
-        ex.save(bigger, "table1", target, force=False)
-    assert len(pd.read_parquet(target / "runs.parquet")) == 6
-    ex.save(bigger, "table1", target, force=True)
+    # a second run (with force, the default) replaces the folder
+    ex.save(ex.reproduce("table1", seeds=5, workers=1), "table1", target)
     assert len(pd.read_parquet(target / "runs.parquet")) == 10
+    ex.save(result, "table1", target)
+    assert len(pd.read_parquet(target / "runs.parquet")) == 6
 
     # a write that fails half-way leaves the previous folder whole, every file of it, and no
     # temporary file or folder behind
@@ -133,7 +152,47 @@ def test_save_writes_the_folder_as_a_set(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]
 
 
+def test_save_without_force_refuses_only_other_settings(tmp_path):
+    target = tmp_path / "results"
+    result = ex.reproduce("table1", seeds=3, workers=1)
+    ex.save(result, "table1", target)
+    # the same settings again: accepted without force
+    ex.save(ex.reproduce("table1", seeds=3, workers=1), "table1", target, force=False)
+    # other settings are refused without force, and the folder is untouched
+    bigger = ex.reproduce("table1", seeds=5, workers=1)
+    with pytest.raises(ConfigError, match="other settings"):
+        ex.save(bigger, "table1", target, force=False)
+    assert len(pd.read_parquet(target / "runs.parquet")) == 6
+    # ... and so is a reproduction's own sweep folder
+    sweep_folder = tmp_path / "sweep"
+    ex.reproduce("table1", seeds=3, workers=1, out=sweep_folder)
+    with pytest.raises(ConfigError, match="other settings"):
+        ex.save(bigger, "table1", sweep_folder, force=False)
+
+
+def test_reproduce_into_a_folder_keeps_the_sweep_and_its_summary(tmp_path):
+    # with ``out``, the folder is the table's sweep (resumable); save adds the summary beside
+    from persuasive import sweep
+
+    folder = tmp_path / "t1"
+    result = ex.reproduce("table1", seeds=3, workers=1, out=folder)
+    assert result.folders == {"table1": folder}
+    ex.save(result, "table1", folder)
+    assert {"manifest.json", "runs", "summary.json", "summary.md", "config.toml"} <= {
+        p.name for p in folder.iterdir()}
+    assert json.loads((folder / "summary.json").read_text()) == result.summaries["table1"]
+    assert len(sweep.load(folder)) == 6
+    # the runs equal a reproduction without a folder, row for row
+    plain = ex.reproduce("table1", seeds=3, workers=1)
+    pd.testing.assert_frame_equal(result.runs, plain.runs)
+    # the same call again finds every run done and gives the same summary
+    again = ex.reproduce("table1", seeds=3, workers=1, out=folder)
+    assert again.summaries == result.summaries
+
+
 def test_a_failing_run_is_reported_and_the_others_kept(monkeypatch):
+    import persuasive.simulation as simulation
+
     real = ex.simulate
 
     def flaky(config, seed):
@@ -141,7 +200,9 @@ def test_a_failing_run_is_reported_and_the_others_kept(monkeypatch):
             raise FloatingPointError("boom at seed 2")
         return real(config, seed)
 
-    monkeypatch.setattr(ex, "simulate", flaky)  # forked workers inherit the patch
+    # forked workers inherit the patch; the sweep runner reads persuasive.simulation's
+    monkeypatch.setattr(ex, "simulate", flaky)
+    monkeypatch.setattr(simulation, "simulate", flaky)
     for workers in (1, 2):
         failures = []
         runs = ex.run_tables(["table1"], seeds=3, workers=workers, chunk=2, failures=failures)
@@ -151,11 +212,16 @@ def test_a_failing_run_is_reported_and_the_others_kept(monkeypatch):
         assert failures[0].error == "FloatingPointError: boom at seed 2"
         assert failures[0].config_hash == ex.PUBLISHED["table1"][0].config(Config()).digest()
     result = ex.reproduce("table1", seeds=3, workers=1)
-    assert len(result.failures) == 2 and len(result.runs) == 4
+    assert [(f.table, f.row, f.seed) for f in result.failures] == [("table1", 0, 2),
+                                                                    ("table1", 1, 2)]
+    assert result.failures[0].error == "FloatingPointError: boom at seed 2"
+    assert [(r["row"], r["seed"]) for r in result.runs.to_dict("records")] == [
+        (0, 1), (0, 3), (1, 1), (1, 3)]
     assert [f["seed"] for f in result.summaries["table1"]["failures"]] == [2, 2]
 
 
 def test_cli_reports_failed_runs_and_exits_1(monkeypatch, capsys, tmp_path):
+    from persuasive import sweep
     from persuasive.cli import main
 
     # seeds whose initial state cannot be drawn in one try fail; the others are kept
@@ -168,7 +234,8 @@ def test_cli_reports_failed_runs_and_exits_1(monkeypatch, capsys, tmp_path):
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
     n_failed = len(summary["failures"])
     assert 0 < n_failed < 12
-    assert len(pd.read_parquet(tmp_path / "r" / "runs.parquet")) == 12 - n_failed
+    assert len(sweep.load(tmp_path / "r")) == 12 - n_failed
+    assert sum(row["runs"] for row in summary["rows"]) == 12 - n_failed
 
 
 def test_workers_end_when_the_main_process_is_killed(tmp_path):
@@ -194,7 +261,8 @@ def test_workers_end_when_the_main_process_is_killed(tmp_path):
     while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(_alive(pid) for pid in workers)
-    assert not (tmp_path / "r").exists()
+    # the runs finished so far stay for a resume, but no summary claims a finished table
+    assert not (tmp_path / "r" / "summary.json").exists()
 
 
 def _children(pid: int) -> list[int]:

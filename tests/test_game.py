@@ -15,9 +15,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from persuasive import packing as slot
 from persuasive import reference
 from persuasive.game import (EGO_FOLLOWER, EGO_LEADER, OTHER_FOLLOWER, OTHER_LEADER,
-                             full_prediction, leader_follower, predict_into, solve_game)
+                             Q_EGO_FOLLOWS_FOLLOWER, Q_EGO_FOLLOWS_LEADER,
+                             Q_EGO_LEADS_FOLLOWER, Q_EGO_LEADS_LEADER, full_prediction,
+                             leader_follower, predict_into, solve_game)
 from persuasive.library import new_lib
 
 finite = dict(allow_nan=False, allow_infinity=False)
@@ -159,6 +162,21 @@ def test_kernel_equals_reference_on_real_valued_games(M_lead, M_fol, agg_max):
 
 # -- full prediction ----------------------------------------------------------------------------
 
+# The ego is the HV and the other the AV (the human's view, as the closed loop solves it);
+# ``unequal`` (conftest) gives the two vehicles different limits and sizes, so that a kernel
+# reading the wrong vehicle's vector shows up.
+
+
+@pytest.fixture(scope="module", params=["paper", "corrected", "unequal"])
+def pk(request):
+    return request.getfixturevalue(request.param)
+
+
+def clip_speeds(states, pk):
+    """Speeds inside each vehicle's limits (ego: HV, other: AV)."""
+    (s_e, v_e), (s_o, v_o) = states
+    return (s_e, min(v_e, pk.P_hv[slot.V_MAX])), (s_o, min(v_o, pk.P_av[slot.V_MAX]))
+
 
 @st.composite
 def joint_states(draw):
@@ -173,40 +191,81 @@ def joint_states(draw):
 
 @settings(max_examples=25)
 @given(joint_states())
-def test_full_prediction_equals_reference_bit_for_bit(packed, states):
-    x_e, x_o = states
-    pred = full_prediction(x_e, x_o, packed.P, packed.disc)
-    (Se, Ve, Ae), (So, Vo, Ao), idx = reference.full_prediction(x_e, x_o, packed.P, packed.disc)
+def test_full_prediction_equals_reference_bit_for_bit(pk, states):
+    x_e, x_o = clip_speeds(states, pk)
+    pred = full_prediction(x_e, x_o, pk.P_hv, pk.P_av, pk.disc)
+    (Se, Ve, Ae), (So, Vo, Ao), idx = reference.full_prediction(x_e, x_o, pk.P_hv, pk.P_av,
+                                                                pk.disc)
     assert (pred.ego_leader, pred.ego_follower, pred.other_leader, pred.other_follower) == idx
     for got, ref in [(pred.ego.s, Se), (pred.ego.v, Ve), (pred.ego.a, Ae),
                      (pred.other.s, So), (pred.other.v, Vo), (pred.other.a, Ao)]:
         np.testing.assert_array_equal(got, ref)
     np.testing.assert_array_equal(
-        pred.rewards_ego, reference.reward_matrix(Se, Ve, Ae, x_e[0], So, packed.disc, packed.P))
+        pred.rewards_ego,
+        reference.reward_matrix(Se, Ve, Ae, x_e[0], So, pk.disc, pk.P_hv, pk.P_av))
     np.testing.assert_array_equal(
         pred.rewards_other,
-        reference.reward_matrix(So, Vo, Ao, x_o[0], Se, packed.disc, packed.P))
+        reference.reward_matrix(So, Vo, Ao, x_o[0], Se, pk.disc, pk.P_av, pk.P_hv))
+
+
+def kernel_prediction(x_e, x_o, pk, Le=None, ego_built=False):
+    """:func:`predict_into` with the HV as ego: ``(libraries, indices, q_values, work)``."""
+    Le = new_lib(50, 11) if Le is None else Le
+    Lo, out = new_lib(50, 11), np.empty(4, np.int64)
+    q_values, work = np.full((4, 11), np.nan), np.zeros(slot.N_WORK, np.int64)
+    predict_into(x_e[0], x_e[1], x_o[0], x_o[1], pk.P_hv, pk.P_av, pk.disc, Le, Lo, out,
+                 q_values, work, ego_built)
+    return (Le, Lo), tuple(int(i) for i in out), q_values, work
 
 
 @settings(max_examples=25)
 @given(joint_states())
-def test_predict_into_equals_reference_bit_for_bit(packed, states):
-    x_e, x_o = states
-    Le, Lo, out = new_lib(50, 11), new_lib(50, 11), np.empty(4, np.int64)
-    predict_into(x_e[0], x_e[1], x_o[0], x_o[1], packed.P, packed.disc, Le, Lo, out)
-    (Se, Ve, Ae), (So, Vo, Ao), idx = reference.full_prediction(x_e, x_o, packed.P, packed.disc)
-    assert tuple(int(i) for i in out) == idx
+def test_predict_into_equals_reference_bit_for_bit(pk, states):
+    x_e, x_o = clip_speeds(states, pk)
+    (Le, Lo), idx_k, q_values, work = kernel_prediction(x_e, x_o, pk)
+    (Se, Ve, Ae), (So, Vo, Ao), idx = reference.full_prediction(x_e, x_o, pk.P_hv, pk.P_av,
+                                                                pk.disc)
+    assert idx_k == idx
     # kernel arrays are sample-major (n_samples, n_traj)
     for got, ref in [(Le.S, Se), (Le.V, Ve), (Le.A, Ae), (Lo.S, So), (Lo.V, Vo), (Lo.A, Ao)]:
         np.testing.assert_array_equal(got.T, ref)
+    # the Q-values are the two solves' (rows: "ego leads" Ql, Qf, then "ego follows" Ql, Qf)
+    pred = full_prediction(x_e, x_o, pk.P_hv, pk.P_av, pk.disc)
+    agg = "max" if pk.config.effective_quirks.q5_leader_agg_max else "min"
+    lead = solve_game(pred.rewards_ego, pred.rewards_other, agg)
+    follow = solve_game(pred.rewards_other, pred.rewards_ego, agg)
+    np.testing.assert_array_equal(q_values[Q_EGO_LEADS_LEADER], lead.q_leader)
+    np.testing.assert_array_equal(q_values[Q_EGO_LEADS_FOLLOWER], lead.q_follower)
+    np.testing.assert_array_equal(q_values[Q_EGO_FOLLOWS_LEADER], follow.q_leader)
+    np.testing.assert_array_equal(q_values[Q_EGO_FOLLOWS_FOLLOWER], follow.q_follower)
+    # work: two libraries built, none reused; pair tests at most the full n_traj^2 n per matrix
+    assert work[slot.WORK_LIBRARIES] == 2 and work[slot.WORK_LIBRARIES_REUSED] == 0
+    assert 0 <= work[slot.WORK_PAIRS_GAME] <= 2 * 11 * 11 * 50
+
+
+def test_predict_into_reuses_a_built_ego_library(paper):
+    x_e, x_o = (-12.0, 5.0), (-11.0, 5.5)
+    (Le, _), idx, q_values, work = kernel_prediction(x_e, x_o, paper)
+    # The same ego library handed back as built: nothing of it is recomputed, same answer
+    (Le2, _), idx2, q_values2, work2 = kernel_prediction(x_e, x_o, paper, Le, ego_built=True)
+    assert Le2 is Le and idx2 == idx
+    np.testing.assert_array_equal(q_values2, q_values)
+    assert (work2[slot.WORK_LIBRARIES], work2[slot.WORK_LIBRARIES_REUSED]) == (1, 1)
+    assert work2[slot.WORK_PAIRS_GAME] == work[slot.WORK_PAIRS_GAME] > 0  # they do meet
+    # ego_built is taken at its word: a library of another state gives that state's game
+    (Lf, _), _, _, _ = kernel_prediction((-30.0, 2.0), x_o, paper)
+    _, idx_far, _, _ = kernel_prediction(x_e, x_o, paper, Lf, ego_built=True)
+    assert idx_far == kernel_prediction((-30.0, 2.0), x_o, paper)[1]
 
 
 @settings(max_examples=40)
 @given(joint_states())
 def test_full_prediction_is_symmetric(packed, states):
+    # the paper's two vehicles are alike, so either view uses the same vectors up to the
+    # path's direction, which the intersection's distance does not read
     x_a, x_b = states
-    ab = full_prediction(x_a, x_b, packed.P, packed.disc)
-    ba = full_prediction(x_b, x_a, packed.P, packed.disc)
+    ab = full_prediction(x_a, x_b, packed.P_hv, packed.P_av, packed.disc)
+    ba = full_prediction(x_b, x_a, packed.P_av, packed.P_hv, packed.disc)
     # "a leads" is the same game seen from either side, and so is "b leads"
     assert ab.ego_leader == ba.other_leader
     assert ab.ego_follower == ba.other_follower
@@ -219,7 +278,7 @@ def test_full_prediction_is_symmetric(packed, states):
 def test_full_prediction_indices_come_from_the_two_solves(packed):
     # ego-L and other-F from "ego leads" (leader matrix M_e), other-L and ego-F from
     # "ego follows" (leader matrix M_o).
-    pred = full_prediction((-12.0, 5.0), (-11.0, 5.5), packed.P, packed.disc)
+    pred = full_prediction((-12.0, 5.0), (-11.0, 5.5), packed.P_hv, packed.P_av, packed.disc)
     agg = "max" if packed.config.effective_quirks.q5_leader_agg_max else "min"
     lead = solve_game(pred.rewards_ego, pred.rewards_other, agg)
     follow = solve_game(pred.rewards_other, pred.rewards_ego, agg)
@@ -229,10 +288,29 @@ def test_full_prediction_indices_come_from_the_two_solves(packed):
 
 
 def test_prediction_state_readout(paper):
-    pred = full_prediction((-20.0, 4.0), (-18.0, 4.5), paper.P, paper.disc)
+    pred = full_prediction((-20.0, 4.0), (-18.0, 4.5), paper.P_hv, paper.P_av, paper.disc)
     assert pred.ego_state("leader", 0) == (-20.0, 4.0)  # time 0 is the current state
     assert pred.other_state("follower", 0) == (-18.0, 4.5)
     assert pred.ego_state("leader", 1) == (pred.ego.s[pred.ego_leader, 0],
                                            pred.ego.v[pred.ego_leader, 0])
     assert pred.other_state("follower", 50) == (pred.other.s[pred.other_follower, 49],
                                                 pred.other.v[pred.other_follower, 49])
+
+
+def test_predict_buffers_is_predict_into_on_buffers(unequal):
+    from persuasive.game import predict_buffers
+    from persuasive.library import as_lib, lib_buffers
+
+    x_e, x_o = (-10.0, 6.5), (-9.0, 7.5)
+    (Le, Lo), idx, q_values, work = kernel_prediction(x_e, x_o, unequal)
+    (buf_e, win_e), (buf_o, win_o) = lib_buffers(50, 11), lib_buffers(50, 11)
+    out, q2, work2 = np.empty(4, np.int64), np.empty((4, 11)), np.zeros(slot.N_WORK, np.int64)
+    predict_buffers(*x_e, *x_o, unequal.P_hv, unequal.P_av, unequal.disc, buf_e, win_e, buf_o,
+                    win_o, out, q2, work2)
+    assert tuple(int(i) for i in out) == idx
+    np.testing.assert_array_equal(q2, q_values)
+    np.testing.assert_array_equal(work2, work)
+    for got, ref in ((as_lib(buf_e, win_e), Le), (as_lib(buf_o, win_o), Lo)):
+        for name in ("S", "V", "A", "base", "coll", "win"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+        np.testing.assert_array_equal(got.pos[0], ref.pos[0])

@@ -123,8 +123,8 @@ def test_zone_is_conservative(kind):
     for who, other in (("av", "hv"), ("hv", "av")):
         path, opath = getattr(scene, who), getattr(scene, other)
         lo, hi = path.zone
-        s = np.concatenate([np.linspace(lo - 30, lo, 300), np.linspace(hi, hi + 30, 300)])
-        s = s[np.isfinite(s)]
+        s = np.concatenate([np.linspace(end, end + 30 * side, 300)
+                            for end, side in ((lo, -1), (hi, 1)) if math.isfinite(end)])
         pts = opath.polyline(-150, 150, 0.005)
         x, y = path.xy(s)
         d = np.min(np.hypot(x[:, None] - pts[None, :, 0], y[:, None] - pts[None, :, 1]), axis=1)

@@ -11,10 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from persuasive import packing as slot
 from persuasive import reference
-from persuasive import _packed as K
-from persuasive._packed import pack
 from persuasive.config import Config, VehicleParams
+from persuasive.packing import pack
 from persuasive.library import mesh_speed, offers_stop, trajectory_library
 
 STOP_LINE = -6.5  # [m]: -(lane width + length / 2)
@@ -33,7 +33,7 @@ def mesh(v0, v_max=10.0, v_min=0.0, u_min=-2.0, u_max=1.0, T=5.0):
 
 
 def q6(on: bool) -> np.ndarray:
-    return pack(Config().with_overrides({"quirks.q6_time_like_stop_test": on}))
+    return pack(Config().with_overrides({"quirks.q6_time_like_stop_test": on}))[0]
 
 
 # -- count, order, targets ----------------------------------------------------------------------
@@ -132,7 +132,7 @@ def test_stop_trajectory_can_pass_the_line_from_the_far_corner(paper):
 def test_stop_trajectory_settles_at_the_line_over_a_long_horizon():
     # T = 40 s. Under-damped as above, it settles within a few centimetres of the line (past
     # it by ~2 cm); the spec's law, not a defect of the library.
-    P = pack(Config().with_overrides({"library.n_samples": 400}))
+    P = pack(Config().with_overrides({"library.n_samples": 400}))[0]
     L = lib(-20.0, 4.0, P)
     assert L.has_stop
     assert L.v[1, -1] < 1e-9
@@ -178,13 +178,56 @@ def test_q6_is_on_in_both_modes(paper, corrected):
 
 def test_no_stop_when_v_lo_is_positive():
     # With u_min = -0.5 m/s^2, v_lo = max(0, v0 - 2.5): positive for v0 > 2.5.
-    P = pack(Config(vehicle=VehicleParams(u_min_mps2=-0.5)))
+    P = pack(Config(vehicle=VehicleParams(u_min_mps2=-0.5)))[0]
     # -50 + 4 / 0.5 = -42 < -6.5, yet v_lo = 1.5 > 0: no stop.
     assert not offers_stop(-50.0, 4.0, P)
     assert not lib(-50.0, 4.0, P).has_stop
     # v0 = 2.5: v_lo = 0 exactly, and the stop is offered again.
     assert offers_stop(-50.0, 2.5, P)
     assert lib(-50.0, 2.5, P).has_stop
+
+
+# -- each vehicle's own parameters -------------------------------------------------------------
+
+
+def test_each_vehicle_uses_its_own_limits_and_line(unequal):
+    # conftest's ``unequal``: the HV 4 m long, v_max = 8 m/s, u_min = -3 m/s^2
+    P_av, P_hv = unequal.P_av, unequal.P_hv
+    # The HV's stop trajectory: the leader stands at -6 + 5 + 4 = 3 m; from (-20, 4):
+    # h = 3 + 20 - 4 = 19, clipped to h_go = 5 + 8 / 0.6 = 18.33..,
+    # a = 0.4 (0.6 (h_go - 5) - 4) + 0.5 (0 - 4) = 0.4 (8 - 4) - 2 = -0.4.
+    # The AV's, as before: leader at 3.5, h = 18.5 (unclipped), a = -0.36.
+    hv, av = lib(-20.0, 4.0, P_hv), lib(-20.0, 4.0, P_av)
+    assert hv.has_stop and av.has_stop
+    assert hv.a[1, 0] == pytest.approx(-0.4, abs=TOL)
+    assert av.a[1, 0] == pytest.approx(-0.36, abs=TOL)
+    # the mesh follows each vehicle's limits: from v0 = 4 the HV's runs from
+    # max(0, 4 - 15) = 0 to min(8, 4 + 5) = 8, the AV's from 0 to 9
+    # (0.9 (1 - 4) = -2.7 is clipped to the AV's u_min = -2, not to the HV's -3)
+    for L, v_hi, u_min in ((hv, 8.0, -3.0), (av, 9.0, -2.0)):
+        targets = np.linspace(0.0, v_hi, 10)
+        np.testing.assert_allclose(L.a[2:, 0], np.clip(GAIN * (targets[1:] - 4.0), u_min, 1.0),
+                                   rtol=0, atol=TOL)
+    # from 8 m/s the HV's mesh tops out at its v_max, the AV's goes on to 10 m/s
+    hv, av = lib(-40.0, 8.0, P_hv), lib(-40.0, 8.0, P_av)
+    assert hv.v.max() <= 8.0 and hv.a.min() >= -3.0 and av.v.max() > 8.5
+    assert hv.a.min() < -2.0  # it does brake harder than the AV can
+    # Q6 with each vehicle's u_min and line: -7.5 + 4 / 3 = -6.17 < -6 (HV) but
+    # -7.5 + 4 / 2 = -5.5 is not < -6.5 (AV)
+    assert offers_stop(-7.5, 4.0, P_hv) and not offers_stop(-7.5, 4.0, P_av)
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+@pytest.mark.parametrize("who", [0, 1], ids=["av", "hv"])
+def test_compiled_library_equals_reference_for_each_vehicle(unequal, who):
+    P = (unequal.P_av, unequal.P_hv)[who]
+    for state in [(-20.0, 4.0), (-9.0, 4.0), (-7.5, 4.0), (-3.0, 8.0), (-30.0, 0.0)]:
+        L = lib(*state, P)
+        S, V, A, stop = reference.library(*state, P)
+        np.testing.assert_array_equal(L.s, S)
+        np.testing.assert_array_equal(L.v, V)
+        np.testing.assert_array_equal(L.a, A)
+        assert L.has_stop == stop
 
 
 # -- limits and agreement -----------------------------------------------------------------------
@@ -245,12 +288,51 @@ def test_compiled_library_equals_reference_bit_for_bit(state, q6_on):
                              "simulation.dt_s": 0.25}],
 )
 def test_compiled_library_equals_reference_for_other_sizes(overrides):
-    P = pack(Config().with_overrides(overrides))
+    P = pack(Config().with_overrides(overrides))[0]
     for state in [(-20.0, 4.0), (-9.0, 4.0), (-3.0, 9.0)]:
         L = lib(*state, P)
         S, V, A, stop = reference.library(*state, P)
-        assert L.s.shape == S.shape == (int(P[K.N_MESH]) + 1, int(P[K.N_SAMPLES]))
+        assert L.s.shape == S.shape == (int(P[slot.N_MESH]) + 1, int(P[slot.N_SAMPLES]))
         np.testing.assert_array_equal(L.s, S)
         np.testing.assert_array_equal(L.v, V)
         np.testing.assert_array_equal(L.a, A)
         assert L.has_stop == stop
+
+
+# -- the kernel form: buffers and the Lib view --------------------------------------------------
+
+
+def test_buffers_hold_the_library_and_its_reward_parts(paper):
+    from persuasive.game import build_buffers
+    from persuasive.library import as_lib, lib_buffers, new_lib
+    from persuasive.rewards import reward_terms
+
+    buf, win = lib_buffers(50, 11)
+    assert buf.shape == (6 * 50 + 1, 11) and win.shape == (11, 2) and win.dtype == np.int64
+    build_buffers(-9.0, 6.0, paper.P_av, paper.disc, buf, win)
+    L = as_lib(buf, win)
+    assert L._fields == ("S", "V", "A", "base", "coll", "pos", "win")
+    assert L.pos.shape == (2, 50, 11) and L.base.shape == (11,) and L.coll.shape == (50, 11)
+    ref = lib(-9.0, 6.0, paper.P_av)
+    np.testing.assert_array_equal(L.S, ref.s.T)  # sample-major views of the buffer
+    np.testing.assert_array_equal(L.V, ref.v.T)
+    np.testing.assert_array_equal(L.A, ref.a.T)
+    # at the intersection pos[0] holds s^2, and the window the samples with s^2 < 56.25
+    np.testing.assert_array_equal(L.pos[0], L.S * L.S)
+    for m in range(11):
+        inside = np.flatnonzero(L.pos[0][:, m] < 56.25)
+        if inside.size:
+            assert tuple(L.win[m]) == (inside[0], inside[-1] + 1)
+        else:
+            assert L.win[m, 0] >= L.win[m, 1]
+    assert (L.win[:, 1] > L.win[:, 0]).sum() >= 5  # from (-9, 6) most enter the zone
+    # the same parts as reward_terms writes into a fresh Lib
+    F = new_lib(50, 11)
+    reward_terms(L.S, L.V, L.A, -9.0, paper.disc, paper.P_av, F.base, F.coll, F.pos, F.win)
+    np.testing.assert_array_equal(F.base, L.base)
+    np.testing.assert_array_equal(F.coll, L.coll)
+    np.testing.assert_array_equal(F.pos[0], L.pos[0])
+    np.testing.assert_array_equal(F.win, L.win)
+    # base = sum_k lambda^(k-1) ((s_k - s_0) - w_u |u_k|), to rounding of the sum's order
+    np.testing.assert_allclose(L.base, (paper.disc[:, None] * ((L.S + 9.0) - 0.1 * np.abs(L.A)))
+                               .sum(axis=0), rtol=1e-13)

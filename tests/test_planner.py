@@ -5,14 +5,15 @@ import pytest
 
 from persuasive import Config, ConfigError, Planner, simulate
 from persuasive.library import trajectory_library
-from persuasive._packed import pack
+from persuasive.packing import pack
 
 
 def test_defaults_to_corrected_mode_and_returns_a_full_plan():
     planner = Planner()
     assert planner.config.mode == "corrected"
     plan = planner.plan((-20.0, 4.0), (-22.0, 4.3))
-    lib = trajectory_library(-20.0, 4.0, pack(planner.config))
+    assert planner.kind == "persuasive"
+    lib = trajectory_library(-20.0, 4.0, pack(planner.config)[0])  # the AV's library
     k = plan.candidate
     np.testing.assert_array_equal(plan.s_m, lib.s[k])
     np.testing.assert_array_equal(plan.a_mps2, lib.a[k])
@@ -65,3 +66,26 @@ def test_bad_states(av, hv, name):
 def test_paper_mode_needs_the_human_role():
     with pytest.raises(ConfigError, match="human_role"):
         Planner(Config(mode="paper")).plan((-20.0, 4.0), (-22.0, 4.3))
+
+
+@pytest.mark.parametrize("overrides", [{"av.kind": "passive"},
+                                       {"hv.vehicle.v_max_mps": 8.0,
+                                        "hv.vehicle.u_min_mps2": -3.0}])
+def test_replaying_other_configurations(overrides):
+    # the passive planner, and vehicles with their own limits: still the simulator's AV
+    config = Config(mode="corrected").with_overrides(overrides)
+    record = simulate(config, 21)
+    planner = Planner(config)
+    assert planner.kind == config.av.kind
+    for k, (s_av, v_av, s_hv, v_hv) in enumerate(record.states[:-1]):
+        plan = planner.plan((s_av, v_av), (s_hv, v_hv))
+        assert plan.accel_mps2 == record.log["av_accel_mps2"][k]
+        assert plan.candidate == record.log["av_trajectory"][k]
+        assert plan.belief_hv_leader == record.log["av_belief_hv_leader"][k]
+
+
+def test_the_hvs_own_speed_limit_is_checked():
+    planner = Planner(Config(mode="corrected").with_overrides({"hv.vehicle.v_max_mps": 8.0}))
+    planner.plan((-20.0, 9.0), (-22.0, 8.0))  # the AV may drive 9 m/s, the HV 8 m/s
+    with pytest.raises(ConfigError, match=r"hv = \(-22.0, 8.5\).*\[0, 8\]"):
+        planner.plan((-20.0, 4.0), (-22.0, 8.5))

@@ -1,6 +1,7 @@
 """The README's promises, run as a user would: its opening commands, its command-line examples
 and its Python example (with the outputs written to a temporary folder)."""
 
+import json
 import re
 import shlex
 from pathlib import Path
@@ -37,8 +38,15 @@ def test_command_line_examples_run(tmp_path, monkeypatch, capsys):
         argv = shlex.split(command)[1:]
         assert main(argv) == 0, command
     capsys.readouterr()
-    for made in ("run.parquet", "profile.pdf", "run.mp4", "results/table2-paper/runs.parquet"):
+    for made in ("run.parquet", "profile.pdf", "run.mp4"):
         assert (tmp_path / made).stat().st_size > 0, made
+    # reproduce's default folder names the table, the mode and a hash of the settings, and
+    # holds the sweep of its runs with the summary
+    from persuasive import sweep
+
+    (results,) = (tmp_path / "results").glob("table2-paper-*")
+    assert json.loads((results / "summary.json").read_text())["seeds"] == 200
+    assert len(sweep.load(results)) == 14 * 200
 
 
 @pytest.mark.slow

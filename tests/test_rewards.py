@@ -16,14 +16,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from persuasive import reference
-from persuasive._packed import MIN_DIST_SQ, sqrt_threshold
 from persuasive.library import Library, trajectory_library
-from persuasive.rewards import reward_matrix_of
+from persuasive.packing import MIN_DIST_SQ, W_C as W_C_SLOT, sqrt_threshold
+from persuasive.rewards import reward_matrix, reward_matrix_of, reward_terms, zone_windows
 
 W_C, W_U, LAM = 100.0, 0.1, 0.99
 TOL = 1e-12  # relative: hand sums in decimal vs. the kernel's sums in binary
 
 finite = dict(allow_nan=False, allow_infinity=False)
+
+
+def rewards(own: Library, other: Library, disc, pk) -> np.ndarray:
+    """``R[own, other]`` with the AV's vector for ``own`` and the HV's for ``other``."""
+    return reward_matrix_of(own, other, disc, pk.P_av, pk.P_hv)
 
 
 def make_lib(s, v, a, s0, v0=0.0) -> Library:
@@ -55,7 +60,7 @@ def test_collision_free_reward_by_hand(paper):
     #   = 1.18406 - 0.148505 = 1.035555
     own = make_lib([-29.8, -29.6, -29.4], [2.0, 2.0, 2.0], [0.5, -0.5, 0.5], s0=-30.0, v0=2.0)
     other = make_lib([-30.0, -30.0, -30.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], s0=-30.0)
-    R = reward_matrix_of(own, other, paper.disc[:3], paper.P)
+    R = rewards(own, other, paper.disc[:3], paper)
     assert R.shape == (1, 1)
     assert R[0, 0] == pytest.approx(1.035555, rel=TOL)
 
@@ -65,7 +70,7 @@ def test_rows_are_own_trajectories_columns_the_others(paper):
     own = make_lib([[-29.0, -28.0], [-29.9, -29.8]], [[10.0, 10.0], [1.0, 1.0]], np.zeros((2, 2)),
                    s0=-30.0)
     other = make_lib(np.full((3, 2), -40.0), np.zeros((3, 2)), np.zeros((3, 2)), s0=-40.0)
-    R = reward_matrix_of(own, other, paper.disc[:2], paper.P)
+    R = rewards(own, other, paper.disc[:2], paper)
     assert R.shape == (2, 3)
     np.testing.assert_allclose(R[0], 1.0 + 0.99 * 2.0, rtol=TOL)
     np.testing.assert_allclose(R[1], 0.1 + 0.99 * 0.2, rtol=TOL)
@@ -81,8 +86,8 @@ def test_collision_penalty_by_hand(paper):
     near = make_lib([-3.0] * 5, [0.0] * 5, [0.0] * 5, s0=-3.0)
     far = make_lib([-30.0] * 5, [0.0] * 5, [0.0] * 5, s0=-30.0)
     disc = paper.disc[:5]
-    R_near = reward_matrix_of(own, near, disc, paper.P)[0, 0]
-    R_far = reward_matrix_of(own, far, disc, paper.P)[0, 0]
+    R_near = rewards(own, near, disc, paper)[0, 0]
+    R_far = rewards(own, far, disc, paper)[0, 0]
     # collision-free base: sum lambda^(k-1) ((s_k + 13) - 0.1 |u_k|)
     base = sum(LAM**k * ((s[k] + 13.0) - W_U * abs(a[k])) for k in range(5))
     assert R_far == pytest.approx(base, rel=TOL)
@@ -96,8 +101,8 @@ def test_distance_exactly_min_dist_is_safe(paper):
     own = make_lib([4.5], [1.0], [0.0], s0=4.4)
     at = make_lib([6.0], [0.0], [0.0], s0=6.0)
     closer = make_lib([np.nextafter(6.0, 0.0)], [0.0], [0.0], s0=6.0)
-    R_at = reward_matrix_of(own, at, paper.disc[:1], paper.P)[0, 0]
-    R_closer = reward_matrix_of(own, closer, paper.disc[:1], paper.P)[0, 0]
+    R_at = rewards(own, at, paper.disc[:1], paper)[0, 0]
+    R_closer = rewards(own, closer, paper.disc[:1], paper)[0, 0]
     assert R_at == pytest.approx(0.1, rel=TOL)
     assert R_closer == pytest.approx(0.1 - W_C * 2.0, rel=TOL)
 
@@ -110,7 +115,7 @@ def test_unsafe_samples_apart_are_all_counted(paper):
     own = make_lib([-2.0, -20.0, -2.0], [1.0, 2.0, 3.0], [0.0, 0.0, 0.0], s0=-2.0)
     other = make_lib([[0.0, 0.0, 0.0], [-30.0, -1.0, 1.0]], np.zeros((2, 3)), np.zeros((2, 3)),
                      s0=0.0)
-    R = reward_matrix_of(own, other, paper.disc[:3], paper.P)[0]
+    R = rewards(own, other, paper.disc[:3], paper)[0]
     base = 0.0 + 0.99 * (-18.0) + 0.0
     np.testing.assert_allclose(R, [base - 592.04, base - 392.04], rtol=TOL)
 
@@ -138,7 +143,7 @@ def small_library_pairs(draw):
 def test_matches_a_straightforward_sum(paper, pair):
     own, other = pair
     n = own.s.shape[1]
-    got = reward_matrix_of(own, other, paper.disc[:n], paper.P)
+    got = rewards(own, other, paper.disc[:n], paper)
     # absolute 1e-9 [reward units] on values up to ~1e4: the two sums group terms differently
     np.testing.assert_allclose(got, naive(own, other, paper.disc), rtol=TOL, atol=1e-9)
 
@@ -148,9 +153,9 @@ def test_matches_a_straightforward_sum(paper, pair):
 def test_arbitrary_trajectories_equal_reference_bit_for_bit(paper, pair):
     own, other = pair
     n = own.s.shape[1]
-    got = reward_matrix_of(own, other, paper.disc[:n], paper.P)
+    got = rewards(own, other, paper.disc[:n], paper)
     ref = reference.reward_matrix(own.s, own.v, own.a, own.s0, other.s, paper.disc[:n],
-                                  paper.P)
+                                  paper.P_av, paper.P_hv)
     np.testing.assert_array_equal(got, ref)
 
 
@@ -194,9 +199,97 @@ def joint_states(draw):
 @given(joint_states())
 def test_library_pairs_equal_reference_bit_for_bit(paper, states):
     (s_a, v_a), (s_b, v_b) = states
-    own = trajectory_library(s_a, v_a, paper.P)
-    other = trajectory_library(s_b, v_b, paper.P)
-    got = reward_matrix_of(own, other, paper.disc, paper.P)
-    ref = reference.reward_matrix(own.s, own.v, own.a, s_a, other.s, paper.disc, paper.P)
+    own = trajectory_library(s_a, v_a, paper.P_av)
+    other = trajectory_library(s_b, v_b, paper.P_hv)
+    got = rewards(own, other, paper.disc, paper)
+    ref = reference.reward_matrix(own.s, own.v, own.a, s_a, other.s, paper.disc, paper.P_av,
+                                  paper.P_hv)
     assert got.shape == (11, 11)
     np.testing.assert_array_equal(got, ref)
+
+
+# -- the kernel's parts: windows, positions, pair tests -----------------------------------------
+
+
+def kernel_parts(lib: Library, disc, P):
+    """:func:`reward_terms` of ``lib`` (sample-major, as the kernels store it)."""
+    n_traj, n = lib.s.shape
+    base, win = np.empty(n_traj), np.empty((n_traj, 2), np.int64)
+    coll, pos = np.empty((n, n_traj)), np.full((2, n, n_traj), np.nan)
+    reward_terms(np.ascontiguousarray(lib.s.T), np.ascontiguousarray(lib.v.T),
+                 np.ascontiguousarray(lib.a.T), lib.s0, disc, P, base, coll, pos, win)
+    return base, coll, pos, win
+
+
+def test_reward_parts_and_pair_tests_by_hand(paper):
+    # The case of test_unsafe_samples_apart_are_all_counted. s^2: own (4, 400, 4), others
+    # (0, 0, 0) and (900, 1, 1); below 56.25: own samples 0 and 2, so its window is [0, 3)
+    # (scanned from both ends: the safe sample 1 inside it stays), the others' [0, 3), [1, 3).
+    own = make_lib([-2.0, -20.0, -2.0], [1.0, 2.0, 3.0], [0.0, 0.0, 0.0], s0=-2.0)
+    other = make_lib([[0.0, 0.0, 0.0], [-30.0, -1.0, 1.0]], np.zeros((2, 3)), np.zeros((2, 3)),
+                     s0=0.0)
+    disc = paper.disc[:3]
+    base, coll, pos, win = kernel_parts(own, disc, paper.P_av)
+    _, _, pos_o, win_o = kernel_parts(other, disc, paper.P_hv)
+    np.testing.assert_array_equal(pos[0, :, 0], [4.0, 400.0, 4.0])  # pos[0] = s^2
+    np.testing.assert_array_equal(pos_o[0].T, [[0.0, 0.0, 0.0], [900.0, 1.0, 1.0]])
+    np.testing.assert_array_equal(win, [[0, 3]])
+    np.testing.assert_array_equal(win_o, [[0, 3], [1, 3]])
+    # B = 0 + 0.99 (-18) + 0; weights lambda^(k-1) (1 + v_k) = 2, 0.99 * 3, 0.9801 * 4
+    assert base[0] == pytest.approx(0.99 * -18.0, rel=TOL)
+    np.testing.assert_allclose(coll[:, 0], [2.0, 2.97, 3.9204], rtol=TOL)
+    C, out = np.empty((1, 2)), np.empty((1, 2))
+    tests = reward_matrix(base, coll, pos, win, pos_o, win_o, paper.P[W_C_SLOT],
+                          paper.P[MIN_DIST_SQ], True, C, out)
+    # own window [0, 3) against the hull [0, 3) of the others': 3 samples x 2 trajectories
+    assert tests == 6
+    np.testing.assert_allclose(C[0], [5.9204, 3.9204], rtol=TOL)
+    np.testing.assert_array_equal(out, rewards(own, other, disc, paper))
+
+
+def test_pair_tests_skip_samples_outside_the_windows(paper):
+    # Own inside the zone only at sample 3; the other's window covers samples 1..2: no
+    # sample of both, so no pair test at all, and no penalty
+    own = make_lib([-30.0, -20.0, -10.0, -1.0], np.ones(4), np.zeros(4), s0=-31.0)
+    other = make_lib([-30.0, -1.0, 1.0, 30.0], np.zeros(4), np.zeros(4), s0=-31.0)
+    disc = paper.disc[:4]
+    base, coll, pos, win = kernel_parts(own, disc, paper.P_av)
+    _, _, pos_o, win_o = kernel_parts(other, disc, paper.P_hv)
+    np.testing.assert_array_equal(win, [[3, 4]])
+    np.testing.assert_array_equal(win_o, [[1, 3]])
+    C, out = np.empty((1, 1)), np.empty((1, 1))
+    assert reward_matrix(base, coll, pos, win, pos_o, win_o, 100.0, 56.25, True, C, out) == 0
+    assert C[0, 0] == 0.0 and out[0, 0] == base[0]
+
+
+@settings(max_examples=200)
+@given(st.lists(st.floats(0.0, 120.0, **finite), min_size=1, max_size=12))
+def test_zone_windows_hold_every_unsafe_sample(squares):
+    n = len(squares)
+    pos = np.zeros((2, n, 1))
+    pos[0, :, 0] = squares
+    win = np.empty((1, 2), np.int64)
+    zone_windows(pos, 56.25, win)
+    inside = [k for k, x in enumerate(squares) if x < 56.25]
+    lo, hi = win[0]
+    if inside:  # the tightest window holding them all
+        assert (lo, hi) == (inside[0], inside[-1] + 1)
+    else:
+        assert lo >= hi
+
+
+@settings(max_examples=30)
+@given(joint_states())
+def test_unequal_vehicles_equal_reference_bit_for_bit(unequal, states):
+    # each library built with its own vehicle's vector (conftest: the HV is smaller and
+    # slower); both read the pair's safety distance 6.75 m
+    (s_a, v_a), (s_b, v_b) = states
+    v_b = min(v_b, 8.0)
+    own = trajectory_library(s_a, v_a, unequal.P_av)
+    other = trajectory_library(s_b, v_b, unequal.P_hv)
+    for mine, theirs, P_m, P_t in ((own, other, unequal.P_av, unequal.P_hv),
+                                   (other, own, unequal.P_hv, unequal.P_av)):
+        got = reward_matrix_of(mine, theirs, unequal.disc, P_m, P_t)
+        ref = reference.reward_matrix(mine.s, mine.v, mine.a, mine.s0, theirs.s, unequal.disc,
+                                      P_m, P_t)
+        np.testing.assert_array_equal(got, ref)

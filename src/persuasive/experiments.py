@@ -122,7 +122,7 @@ def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any
         "hv_s0_m": s["hv_initial_state"][0],
         "hv_v0_mps": s["hv_initial_state"][1],
         **{k: s[k] for k in _METRICS},
-        "min_dist_m": config.vehicle.min_dist_m,
+        "min_dist_m": rec.scenario.min_dist_m,  # the pair's, as the kernels use it
         "config_hash": config.digest(),
         "version": __version__,
     }
@@ -324,11 +324,12 @@ def default_folder(base: Config, table: str, seeds: int) -> Path:
     return Path("results") / f"{table}-{base.mode}-{settings_digest(base, table, seeds)}"
 
 
-def check_folder(folder: str | Path, grid, force: bool = False) -> None:
-    """Refuse (:class:`ConfigError`), before any run, a results folder holding something else
-    than this reproduction: another sweep's runs, or files that are not a sweep's. ``grid``:
-    the table's sweep grid (:func:`table_grid`). Nothing is refused with ``force``."""
-    from .sweep import read_manifest
+def check_folder(folder: str | Path, settings, force: bool = False) -> None:
+    """Refuse (:class:`ConfigError`) a results folder holding something else than this
+    reproduction. ``settings``: the table's sweep grid (:func:`table_grid`; the folder must be
+    that sweep's, checked before any run) or a summary's ``config_hash`` (the folder's
+    ``summary.json`` must carry it). Nothing is refused with ``force``."""
+    from .sweep import Grid, read_manifest
 
     folder = Path(folder)
     if force or not folder.exists():
@@ -337,12 +338,20 @@ def check_folder(folder: str | Path, grid, force: bool = False) -> None:
         raise OutputError(f"results folder {str(folder)!r} cannot be written: it is a file")
     if not any(folder.iterdir()):
         return
-    try:
-        manifest = read_manifest(folder)
-    except ConfigError:
-        raise OutputError(f"results folder {str(folder)!r} holds other files; choose another "
-                          "--out or pass --force to replace it") from None
-    if manifest.get("grid_digest") != grid.digest:
+    if isinstance(settings, Grid):
+        try:
+            same = read_manifest(folder).get("grid_digest") == settings.digest
+        except ConfigError:
+            raise OutputError(f"results folder {str(folder)!r} holds other files; choose "
+                              "another --out or pass --force to replace it") from None
+    else:
+        try:
+            old = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            raise OutputError(f"results folder {str(folder)!r} holds other files; choose "
+                              "another --out or pass --force to replace it") from None
+        same = old.get("config_hash") == settings
+    if not same:
         raise OutputError(
             f"results folder {str(folder)!r} holds results made with other settings; choose "
             "another --out or pass --force to replace them")
@@ -513,6 +522,8 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
                 folders[t] = folder
     wall = time.perf_counter() - t0
     summaries = {t: summarize(runs, t, base, seeds, failures) for t in tables}
+    for t, folder in folders.items():  # a results folder is complete: runs and summary
+        _write_summary(folder, summaries[t], atomic=True)
     frame = pd.DataFrame(runs, columns=list(RUN_COLUMNS))
     return Reproduction(frame, summaries, wall, tuple(failures), base, folders or None)
 

@@ -286,7 +286,11 @@ class GameCache:
         idx, q_values = np.empty(4, np.int64), np.empty((4, n_traj))
         if not built:
             build_buffers(key[0], key[1], self.P_hv, self.disc, *hv)
+            self.work[slot.WORK_LIBRARIES] += 1
+        else:
+            self.work[slot.WORK_LIBRARIES_REUSED] += 1
         build_buffers(key[2], key[3], self.P_av, self.disc, *av)
+        self.work[slot.WORK_LIBRARIES] += 1
         from .game import solve_buffers
 
         solve_buffers(*hv, *av, self.P_hv, idx, q_values, self.work)
@@ -300,6 +304,7 @@ class GameCache:
 
         view = self.empty_view()
         build_buffers(float(x_av[0]), float(x_av[1]), self.P_av, self.disc, *view.av)
+        self.work[slot.WORK_LIBRARIES] += 1
         return view
 
 

@@ -70,7 +70,8 @@ def compare_figure(summary: dict[str, Any], runs) -> Figure:
     positions = np.arange(len(labels) * 2, dtype=float)
     positions += np.repeat(np.arange(len(labels)), 2) * 0.6  # a gap between pairs
     box = ax_b.boxplot([d if d.size else [np.nan] for d in data], positions=positions,
-                       vert=False, widths=0.7, patch_artist=True, showfliers=False,
+                       orientation="horizontal", widths=0.7, patch_artist=True,
+                       showfliers=False,
                        medianprops={"color": "black", "lw": 0.8})
     for patch, color in zip(box["boxes"], colors):
         patch.set_facecolor(color)

@@ -119,7 +119,7 @@ class Scenario:
                 raise ConfigError(
                     f"scenario.{who}_s0_m = {s0:g} (half-width {hw:g}) puts every initial "
                     f"position of the {who.upper()} inside its conflict zone, which starts at "
-                    f"{lo:.2f} m in the {self.kind} scenario; allowed: below {lo - hw:.2f} m")
+                    f"{lo:.2f} m in the {self.kind} scenario; allowed: below {lo + hw:.2f} m")
 
     # -- the outcome's tests (§7) --------------------------------------------------------------
 

@@ -1,0 +1,85 @@
+"""``persuasive highway``: the planner drives highway-env's ego at its intersection.
+
+Episodes of highway-env's ``intersection-v2`` (``-v1`` where v2 is missing), each run twice
+on the same seed: the ego driven by the planner (``persuasive.envs.highway``) and by
+highway-env's own IDM driver; one table row per episode and driver, then a summary per driver
+(or one JSON object). highway-env is imported inside the command (the ``highway`` extra).
+"""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from ..config import AV_KIND_ALIASES, AV_KINDS
+from ._common import compile_notice
+
+
+def _yes(flag: bool) -> str:
+    return "yes" if flag else "no"
+
+
+def _num(value, digits: int = 2) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+@click.command()
+@click.option("--episodes", type=int, default=5, show_default=True,
+              help="Episodes, seeds SEED .. SEED + EPISODES - 1.")
+@click.option("--planner", type=click.Choice([*AV_KINDS, *AV_KIND_ALIASES]),
+              default="persuasive", show_default=True,
+              help="The AV planner driving the ego (corrected mode).")
+@click.option("--seed", type=int, default=1, show_default=True,
+              help="Seed of the first episode (highway-env's reset seed).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--video", type=click.Path(dir_okay=False), default=None,
+              help="Write the planner's first episode as .mp4 or .gif (the folder must exist).")
+def highway(episodes, planner, seed, as_json, video) -> None:
+    """Drive highway-env's intersection ego with the planner, against its IDM traffic,
+    beside highway-env's own ego driver on the same seeds."""
+    from ..envs.highway import (CONTEST_RANGE_M, DEFAULT_DRIVER, run_highway, write_video)
+
+    if video:
+        from ..plots.files import check_animation_path
+
+        check_animation_path(video)  # before any work
+    compile_notice()
+    frames = [] if video else None
+    report = run_highway(episodes, planner, seed, frames=frames)
+    if video:
+        write_video(frames, video)
+    if as_json:
+        out = report.to_dict()
+        if video:
+            out["video"] = video
+        click.echo(json.dumps(out))
+        return
+    first, last = report.seeds[0], report.seeds[-1]
+    click.echo(f"highway-env {report.env_id}: the ego goes straight (o0 -> o2) at 10 Hz; "
+               f"{report.planner} planner vs highway-env's IDM ego ({DEFAULT_DRIVER}); "
+               f"seeds {first}..{last}")
+    head = (f"{'seed':>6}  {'driver':<11}{'collision':<11}{'crossed':<9}{'arrived':<9}"
+            f"{'first':<7}{'ego/other':<11}{'time to cross [s]':>18}{'min dist [m]':>14}"
+            f"{'min conflict dist [m]':>23}")
+    click.echo(head)
+    for e in report.episodes:
+        click.echo(f"{e.seed:>6}  {e.driver:<11}{_yes(e.collision):<11}{_yes(e.crossed):<9}"
+                   f"{_yes(e.arrived):<9}{e.first:<7}{f'{e.ego_first}/{e.other_first}':<11}"
+                   f"{_num(e.time_to_cross_s, 1):>18}{_num(e.min_distance_m):>14}"
+                   f"{_num(e.min_conflict_distance_m):>23}")
+    click.echo("")
+    click.echo(f"{'driver':<11}{'episodes':>9}{'collisions':>11}{'crossed':>9}{'arrived':>9}"
+               f"{'ego first':>10}{'other first':>12}{'mean time to cross [s]':>24}"
+               f"{'min dist [m]':>14}{'median min conflict dist [m]':>30}")
+    for driver, s in report.summary().items():
+        click.echo(f"{driver:<11}{s['episodes']:>9}{s['collisions']:>11}{s['crossed']:>9}"
+                   f"{s['arrived']:>9}{s['ego_first']:>10}{s['other_first']:>12}"
+                   f"{_num(s['mean_time_to_cross_s'], 2):>24}{_num(s['min_distance_m']):>14}"
+                   f"{_num(s['median_min_conflict_distance_m']):>30}")
+    click.echo(f"first: who reached the conflict point first against the vehicles that were "
+               f"within {CONTEST_RANGE_M:g} m of it with the ego; min dist: to any vehicle "
+               f"(oncoming traffic passes 4 m beside); min conflict dist: to vehicles whose "
+               f"lanes enter the ego's path or share its lane")
+    if video:
+        click.echo(f"video of seed {first} ({report.planner}) written to {video}")

@@ -1,0 +1,704 @@
+"""The persuasive planner driving highway-env's ego at its intersection (issue 13).
+
+highway-env's ``intersection-v2`` (``intersection-v1`` on versions without it) is a four-way
+crossing of two-lane roads, filled with highway-env's own IDM traffic that turns left, right
+or goes straight. The ego drives straight through (route ``o0 -> o2``, destination ``"o2"``)
+with a longitudinal-only ``ContinuousAction`` (lateral control off: the ego's path is a
+straight line) at ``simulation_frequency = policy_frequency = 10`` Hz, the planner's 0.1 s
+step. The action range is the planner's ``[u_min, u_max]`` and the speed range its
+``[v_min, v_max]``.
+
+The planner knows one conflict between two vehicles; highway-env's traffic was not modelled
+for it. Each other vehicle is therefore **projected onto its conflict with the ego's path**
+(:class:`Projector`): the conflict point is the first point where its own lane sequence
+(current lane, then its route) comes within :data:`CONFLICT_BAND_M` (2.5 m) of the ego's
+path line, to cross it or to merge into it (a merging vehicle runs beside the ego's lane for
+metres before it joins it: the exact merge point would be met too late); its position
+relative to that point, measured along its own lanes (negative before it), and its speed form
+the planner's human state ``(s_HV, v_HV)``, and the ego's position relative to the same
+point, along its path, the AV state. The planner then sees each conflict as the paper's
+right-angle crossing. A vehicle's lane sequence and conflict point are kept from when it is
+first seen, so that a vehicle past the point is still measured against it until it has
+cleared it.
+
+Which vehicle the planner plans against: **all of them, and the ego takes the most cautious
+answer**. One planner per conflicting vehicle (each keeps its own belief on that driver's
+role and its stored prediction of that driver, which a single planner switching between
+vehicles would mix up) plans against that vehicle while neither has cleared the conflict
+(``s < min_dist`` for both); the ego applies the lowest of their accelerations. Planning
+against only the "most critical" vehicle (e.g. the earliest arrival) would switch targets
+between steps and lose the beliefs, and could accelerate into a second vehicle the planner
+does not see. Without a conflict the ego accelerates at ``u_max`` up to ``v_max`` (free flow,
+as ``persuasive.simulation.free_flow_time``). A vehicle ahead in the ego's own lane is no
+crossing: the ego keeps an IDM gap to it (``config.hv.idm`` parameters) by taking the lower of
+the two accelerations. The acceleration is finally limited so that the speed stays in
+``[v_min, v_max]`` within the step (highway-env integrates with Euler steps).
+
+The comparison driver (``default``) is highway-env's own: the ego becomes one of the env's
+``IDMVehicle`` (its parameters as the env sets them for traffic, lane changes off, routed to
+``o2``), which highway-env's ``RegulatedRoad`` makes yield to traffic of higher priority, the
+behaviour highway-env gives every vehicle it drives itself. Both drivers run the same seeds
+(``env.reset(seed=...)``), so every episode starts from the same traffic.
+
+Per episode (:class:`EpisodeResult`): collision, whether the ego crossed the intersection
+(left its inner lane) and arrived (highway-env's ``has_arrived``), who crossed first (against
+each *contested* vehicle: one whose conflict point both vehicles were within
+:data:`CONTEST_RANGE_M` of at the same step, the paper's start being 20 +- 5 m before it; who
+reached the conflict point first), the ego's time to cross and the minimum centre distance to
+any other vehicle.
+
+Headless rendering: pygame draws the ``rgb_array`` frames with SDL's ``offscreen`` video
+driver (set here when ``SDL_VIDEODRIVER`` is unset or ``dummy``: with ``dummy`` pygame runs
+headless too, but highway-env's viewer then draws nothing and every frame is black).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from ..config import AV_KIND_ALIASES, AV_KINDS, Config, ConfigError
+
+#: highway-env ids tried in order (the issue names ``intersection-v2``).
+HIGHWAY_ENV_IDS = ("intersection-v2", "intersection-v1")
+#: The ego's route: straight through, from ``o0`` to ``o2``.
+DESTINATION = "o2"
+#: highway-env's simulation and policy frequency [Hz] (the planner's step is 1 / 10 s).
+FREQUENCY_HZ = 10
+#: A vehicle contests the ego's crossing when both were this close before the conflict point
+#: at the same step [m].
+CONTEST_RANGE_M = 25.0
+#: Lateral distance under which a point is on the ego's path line [m].
+ON_PATH_M = 1e-6
+#: The conflict starts where the other's path comes this close to the ego's path line [m]:
+#: half of highway-env's 4 m lane plus 0.5 m, so that a vehicle merging from the side is met
+#: before it is in the lane, while the oncoming lane (4 m away) is no conflict.
+CONFLICT_BAND_M = 2.5
+#: Largest spacing of the samples of a curved lane searched for the conflict [m].
+SAMPLE_M = 0.25
+#: A vehicle this close to the ego's path line, heading within 30 degrees of it, is in the
+#: ego's lane [m].
+SAME_LANE_M = 1.0
+SAME_LANE_COS = math.cos(math.radians(30.0))
+#: Driver names of the report.
+DEFAULT_DRIVER = "default"
+
+
+def _import_highway_env():
+    """``highway_env``, imported with a headless pygame (:func:`headless_video`)."""
+    headless_video()
+    os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
+    os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+    try:
+        import highway_env  # noqa: F401
+    except ImportError:
+        raise ConfigError("persuasive highway needs highway-env: pip install "
+                          "'persuasive[highway]'") from None
+    return highway_env
+
+
+def headless_video() -> None:
+    """Let pygame draw without a display: SDL's ``offscreen`` video driver, unless another
+    driver is set. ``dummy`` is replaced too: highway-env (1.12) draws nothing when
+    ``SDL_VIDEODRIVER=dummy`` (its viewer disables itself), so its frames would be black."""
+    if os.environ.get("SDL_VIDEODRIVER", "dummy") == "dummy":
+        os.environ["SDL_VIDEODRIVER"] = "offscreen"
+
+
+def highway_env_id() -> str:
+    """The intersection id the installed highway-env provides (:data:`HIGHWAY_ENV_IDS`)."""
+    _import_highway_env()
+    from gymnasium.envs.registration import registry
+
+    for env_id in HIGHWAY_ENV_IDS:
+        if env_id in registry:
+            return env_id
+    raise ConfigError(f"highway-env provides none of {', '.join(HIGHWAY_ENV_IDS)}")
+
+
+def planner_config(kind: str = "persuasive") -> Config:
+    """The planner's configuration: corrected mode (the :class:`~persuasive.Planner`'s
+    default; paper mode's quirk Q3 reads a human role highway-env's drivers do not have) with
+    ``av.kind = kind``."""
+    if kind not in AV_KINDS and kind not in AV_KIND_ALIASES:
+        raise ConfigError(f"--planner = {kind!r} is out of range; allowed: "
+                          f"{' | '.join(AV_KINDS)}")
+    return Config(mode="corrected").with_overrides({"av.kind": kind})
+
+
+def highway_config(config: Config) -> dict[str, Any]:
+    """highway-env's configuration for the ego (see the module docstring)."""
+    veh = config.vehicle_of("av")
+    if config.simulation.dt_s * FREQUENCY_HZ != 1.0:
+        raise ConfigError(f"simulation.dt_s = {config.simulation.dt_s!r} is out of range; "
+                          f"allowed: {1 / FREQUENCY_HZ} (highway-env runs at {FREQUENCY_HZ} Hz)")
+    return {
+        "action": {"type": "ContinuousAction", "longitudinal": True, "lateral": False,
+                   "acceleration_range": (veh.u_min_mps2, veh.u_max_mps2),
+                   "speed_range": (veh.v_min_mps, veh.v_max_mps)},
+        "destination": DESTINATION,
+        "simulation_frequency": FREQUENCY_HZ,
+        "policy_frequency": FREQUENCY_HZ,
+    }
+
+
+def make_highway_env(config: Config, render_mode: str | None = None):
+    """highway-env's intersection, configured for the ego (:func:`highway_config`)."""
+    import gymnasium as gym
+
+    env_id = highway_env_id()
+    return gym.make(env_id, config=highway_config(config), render_mode=render_mode)
+
+
+# -- the projection ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EgoPath:
+    """The ego's straight path: ``origin`` (2,) [m], unit ``direction`` (2,), ``length_m``;
+    ``exit_u_m``: where it leaves the intersection (the start of its last lane) [m]."""
+
+    origin: np.ndarray
+    direction: np.ndarray
+    length_m: float
+    exit_u_m: float
+
+    @classmethod
+    def from_lanes(cls, network, lanes: list[tuple]) -> EgoPath:
+        """From consecutive straight, collinear lanes; :class:`ConfigError` otherwise."""
+        from highway_env.road.lane import StraightLane
+
+        objs = [network.get_lane(index) for index in lanes]
+        if not all(isinstance(lane, StraightLane) for lane in objs):
+            raise ConfigError("the ego's route is not straight (lateral control is off)")
+        origin = np.array(objs[0].start, float)
+        direction = np.array(objs[0].direction, float)
+        path = cls(origin, direction, 0.0, 0.0)
+        for lane in objs:
+            (_, lat0), (_, lat1) = path.coordinates(lane.start), path.coordinates(lane.end)
+            if abs(lat0) > ON_PATH_M or abs(lat1) > ON_PATH_M:
+                raise ConfigError("the ego's route is not one straight line")
+        length = float(sum(lane.length for lane in objs))
+        exit_u = float(sum(lane.length for lane in objs[:-1]))
+        return cls(origin, direction, length, exit_u)
+
+    def coordinates(self, point) -> tuple[float, float]:
+        """``(u, lateral)`` [m] of ``point``: along the path from its origin, and to its left."""
+        d = np.asarray(point, float) - self.origin
+        ux, uy = self.direction
+        return float(d[0] * ux + d[1] * uy), float(-d[0] * uy + d[1] * ux)
+
+
+@dataclass
+class Track:
+    """What is kept of one other vehicle: its lane sequence from when it was first seen, the
+    cumulative length before each lane [m], and its conflict with the ego's path (``None``
+    when its lanes never enter it): index of the lane, longitudinal position on that lane
+    [m], arc length from the start of the sequence [m], the point (2,) and its ``u`` on the
+    ego's path [m]."""
+
+    vehicle: Any
+    lanes: list[tuple]
+    offsets: list[float]
+    conflict_lane: int | None = None
+    conflict_long_m: float = math.nan
+    conflict_arc_m: float = math.nan
+    point: np.ndarray | None = None
+    conflict_u_m: float = math.nan
+
+
+@dataclass(frozen=True)
+class Projection:
+    """One other vehicle on its conflict with the ego's path: the planner's two states."""
+
+    other_s_m: float  #: the vehicle's position relative to the conflict point, along its lanes
+    other_v_mps: float  #: its speed
+    ego_s_m: float  #: the ego's position relative to the same point, along its path
+    point: tuple[float, float]  #: the conflict point [m]
+    track: Track = field(repr=False, compare=False)
+
+
+def lane_sequence(vehicle, network) -> list[tuple]:
+    """The lanes a vehicle will drive: the one it follows now, then the rest of its route."""
+    current = getattr(vehicle, "target_lane_index", None) or vehicle.lane_index
+    lanes = [tuple(current)]
+    route = [tuple(r) for r in (getattr(vehicle, "route", None) or [])]
+    starts = [i for i, r in enumerate(route) if r[:2] == lanes[0][:2]]
+    rest = route[starts[0] + 1:] if starts else route
+    for r in rest:
+        index = r if r[2] is not None else (r[0], r[1], 0)
+        network.get_lane(index)  # a lane of the network
+        lanes.append(index)
+    return lanes
+
+
+def _lane_samples(lane) -> np.ndarray:
+    """Longitudinal positions [m] where a lane is searched for the conflict: its ends for a
+    straight lane, at most :data:`SAMPLE_M` apart otherwise."""
+    from highway_env.road.lane import StraightLane
+
+    if isinstance(lane, StraightLane):
+        return np.array([0.0, lane.length])
+    n = max(2, int(math.ceil(lane.length / SAMPLE_M)) + 1)
+    return np.linspace(0.0, lane.length, n)
+
+
+def find_conflict(network, lanes: list[tuple], ego: EgoPath,
+                  band_m: float = CONFLICT_BAND_M) -> tuple[int, float] | None:
+    """Where a lane sequence first comes within ``band_m`` of the ego's path: ``(lane index in
+    lanes, longitudinal position on that lane [m])``, or ``None``.
+
+    Lanes at the start that lie on the ego's path (the vehicle is in the ego's lane) are
+    skipped; after them, the first point where the lateral offset from the ego's path line,
+    coming from beyond ``band_m``, reaches ``band_m`` (crossing the path or merging into it;
+    found exactly on a straight lane, by bisection on a curved one), within the ego's path.
+    Leaving the path (a turn out of the ego's lane) is no entry.
+    """
+    from highway_env.road.lane import StraightLane
+
+    objs = [network.get_lane(index) for index in lanes]
+    first = 0
+    while first < len(objs) and isinstance(objs[first], StraightLane) and all(
+            abs(ego.coordinates(p)[1]) <= ON_PATH_M for p in (objs[first].start,
+                                                             objs[first].end)):
+        first += 1
+    prev = None  # (lane, longitudinal, lateral) of the previous sample
+    for i in range(first, len(objs)):
+        lane = objs[i]
+        for x in _lane_samples(lane):
+            x = float(x)
+            lat = ego.coordinates(lane.position(x, 0.0))[1]
+            if prev is not None and abs(prev[2]) > band_m and (
+                    abs(lat) <= band_m or (lat > 0) != (prev[2] > 0)):
+                target = math.copysign(band_m, prev[2])
+                lo = prev[1] if prev[0] == i else 0.0
+                hit = _solve(lane, ego, lo, x, target, isinstance(lane, StraightLane))
+                u_hit = ego.coordinates(lane.position(hit, 0.0))[0]
+                if 0.0 <= u_hit <= ego.length_m:
+                    return i, hit
+            prev = (i, x, lat)
+    return None
+
+
+def _solve(lane, ego: EgoPath, lo: float, hi: float, target: float, straight: bool) -> float:
+    """The longitudinal position in ``[lo, hi]`` where the lane's lateral offset from the ego's
+    path line equals ``target`` (it is beyond ``target`` at ``lo`` and not at ``hi``)."""
+    f_lo = ego.coordinates(lane.position(lo, 0.0))[1] - target
+    f_hi = ego.coordinates(lane.position(hi, 0.0))[1] - target
+    if straight:  # the offset is linear along a straight lane
+        return lo + (hi - lo) * f_lo / (f_lo - f_hi)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        f_mid = ego.coordinates(lane.position(mid, 0.0))[1] - target
+        if (f_mid > 0) == (f_lo > 0):
+            lo, f_lo = mid, f_mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+class Projector:
+    """Projects other vehicles onto their conflict with the ego's path (module docstring).
+
+    ``network``: the road network; ``ego_lanes``: the ego's route as lane indices.
+    """
+
+    def __init__(self, network, ego_lanes: list[tuple]):
+        self.network = network
+        self.ego = EgoPath.from_lanes(network, ego_lanes)
+        self._tracks: dict[int, Track] = {}
+
+    def track(self, vehicle) -> Track:
+        """The vehicle's :class:`Track`, made when it is first seen (or when it has left the
+        lanes it was first seen on)."""
+        track = self._tracks.get(id(vehicle))
+        if track is not None and track.vehicle is vehicle and self._lane_position(
+                track, vehicle) is not None:
+            return track
+        lanes = lane_sequence(vehicle, self.network)
+        offsets = np.concatenate([[0.0], np.cumsum(
+            [self.network.get_lane(i).length for i in lanes])])[:-1].tolist()
+        track = Track(vehicle, lanes, offsets)
+        found = find_conflict(self.network, lanes, self.ego)
+        if found is not None:
+            i, long_m = found
+            point = self.network.get_lane(lanes[i]).position(long_m, 0.0)
+            track.conflict_lane, track.conflict_long_m = i, long_m
+            track.conflict_arc_m = offsets[i] + long_m
+            track.point = np.asarray(point, float)
+            track.conflict_u_m = self.ego.coordinates(point)[0]
+        self._tracks[id(vehicle)] = track
+        return track
+
+    @staticmethod
+    def _lane_position(track: Track, vehicle) -> int | None:
+        current = getattr(vehicle, "target_lane_index", None) or vehicle.lane_index
+        for i, index in enumerate(track.lanes):
+            if index[:2] == tuple(current)[:2]:
+                return i
+        return None
+
+    def arc_position(self, track: Track, vehicle) -> float:
+        """The vehicle's arc length along its kept lane sequence [m]."""
+        i = self._lane_position(track, vehicle)
+        lane = self.network.get_lane(track.lanes[i])
+        return track.offsets[i] + float(lane.local_coordinates(vehicle.position)[0])
+
+    def in_ego_lane(self, vehicle) -> bool:
+        """On the ego's path line and heading along it (a leader or a follower)."""
+        _, lat = self.ego.coordinates(vehicle.position)
+        return abs(lat) <= SAME_LANE_M and float(np.dot(vehicle.direction, self.ego.direction)) \
+            >= SAME_LANE_COS
+
+    def project(self, vehicle, ego_vehicle) -> Projection | None:
+        """The vehicle on its conflict with the ego's path, or ``None`` (no conflict, or it
+        is in the ego's lane)."""
+        if self.in_ego_lane(vehicle):
+            return None
+        track = self.track(vehicle)
+        if track.conflict_lane is None:
+            return None
+        other_s = self.arc_position(track, vehicle) - track.conflict_arc_m
+        ego_s = self.ego.coordinates(ego_vehicle.position)[0] - track.conflict_u_m
+        return Projection(float(other_s), float(vehicle.speed), float(ego_s),
+                          (float(track.point[0]), float(track.point[1])), track)
+
+    def leader(self, ego_vehicle, vehicles: Iterable) -> tuple[float, float] | None:
+        """The nearest vehicle ahead in the ego's lane: ``(bumper gap [m], speed [m/s])``."""
+        u_ego = self.ego.coordinates(ego_vehicle.position)[0]
+        best = None
+        for v in vehicles:
+            if v is ego_vehicle or not self.in_ego_lane(v):
+                continue
+            gap = self.ego.coordinates(v.position)[0] - u_ego - 0.5 * (v.LENGTH
+                                                                         + ego_vehicle.LENGTH)
+            if self.ego.coordinates(v.position)[0] > u_ego and (best is None or gap < best[0]):
+                best = (float(gap), float(v.speed))
+        return best
+
+
+def idm_accel(config: Config, v: float, leader: tuple[float, float]) -> float:
+    """IDM acceleration [m/s^2] behind a leader ``(gap [m], speed [m/s])`` with the
+    parameters of ``config.hv.idm`` and the ego's ``v_max`` as desired speed."""
+    p = config.hv.idm
+    v0 = config.vehicle_of("av").v_max_mps
+    gap, v_lead = leader
+    s_star = p.jam_gap_m + max(0.0, v * p.time_gap_s + v * (v - v_lead) / (
+        2.0 * math.sqrt(p.max_accel_mps2 * p.comfort_decel_mps2)))
+    return p.max_accel_mps2 * (1.0 - (v / v0) ** p.delta - (s_star / max(gap, 0.1)) ** 2)
+
+
+# -- the drivers ---------------------------------------------------------------------------
+
+
+class PlannerDriver:
+    """The ego driven by :class:`~persuasive.Planner` (module docstring: one planner per
+    conflicting vehicle, the most cautious answer, an IDM gap to a leader in the lane)."""
+
+    def __init__(self, config: Config, seed: int):
+        self.config = config
+        self.seed = seed
+        self._planners: dict[int, Any] = {}
+        self._made = 0
+        self.last_targets = 0  #: vehicles planned against at the last step
+
+    def act(self, env, projections: list[Projection], projector: Projector) -> float:
+        from ..planner import Planner
+
+        cfg = self.config
+        av, hv = cfg.vehicle_of("av"), cfg.vehicle_of("hv")
+        ego = env.unwrapped.vehicle
+        clear = clear_distance(cfg)
+        v_ego = min(max(float(ego.speed), av.v_min_mps), av.v_max_mps)
+        accels, live = [], set()
+        for p in projections:
+            if not (p.other_s_m < clear and p.ego_s_m < clear):
+                continue
+            key = id(p.track)
+            planner = self._planners.get(key)
+            if planner is None:
+                planner = self._planners[key] = Planner(cfg, seed=self.seed * 1000 + self._made)
+                self._made += 1
+            live.add(key)
+            v_other = min(max(p.other_v_mps, hv.v_min_mps), hv.v_max_mps)
+            accels.append(planner.plan(av=(p.ego_s_m, v_ego), hv=(p.other_s_m, v_other))
+                          .accel_mps2)
+        for key in list(self._planners):
+            if key not in live:
+                del self._planners[key]
+        self.last_targets = len(accels)
+        a = min(accels) if accels else av.u_max_mps2
+        leader = projector.leader(ego, env.unwrapped.road.vehicles)
+        if leader is not None:
+            a = min(a, idm_accel(cfg, v_ego, leader))
+        dt = 1.0 / FREQUENCY_HZ
+        a = min(max(a, av.u_min_mps2, (av.v_min_mps - float(ego.speed)) / dt),
+                av.u_max_mps2, (av.v_max_mps - float(ego.speed)) / dt)
+        return float(a)
+
+
+def clear_distance(config: Config) -> float:
+    """Where a vehicle has cleared the conflict of the planner's scenario [m] (7.5)."""
+    from ..simulation import static_setup
+
+    return float(static_setup(config)[0].hv.clear_s)
+
+
+def install_default_ego(env) -> Any:
+    """Replace the ego by one of highway-env's own ``IDMVehicle`` (module docstring)."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    u = env.unwrapped
+    old = u.vehicle
+    ego = IDMVehicle(u.road, np.array(old.position, float), heading=old.heading,
+                     speed=old.speed, target_lane_index=old.lane_index,
+                     enable_lane_change=False)
+    ego.plan_route_to(DESTINATION)
+    u.road.vehicles[u.road.vehicles.index(old)] = ego
+    u.controlled_vehicles = [ego]
+    return ego
+
+
+def _action(config: Config, accel: float) -> np.ndarray:
+    """The ``ContinuousAction`` in ``[-1, 1]`` that highway-env maps to ``accel``."""
+    veh = config.vehicle_of("av")
+    lo, hi = veh.u_min_mps2, veh.u_max_mps2
+    return np.array([2.0 * (accel - lo) / (hi - lo) - 1.0])
+
+
+# -- episodes ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """One episode of one driver (module docstring)."""
+
+    seed: int
+    driver: str  #: the planner's kind, or "default" (highway-env's IDM ego)
+    collision: bool
+    crossed: bool  #: the ego left the intersection's inner lane
+    arrived: bool  #: highway-env's has_arrived at the end
+    first: str  #: against the contested vehicles: "ego", "other", "mixed" or "none"
+    ego_first: int  #: contested vehicles the ego reached the conflict point before
+    other_first: int  #: contested vehicles that reached it before the ego
+    contested: int  #: vehicles that contested the ego's crossing
+    time_to_cross_s: float | None  #: when the ego left the inner lane [s]
+    min_distance_m: float  #: minimum centre distance to any other vehicle [m]
+    #: the same over the vehicles whose lanes enter the ego's path or that are in its lane
+    #: (oncoming traffic passes 4 m beside the ego and sets ``min_distance_m``) [m]
+    min_conflict_distance_m: float
+    steps: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class _Contest:
+    ego_at: int | None = None
+    other_at: int | None = None
+    contested: bool = False
+
+
+def run_episode(seed: int, driver: str = "persuasive", config: Config | None = None,
+                frames: list | None = None) -> EpisodeResult:
+    """One episode of highway-env's intersection with ``seed``.
+
+    ``driver``: an AV kind (the planner drives the ego, :class:`PlannerDriver`) or
+    ``"default"`` (highway-env's IDM ego, :func:`install_default_ego`). ``config``: the
+    planner's (default :func:`planner_config` of ``driver``). ``frames``: a list that receives
+    the ``rgb_array`` frames (after the reset and after each step).
+    """
+    if driver != DEFAULT_DRIVER:
+        config = config if config is not None else planner_config(driver)
+        driver = config.av.kind
+    else:
+        config = config if config is not None else planner_config()
+    env = make_highway_env(config, render_mode="rgb_array" if frames is not None else None)
+    try:
+        env.reset(seed=seed)
+        u = env.unwrapped
+        network = u.road.network
+        start = u.vehicle.lane_index
+        nodes = network.shortest_path(start[1], DESTINATION)
+        ego_lanes = [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
+        projector = Projector(network, ego_lanes)
+        if driver == DEFAULT_DRIVER:
+            install_default_ego(env)
+            planner = None
+        else:
+            planner = PlannerDriver(config, seed)
+        if frames is not None:
+            frames.append(env.render())
+        contests: dict[int, _Contest] = {}
+        state = {"min_d": math.inf, "min_conflict_d": math.inf, "cross": None}
+
+        def observe(k: int) -> list[Projection]:
+            ego = u.vehicle
+            projections = []
+            for v in u.road.vehicles:
+                if v is ego:
+                    continue
+                d = float(np.linalg.norm(np.asarray(v.position) - np.asarray(ego.position)))
+                state["min_d"] = min(state["min_d"], d)
+                p = projector.project(v, ego)
+                if p is not None or projector.in_ego_lane(v):
+                    state["min_conflict_d"] = min(state["min_conflict_d"], d)
+                if p is None:
+                    continue
+                projections.append(p)
+                c = contests.setdefault(id(p.track), _Contest())
+                if -CONTEST_RANGE_M <= p.ego_s_m <= 0.0 and -CONTEST_RANGE_M <= p.other_s_m <= 0.0:
+                    c.contested = True
+                if c.ego_at is None and p.ego_s_m >= 0.0:
+                    c.ego_at = k
+                if c.other_at is None and p.other_s_m >= 0.0:
+                    c.other_at = k
+            if state["cross"] is None and projector.ego.coordinates(ego.position)[0] >= \
+                    projector.ego.exit_u_m:
+                state["cross"] = k
+            return projections
+
+        projections = observe(0)
+        k, terminated, truncated = 0, False, False
+        while not (terminated or truncated):
+            accel = 0.0 if planner is None else planner.act(env, projections, projector)
+            _, _, terminated, truncated, _ = env.step(_action(config, accel))
+            k += 1
+            if frames is not None:
+                frames.append(env.render())
+            projections = observe(k)
+        ego = u.vehicle
+        ego_first = other_first = contested = 0
+        for c in contests.values():
+            if not c.contested:
+                continue
+            contested += 1
+            if c.ego_at is None and c.other_at is None:
+                continue
+            if c.other_at is None or (c.ego_at is not None and c.ego_at < c.other_at):
+                ego_first += 1
+            elif c.ego_at is None or c.other_at < c.ego_at:
+                other_first += 1
+        first = "none"
+        if ego_first and other_first:
+            first = "mixed"
+        elif ego_first:
+            first = "ego"
+        elif other_first:
+            first = "other"
+        dt = 1.0 / FREQUENCY_HZ
+        return EpisodeResult(
+            seed=int(seed), driver=driver, collision=bool(ego.crashed),
+            crossed=state["cross"] is not None, arrived=bool(u.has_arrived(ego)), first=first,
+            ego_first=ego_first, other_first=other_first, contested=contested,
+            time_to_cross_s=None if state["cross"] is None else round(state["cross"] * dt, 10),
+            min_distance_m=float(state["min_d"]),
+            min_conflict_distance_m=float(state["min_conflict_d"]), steps=k)
+    finally:
+        env.close()
+
+
+@dataclass(frozen=True)
+class HighwayReport:
+    """Episodes of the planner and of highway-env's default ego on the same seeds."""
+
+    env_id: str
+    planner: str
+    seeds: tuple[int, ...]
+    episodes: tuple[EpisodeResult, ...]
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        """Per driver: counts of collisions, crossings, arrivals and of who went first; the
+        mean time to cross (over crossing episodes) and the smallest and median minimum
+        distance."""
+        out = {}
+        for driver in (self.planner, DEFAULT_DRIVER):
+            eps = [e for e in self.episodes if e.driver == driver]
+            times = [e.time_to_cross_s for e in eps if e.time_to_cross_s is not None]
+            dists = [e.min_distance_m for e in eps]
+            conflict = [e.min_conflict_distance_m for e in eps]
+            out[driver] = {
+                "episodes": len(eps),
+                "collisions": sum(e.collision for e in eps),
+                "crossed": sum(e.crossed for e in eps),
+                "arrived": sum(e.arrived for e in eps),
+                "ego_first": sum(e.ego_first for e in eps),
+                "other_first": sum(e.other_first for e in eps),
+                "mean_time_to_cross_s": float(np.mean(times)) if times else None,
+                "min_distance_m": float(np.min(dists)) if dists else None,
+                "median_min_distance_m": float(np.median(dists)) if dists else None,
+                "min_conflict_distance_m": float(np.min(conflict)) if conflict else None,
+                "median_min_conflict_distance_m": float(np.median(conflict)) if conflict
+                else None,
+            }
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"env_id": self.env_id, "planner": self.planner, "seeds": list(self.seeds),
+                "episodes": [e.to_dict() for e in self.episodes], "summary": self.summary()}
+
+
+def run_highway(episodes: int = 5, planner: str = "persuasive", seed: int = 1,
+                frames: list | None = None) -> HighwayReport:
+    """``episodes`` episodes (seeds ``seed .. seed + episodes - 1``), each driven by the
+    planner and by highway-env's default ego. ``frames`` receives the frames of the
+    planner's first episode."""
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ConfigError(f"--episodes = {episodes!r} is out of range; allowed: integer >= 1")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**31 - episodes:
+        raise ConfigError(f"--seed = {seed!r} is out of range; allowed: integer in "
+                          f"[0, 2^31 - episodes)")
+    config = planner_config(planner)
+    seeds = tuple(range(seed, seed + episodes))
+    results = []
+    for i, s in enumerate(seeds):
+        results.append(run_episode(s, config.av.kind, config, frames if i == 0 else None))
+        results.append(run_episode(s, DEFAULT_DRIVER, config))
+    return HighwayReport(highway_env_id(), config.av.kind, seeds, tuple(results))
+
+
+def write_video(frames: list[np.ndarray], path: str | Path, fps: int = FREQUENCY_HZ) -> Path:
+    """Write frames as MP4 (H.264) or GIF, by extension, atomically (as ``persuasive
+    animate``)."""
+    import imageio.v2 as iio2
+    import imageio.v3 as iio3
+
+    from .._files import atomic_write
+    from ..plots.files import check_animation_path
+
+    path = Path(path)
+    ext = check_animation_path(path)
+    even = [np.pad(f, ((0, f.shape[0] % 2), (0, f.shape[1] % 2), (0, 0)), constant_values=255)
+            for f in frames]
+
+    def write(tmp: Path) -> None:
+        if ext == ".mp4":
+            writer = iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
+                                     pixelformat="yuv420p", macro_block_size=2,
+                                     ffmpeg_log_level="error")
+            try:
+                for frame in even:
+                    writer.append_data(frame)
+            except BaseException:
+                with contextlib.suppress(Exception):
+                    writer.close()
+                raise
+            writer.close()
+        else:
+            iio3.imwrite(tmp, np.stack(even), extension=".gif", plugin="pillow",
+                         duration=1000.0 / fps, loop=0)
+
+    atomic_write(path, write)
+    return path
+
+
+__all__ = ["CONTEST_RANGE_M", "EgoPath", "EpisodeResult", "HighwayReport", "PlannerDriver",
+           "Projection", "Projector", "find_conflict", "highway_env_id", "install_default_ego",
+           "make_highway_env", "planner_config", "run_episode", "run_highway", "write_video"]

@@ -1,0 +1,133 @@
+"""``persuasive compare`` (``persuasive.studies.compare``): every pair on the same runs, the
+summary's statistics, the command and its figure."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from persuasive import Config, ConfigError, simulate
+from persuasive.cli import main
+from persuasive.studies import compare as cmp
+
+
+def run(capsys, *args):
+    code = main(list(args))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_parse_kinds():
+    assert cmp.parse_kinds("persuasive, yield", ("persuasive", "yield", "cv"), "--av",
+                           ()) == ("persuasive", "yield")
+    assert cmp.parse_kinds("mpc", ("persuasive",), "--av", ()) == ("persuasive",)
+    assert cmp.parse_kinds("all", ("a", "b"), "--av", ("a", "b")) == ("a", "b")
+    assert cmp.parse_kinds(None, ("a", "b"), "--hv", ("a",)) == ("a",)
+    with pytest.raises(ConfigError, match="--av = 'x' is out of range"):
+        cmp.parse_kinds("persuasive,x", ("persuasive",), "--av", ())
+    with pytest.raises(ConfigError, match="given twice"):
+        cmp.parse_kinds("a,a", ("a",), "--av", ())
+
+
+@pytest.fixture(scope="module")
+def comparison(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cmp") / "c"
+    return cmp.run_comparison(Config(), ("persuasive", "yield", "cv"), ("lfg", "aggressive"),
+                              seeds=6, out=folder, workers=2, timing_seeds=1)
+
+
+def test_every_pair_meets_the_same_humans(comparison):
+    runs = comparison.runs
+    assert len(runs) == 3 * 2 * 6 and comparison.failures == 0
+    assert set(runs["streams"]) == {"per-agent"}  # forced for a paired comparison
+    for hv, mine in runs.groupby("hv.kind"):
+        starts = mine.groupby("seed")[["hv_initial_state.0", "hv_initial_state.1",
+                                       "av_initial_state.0"]].nunique()
+        assert (starts == 1).all().all(), hv  # one initial state per seed, whatever the AV
+
+
+def test_rows_equal_the_runs_they_summarise(comparison):
+    runs = comparison.runs
+    for row in comparison.summary["rows"]:
+        mine = runs[(runs["av.kind"] == row["av"]) & (runs["hv.kind"] == row["hv"])]
+        first = mine["first_at_line"].to_numpy()
+        assert row["runs"] == len(mine) == 6
+        assert row["av_first_pct"] == pytest.approx(100 * np.mean(first == 1))
+        assert row["collisions"] == int(mine["collision"].sum())
+        lo, hi = row["av_first_pct_ci"]
+        assert lo <= row["av_first_pct"] <= hi
+        assert row["av_decision_ms"
+                   "_median"] > 0
+        # each run is what simulate gives for its pair and seed
+        seed = int(mine["seed"].iloc[0])
+        config = cmp.comparison_base(Config()).with_overrides({"av.kind": row["av"],
+                                                               "hv.kind": row["hv"]})
+        assert simulate(config, seed).outcome.first_at_line == int(mine["first_at_line"].iloc[0])
+
+
+def test_yield_never_goes_first_and_paired_differences_are_by_seed(comparison):
+    rows = {(r["av"], r["hv"]): r for r in comparison.summary["rows"]}
+    assert rows[("yield", "aggressive")]["av_first_pct"] == 0.0
+    runs = comparison.runs
+    for p in comparison.summary["paired"]:
+        ref = runs[(runs["av.kind"] == "persuasive") & (runs["hv.kind"] == p["hv"])]
+        other = runs[(runs["av.kind"] == p["av"]) & (runs["hv.kind"] == p["hv"])]
+        a = ref.set_index("seed")["first_at_line"].eq(1).astype(float)
+        b = other.set_index("seed")["first_at_line"].eq(1).astype(float)
+        assert p["av_first_pct"]["mean"] == pytest.approx(100 * (b - a).mean())
+        assert p["av_first_pct"]["seeds"] == 6
+
+
+def test_summary_is_a_function_of_the_runs(comparison):
+    again = cmp.summarize(comparison.runs, cmp.comparison_base(Config()),
+                          ("persuasive", "yield", "cv"), ("lfg", "aggressive"), 6,
+                          {(r["av"], r["hv"]): r["av_decision_ms_median"]
+                           for r in comparison.summary["rows"]})
+    saved = json.loads((comparison.folder / "summary.json").read_text())
+    again["failures"] = saved["failures"]
+    assert json.loads(json.dumps(again)) == saved  # bootstrap intervals included
+
+
+def test_bootstrap_interval_by_construction():
+    values = np.array([0.0] * 50 + [1.0] * 50)
+    lo, hi = cmp._bootstrap_ci(values)
+    assert 0.35 < lo < 0.5 < hi < 0.65  # about +-1.96 * 0.05
+    assert cmp._bootstrap_ci(np.ones(7)) == [1.0, 1.0]
+    assert cmp._bootstrap_ci(np.array([np.nan])) == [None, None]
+
+
+def test_compare_command_json_and_figure(capsys, tmp_path):
+    code, out, err = run(capsys, "compare", "--av", "persuasive,passive", "--hv", "stubborn",
+                         "--seeds", "3", "--workers", "1", "--quiet", "--json",
+                         "--out", str(tmp_path / "c"), "--timing-seeds", "1")
+    assert code == 0, err
+    rows = json.loads(out)
+    assert [(r["av"], r["hv"]) for r in rows] == [("persuasive", "stubborn"),
+                                                 ("passive", "stubborn")]
+    assert all(set(r) == set(cmp.JSON_KEYS) for r in rows)
+    code, out, err = run(capsys, "plot", "compare", "--from", str(tmp_path / "c"), "--out",
+                         str(tmp_path / "c.png"))
+    assert code == 0 and (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+    # rerunning the same comparison resumes (nothing to run) and gives the same summary
+    before = (tmp_path / "c" / "summary.json").read_text()
+    code, _, _ = run(capsys, "compare", "--av", "persuasive,passive", "--hv", "stubborn",
+                     "--seeds", "3", "--workers", "1", "--quiet", "--json",
+                     "--out", str(tmp_path / "c"), "--timing-seeds", "1")
+    after = json.loads((tmp_path / "c" / "summary.json").read_text())
+    assert code == 0
+    for a, b in zip(json.loads(before)["rows"], after["rows"]):
+        a.pop("av_decision_ms_median"), b.pop("av_decision_ms_median")  # timing varies
+        assert a == b
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--av", "persuasive,teleport"], "--av = 'teleport' is out of range"),
+    (["--hv", "lfg,lfg"], "given twice"),
+    (["--seeds", "0"], "--seeds"),
+])
+def test_compare_bad_input(capsys, tmp_path, args, message):
+    code, out, err = run(capsys, "compare", *args, "--out", str(tmp_path / "c"), "--quiet")
+    assert code == 2 and out == "" and message in err and err.count("\n") == 1

@@ -1,0 +1,48 @@
+"""The compiled kernels' cache guard (``persuasive._compile``): an edit in any source of the
+package clears the cached kernels, so a function never runs a stale copy of a callee."""
+
+from __future__ import annotations
+
+import persuasive._compile as comp
+
+
+def _fake_package(root):
+    (root / "sub" / "__pycache__").mkdir(parents=True)
+    (root / "__pycache__").mkdir()
+    (root / "a.py").write_text("x = 1\n")
+    (root / "sub" / "b.py").write_text("y = 2\n")
+    caches = [root / "__pycache__" / "a.f-1.py311.nbi", root / "__pycache__" / "a.f-1.py311.1.nbc",
+              root / "sub" / "__pycache__" / "b.g-3.py311.nbi"]
+    for c in caches:
+        c.write_bytes(b"cached")
+    keep = root / "__pycache__" / "a.cpython-311.pyc"
+    keep.write_bytes(b"bytecode")
+    return caches, keep
+
+
+def test_an_edit_anywhere_clears_the_cached_kernels(tmp_path, monkeypatch):
+    monkeypatch.setattr(comp, "_PACKAGE", tmp_path)
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    caches, keep = _fake_package(tmp_path)
+    assert comp.ensure_fresh_cache() is True  # no stamp yet: cleared, stamp written
+    assert not any(c.exists() for c in caches) and keep.exists()
+    for c in caches:  # the kernels compiled again
+        c.write_bytes(b"cached")
+    assert comp.ensure_fresh_cache() is False  # nothing changed: the cache stands
+    assert all(c.exists() for c in caches)
+    (tmp_path / "sub" / "b.py").write_text("y = 3\n")  # an edit in another file
+    assert comp.ensure_fresh_cache() is True
+    assert not any(c.exists() for c in caches) and keep.exists()
+
+
+def test_the_stamp_follows_numba_cache_dir(tmp_path, monkeypatch):
+    pkg, cache = tmp_path / "pkg", tmp_path / "cache"
+    pkg.mkdir()
+    (pkg / "a.py").write_text("x = 1\n")
+    stale = cache / "work" / "persuasive" / "k.f-1.py311.nbi"
+    stale.parent.mkdir(parents=True)
+    stale.write_bytes(b"cached")
+    monkeypatch.setattr(comp, "_PACKAGE", pkg)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    assert comp.ensure_fresh_cache() is True
+    assert not stale.exists() and (cache / comp._STAMP).exists()

@@ -1,0 +1,443 @@
+"""The gymnasium environment (``persuasive.envs.conflict``) and the planner in highway-env
+(``persuasive.envs.highway``, ``persuasive highway``).
+
+Tolerances: the environment is the closed loop of ``simulate`` and is compared with it bit for
+bit (exact equality); rewards are recomputed by hand with the same formula and compared to
+1e-12 absolute; the highway-env projection is compared with hand-computed geometry to 1e-9 m
+(straight lanes) and 1e-7 m (arcs, found by bisection to far below that).
+"""
+
+import json
+import math
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import persuasive.envs  # noqa: F401  (registers the ids)
+from persuasive import Config, ConfigError, Planner, simulate
+from persuasive.cli import main
+from persuasive.envs import ENV_IDS
+
+#: check_env's advice for action boxes other than [-1, 1]; the issue fixes the box to the
+#: vehicle's [u_min, u_max] (m/s^2), so this one warning is expected.
+ACTION_BOX_ADVICE = "recommend using a symmetric and normalized space"
+WRAPPED_ADVICE = "is different from the unwrapped version"
+
+
+def _check_quietly(env, allowed=(ACTION_BOX_ADVICE,)):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env)
+    unexpected = [str(w.message) for w in caught
+                  if not any(a in str(w.message) for a in allowed)]
+    assert unexpected == []
+
+
+def _episode(env, actions, seed):
+    """Observations, rewards, flags and infos of ``actions`` from ``reset(seed)``."""
+    obs, info = env.reset(seed=seed)
+    out = [(obs, None, False, False, info)]
+    for a in actions:
+        step = env.step(np.array([a], np.float32))
+        out.append(step)
+        if step[2] or step[3]:
+            break
+    return out
+
+
+# -- gymnasium: API, registration, determinism ---------------------------------------------
+
+
+@pytest.mark.parametrize("env_id", list(ENV_IDS.values()))
+def test_every_registered_id_passes_check_env(env_id):
+    env = gym.make(env_id)
+    _check_quietly(env.unwrapped)
+    _check_quietly(env, allowed=(ACTION_BOX_ADVICE, WRAPPED_ADVICE))
+    assert env.unwrapped.config.scenario.kind == next(k for k, v in ENV_IDS.items()
+                                                      if v == env_id)
+    env.close()
+
+
+def test_ids_register_in_a_fresh_interpreter():
+    """gymnasium >= 1.0 no longer calls ``gymnasium.envs`` entry points: the entry point is
+    declared (and works when called), and the ``module:id`` form registers by itself."""
+    entry = ("from importlib.metadata import entry_points\n"
+             "import gymnasium as gym\n"
+             "(ep,) = [e for e in entry_points(group='gymnasium.envs') if e.name == 'persuasive']\n"
+             "assert ep.value == 'persuasive.envs:register_envs'\n"
+             "assert 'persuasive/Intersection-v0' not in gym.registry\n"
+             "ep.load()()\n"
+             "print(gym.make('persuasive/Intersection-v0').reset(seed=1)[0].tolist())\n")
+    module = ("import gymnasium as gym\n"
+              "env = gym.make('persuasive.envs:persuasive/Intersection-v0')\n"
+              "print(env.reset(seed=1)[0].tolist())\n")
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for code in (entry, module)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [err for _, err in outs]
+    expected = gym.make("persuasive/Intersection-v0").reset(seed=1)[0].tolist()
+    assert [json.loads(out) for out, _ in outs] == [expected, expected]
+
+
+def test_seed_drives_the_run_as_simulate_does_and_is_deterministic():
+    env = gym.make("persuasive/Intersection-v0")
+    actions = [1.0, 0.5, -0.3, -2.0, 0.8] * 4
+    first, again = _episode(env, actions, 5), _episode(env, actions, 5)
+    assert len(first) == len(again) == len(actions) + 1
+    for a, b in zip(first, again):
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:4] == b[1:4]
+        assert a[4].keys() == b[4].keys()
+        for key in a[4]:
+            np.testing.assert_array_equal(a[4][key], b[4][key])
+    # reset(seed) starts the run simulate(config, seed) runs
+    for seed in (5, 996):
+        obs, info = env.reset(seed=seed)
+        x0 = simulate(env.unwrapped.config, seed).states[0]
+        np.testing.assert_array_equal(info["true_state"], x0)
+        np.testing.assert_array_equal(obs, x0.astype(np.float32))
+    assert not np.array_equal(env.reset(seed=6)[0], env.reset(seed=5)[0])
+
+
+@pytest.mark.parametrize("vector", [gym.vector.SyncVectorEnv, gym.vector.AsyncVectorEnv])
+def test_vector_envs_step(vector):
+    envs = vector([lambda: gym.make("persuasive/Intersection-v0") for _ in range(2)])
+    try:
+        obs, _ = envs.reset(seed=[3, 4])
+        assert obs.shape == (2, 4) and obs.dtype == np.float32
+        single = gym.make("persuasive/Intersection-v0")
+        for j, seed in enumerate((3, 4)):
+            np.testing.assert_array_equal(obs[j], single.reset(seed=seed)[0])
+        for _ in range(5):
+            obs, reward, terminated, truncated, info = envs.step(
+                np.array([[1.0], [-1.0]], np.float32))
+            assert obs.shape == (2, 4) and reward.shape == (2,)
+        expected = _episode(single, [-1.0] * 5, 4)[-1][0]
+        np.testing.assert_array_equal(obs[1], expected)
+    finally:
+        envs.close()
+
+
+def test_bad_arguments_are_config_errors():
+    with pytest.raises(ConfigError, match="controlled"):
+        gym.make("persuasive/Intersection-v0", controlled="both")
+    with pytest.raises(ConfigError, match="other_kind"):
+        gym.make("persuasive/Intersection-v0", controlled="av", other_kind="persuasive")
+    with pytest.raises(ConfigError, match="observe_belief"):
+        gym.make("persuasive/Intersection-v0", controlled="av", observe_belief=True)
+    env = gym.make("persuasive/Intersection-v0", disable_env_checker=True)
+    env.reset(seed=1)
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.array([np.nan]))
+
+
+# -- gymnasium: reward, termination, truncation, rendering ---------------------------------
+
+
+@pytest.mark.parametrize("controlled", ["hv", "av"])
+def test_reward_is_the_papers_step_reward_from_the_logged_states(controlled):
+    """Full throttle against an opponent that does not yield: the pair comes within the
+    safety distance, so the collision term is exercised too."""
+    other = "persuasive" if controlled == "hv" else "aggressive"
+    env = gym.make("persuasive/Intersection-v0", controlled=controlled, other_kind=other)
+    steps = _episode(env, [1.0] * 61, 1)
+    record = env.unwrapped.record()
+    states, c = record.states, env.unwrapped.config
+    j = 0 if controlled == "av" else 2
+    accel = record.log[f"{controlled}_accel_mps2"]
+    terms = []
+    for k, (_, reward, _, _, info) in enumerate(steps[1:]):
+        s, v = states[k + 1, j], states[k + 1, j + 1]
+        d = math.sqrt(states[k + 1, 0] ** 2 + states[k + 1, 2] ** 2)  # the intersection's
+        coll = (1.0 + v) if d < 7.5 else 0.0
+        expected = (s - states[0, j]) - c.reward.w_c * coll - c.reward.w_u * abs(accel[k])
+        assert reward == pytest.approx(expected, rel=0, abs=1e-12)
+        assert info["reward_collision"] == coll and info["accel_mps2"] == accel[k] == 1.0
+        terms.append(coll)
+    assert any(t > 0 for t in terms) and any(t == 0 for t in terms)
+
+
+def test_terminates_on_collision():
+    """The agent's AV at full throttle against the aggressive human (full throttle, never
+    yields): they collide, and the episode ends at the first step whose footprints overlap."""
+    env = gym.make("persuasive/Intersection-v0", controlled="av", other_kind="aggressive")
+    steps = _episode(env, [1.0] * 61, 2)
+    *_, (_, _, terminated, truncated, info) = steps
+    assert terminated and not truncated and info["collision"]
+    record = env.unwrapped.record()
+    overlap = env.unwrapped.scenario.collides(record.states[:, 0], record.states[:, 2])
+    assert overlap[-1] and not overlap[:-1].any()
+    assert len(steps) - 1 < 61
+
+
+def test_terminates_when_both_have_cleared():
+    env = gym.make("persuasive/Intersection-v0", other_kind="yield",
+                   config={"simulation": {"n_steps": 150}})
+    *_, (_, _, terminated, truncated, info) = _episode(env, [1.0] * 150, 1)
+    assert terminated and not truncated and not info["collision"]
+    assert info["av_cleared"] and info["hv_cleared"]
+
+
+def test_truncates_at_the_run_length():
+    """The agent's HV brakes and stops before the conflict: it never clears, no collision,
+    so the episode runs the 61 steps of simulation.n_steps and is truncated on the last."""
+    env = gym.make("persuasive/Intersection-v0")
+    steps = _episode(env, [-2.0] * 80, 3)
+    assert len(steps) - 1 == env.unwrapped.config.simulation.n_steps == 61
+    assert [s[3] for s in steps[1:]] == [False] * 60 + [True]
+    assert not any(s[2] for s in steps[1:])
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(np.array([0.0], np.float32))
+
+
+def test_render_returns_the_documented_rgb_array():
+    env = gym.make("persuasive/LeftTurn-v0", render_mode="rgb_array")
+    env.reset(seed=2)
+    first = env.render()
+    for _ in range(10):
+        env.step(np.array([0.5], np.float32))
+    frame = env.render()
+    assert frame.shape == (400, 400, 3) and frame.dtype == np.uint8
+    assert frame.min() < 100 < frame.max()  # a drawing, not a blank frame
+    assert not np.array_equal(frame, first)  # the vehicles moved
+    env.close()
+    quiet = gym.make("persuasive/Intersection-v0", disable_env_checker=True)
+    quiet.reset(seed=2)
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert quiet.unwrapped.render() is None
+
+
+def test_belief_observation_is_the_planners_belief():
+    """Replaying the LFG human's accelerations of ``simulate`` as the agent's actions (float64,
+    corrected mode: no quirk Q3 reads the human's role) gives the same run, and the appended
+    belief is the AV's P(HV = leader) after its update at each step."""
+    config = Config(mode="corrected")
+    reference = simulate(config, 11)
+    env = gym.make("persuasive/Intersection-v0", config=config, observe_belief=True)
+    obs, info = env.reset(seed=11)
+    assert obs.shape == (5,) and env.observation_space.shape == (5,)
+    for k, a in enumerate(reference.log["hv_accel_mps2"]):
+        assert obs[4] == np.float32(reference.log["av_belief_hv_leader"][k])
+        obs, _, terminated, truncated, info = env.step(np.array([a]))
+        if terminated or truncated:
+            break
+    states = env.unwrapped.record().states
+    np.testing.assert_array_equal(states, reference.states[:len(states)])
+
+
+# -- the README example: the planner as a policy through the env, bit for bit -------------
+
+README_EXAMPLE = """
+import gymnasium as gym
+import numpy as np
+import persuasive.envs                      # registers persuasive/Intersection-v0, ...
+from persuasive import Planner, simulate
+
+env = gym.make("persuasive/Intersection-v0", controlled="av")  # the agent drives the AV
+obs, info = env.reset(seed=996)
+planner = Planner(env.unwrapped.config)     # the env's configuration: paper mode
+terminated = truncated = False
+while not (terminated or truncated):
+    plan = planner.plan(av=info["av_state"], hv=info["hv_state"],
+                        human_role=info["human_role"])      # quirk Q3 reads the role
+    obs, reward, terminated, truncated, info = env.step(np.array([plan.accel_mps2]))
+
+episode = env.unwrapped.record()            # the RunRecord of the steps taken
+reference = simulate(env.unwrapped.config, 996)
+n = len(episode.states)
+assert np.array_equal(episode.states, reference.states[:n])   # bit for bit
+assert episode.outcome.first_at_line == reference.outcome.first_at_line
+"""
+
+
+def test_readme_example_runs():
+    namespace = {}
+    exec(compile(README_EXAMPLE, "README", "exec"), namespace)
+    assert namespace["truncated"]  # the seed-996 run never has both vehicles clear
+
+
+@pytest.mark.parametrize("mode", ["paper", "corrected"])
+@pytest.mark.parametrize("seed", [1, 21, 996])
+def test_planner_through_the_env_reproduces_simulate_bit_for_bit(mode, seed):
+    config = Config(mode=mode)
+    env = gym.make("persuasive/Intersection-v0", config=config, controlled="av")
+    obs, info = env.reset(seed=seed)
+    planner = Planner(env.unwrapped.config)
+    feasible, done = [], False
+    while not done:
+        plan = planner.plan(av=info["av_state"], hv=info["hv_state"],
+                            human_role=info["human_role"] if mode == "paper" else None)
+        feasible.append(plan.feasible)
+        obs, _, terminated, truncated, info = env.step(np.array([plan.accel_mps2]))
+        done = terminated or truncated
+    episode, reference = env.unwrapped.record(), simulate(config, seed)
+    n = len(episode.states)
+    np.testing.assert_array_equal(episode.states, reference.states[:n])
+    for column in ("av_accel_mps2", "hv_accel_mps2", "hv_role", "hv_next_role",
+                   "hv_belief_other_leader"):
+        np.testing.assert_array_equal(episode.log[column], reference.log[column][:n - 1])
+    assert feasible == list(reference.log["av_feasible"][:n - 1])
+    if n == len(reference.states):  # the whole run: the same outcome
+        for name in ("first_at_line", "first_at_conflict_point", "collision",
+                     "min_distance_to_line_m", "min_distance_m", "idx_end",
+                     "hv_role_changes", "av_time_to_line_s", "hv_time_to_line_s"):
+            assert getattr(episode.outcome, name) == getattr(reference.outcome, name) or (
+                math.isnan(getattr(episode.outcome, name))
+                and math.isnan(getattr(reference.outcome, name)))
+
+
+# -- highway-env: the projection onto the conflict ------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def crossing():
+    """highway-env's intersection after reset, with the ego's :class:`Projector`."""
+    from persuasive.envs.highway import (DESTINATION, Projector, make_highway_env,
+                                         planner_config)
+
+    env = make_highway_env(planner_config())
+    env.reset(seed=1)
+    u = env.unwrapped
+    network = u.road.network
+    start = u.vehicle.lane_index
+    nodes = network.shortest_path(start[1], DESTINATION)
+    lanes = [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
+    yield u, Projector(network, lanes)
+    env.close()
+
+
+def _vehicle(u, lane_index, longitudinal, destination, speed=7.0):
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    v = IDMVehicle.make_on_lane(u.road, lane_index, longitudinal, speed)
+    return v.plan_route_to(destination)
+
+
+def _cross(a, b):
+    return a[0] * b[1] - a[1] * b[0]
+
+
+def _ego_line(u):
+    """The ego's lane by hand: a point on it and its unit direction."""
+    lane = u.road.network.get_lane(("o0", "ir0", 0))
+    d = (lane.end - lane.start) / np.linalg.norm(lane.end - lane.start)
+    return lane.start, d
+
+
+def test_projection_of_a_crossing_vehicle_matches_the_lane_geometry(crossing):
+    """A vehicle 50 m along the western approach, going straight east: its lanes are the
+    approach (start a, end b) then the inner lane (b to c), which comes within the band
+    (2.5 m) of the ego's line 2.5 m before crossing it."""
+    u, projector = crossing
+    net = u.road.network
+    approach, inner = net.get_lane(("o1", "ir1", 0)), net.get_lane(("ir1", "il3", 0))
+    v = _vehicle(u, ("o1", "ir1", 0), 50.0, "o3")
+    p = projector.project(v, u.vehicle)
+    # by hand: where the inner lane crosses the ego's line, then 2.5 m back along it (the
+    # lanes cross at right angles)
+    o, d = _ego_line(u)
+    a, b, c = approach.start, approach.end, inner.end
+    t = _cross(o - b, d) / _cross(c - b, d)  # b + t (c - b) lies on the line
+    along = (c - b) / np.linalg.norm(c - b)
+    assert abs(np.dot(along, d)) < 1e-12
+    point = b + t * (c - b) - 2.5 * along
+    entry = t * np.linalg.norm(c - b) - 2.5
+    expected_other = -((np.linalg.norm(b - a) - 50.0) + entry)
+    expected_ego = np.dot(u.vehicle.position - o, d) - np.dot(point - o, d)
+    assert p.point == pytest.approx(tuple(point), abs=1e-9)
+    assert p.other_s_m == pytest.approx(expected_other, abs=1e-9)
+    assert p.other_s_m == pytest.approx(-(50.0 + 13.0 - 2.5), abs=1e-9)
+    assert p.ego_s_m == pytest.approx(expected_ego, abs=1e-9)
+    assert p.other_v_mps == 7.0
+    # the same vehicle first seen 20 m into the inner lane is 20 - 10.5 m past the point
+    w = _vehicle(u, ("ir1", "il3", 0), 20.0, "o3")
+    assert projector.project(w, u.vehicle).other_s_m == pytest.approx(20.0 - 10.5, abs=1e-9)
+
+
+def _arc_entry(lane, x_line):
+    """By hand: where an arc (centre m, radius r) first reaches the vertical line x =
+    x_line, and the arc length from its start to there."""
+    m, r = lane.center, lane.radius
+    dy = math.sqrt(r ** 2 - (x_line - m[0]) ** 2)
+    start = math.atan2(*(lane.position(0.0, 0.0) - m)[::-1])
+
+    def swept(q):  # angle swept from the arc's start, in its direction of travel
+        return ((math.atan2(*(q - m)[::-1]) - start) * lane.direction) % (2 * math.pi)
+
+    point = min((np.array([x_line, m[1] + dy]), np.array([x_line, m[1] - dy])), key=swept)
+    return point, r * swept(point)
+
+
+def test_projection_of_turning_vehicles_matches_the_arc_geometry(crossing):
+    """A left turn from the east crosses the band around the ego's line (x = x_o + 2.5,
+    coming from the east) on its arc; a right turn from the east, which merges into the
+    ego's exit, reaches the band on its arc too, metres before the merge point."""
+    u, projector = crossing
+    net = u.road.network
+    o, d = _ego_line(u)
+    assert tuple(d) == pytest.approx((0.0, -1.0))  # the ego drives south: east is its left
+    approach = net.get_lane(("o3", "ir3", 0))
+    for destination, inner in (("o0", ("ir3", "il0", 0)), ("o2", ("ir3", "il2", 0))):
+        arc = net.get_lane(inner)
+        v = _vehicle(u, ("o3", "ir3", 0), 60.0, destination)
+        p = projector.project(v, u.vehicle)
+        point, length = _arc_entry(arc, o[0] + 2.5)
+        assert p.point == pytest.approx(tuple(point), abs=1e-7)
+        assert p.other_s_m == pytest.approx(-((approach.length - 60.0) + length), abs=1e-7)
+        expected_ego = np.dot(u.vehicle.position - o, d) - np.dot(point - o, d)
+        assert p.ego_s_m == pytest.approx(expected_ego, abs=1e-7)
+    merge_end = arc.position(arc.length, 0.0)
+    assert np.linalg.norm(merge_end - point) > 5.0  # met well before the merge point
+
+
+def test_vehicles_in_the_ego_lane_or_never_entering_it_are_no_conflict(crossing):
+    u, projector = crossing
+    ahead = _vehicle(u, ("o0", "ir0", 0), u.vehicle.lane.local_coordinates(
+        u.vehicle.position)[0] + 20.0, "o2", speed=5.0)
+    assert projector.project(ahead, u.vehicle) is None
+    gap, speed = projector.leader(u.vehicle, [ahead])
+    assert gap == pytest.approx(20.0 - 5.0, abs=1e-9) and speed == 5.0  # bumper to bumper
+    oncoming = _vehicle(u, ("o2", "ir2", 0), 50.0, "o0")  # straight north, beside the ego
+    assert projector.project(oncoming, u.vehicle) is None
+    away = _vehicle(u, ("o1", "ir1", 0), 50.0, "o0")  # right turn, north, never meets it
+    assert projector.project(away, u.vehicle) is None
+
+
+# -- highway-env: the command ---------------------------------------------------------------
+
+
+def test_highway_command_is_deterministic_and_writes_a_video(capsys, tmp_path):
+    import imageio.v3 as iio
+
+    video = tmp_path / "episode.gif"
+    code = main(["highway", "--episodes", "2", "--seed", "1", "--json", "--video", str(video)])
+    first = json.loads(capsys.readouterr().out)
+    code_again = main(["highway", "--episodes", "2", "--seed", "1", "--json"])
+    again = json.loads(capsys.readouterr().out)
+    assert code == code_again == 0
+    assert first.pop("video") == str(video)
+    assert first == again  # same seeds, same report (the video's rendering changes nothing)
+    assert first["env_id"] in ("intersection-v2", "intersection-v1")
+    assert [(e["seed"], e["driver"]) for e in first["episodes"]] == [
+        (1, "persuasive"), (1, "default"), (2, "persuasive"), (2, "default")]
+    for e in first["episodes"]:
+        assert set(e) >= {"collision", "crossed", "arrived", "first", "time_to_cross_s",
+                          "min_distance_m"}
+        assert e["crossed"] == (e["time_to_cross_s"] is not None)
+        assert e["min_distance_m"] > 0
+    assert set(first["summary"]) == {"persuasive", "default"}
+    frames = iio.imread(video, index=None)
+    assert len(frames) == first["episodes"][0]["steps"] + 1
+    assert frames[len(frames) // 2].std() > 10  # drawn headless, not black
+
+
+def test_highway_command_text_and_bad_input(capsys, tmp_path):
+    assert main(["highway", "--episodes", "0"]) == 2
+    assert "--episodes" in capsys.readouterr().err
+    assert main(["highway", "--video", str(tmp_path / "x.avi")]) == 2
+    assert "unsupported extension" in capsys.readouterr().err
