@@ -9,8 +9,9 @@ import persuasive._compile as comp
 def _fake_package(root):
     (root / "sub" / "__pycache__").mkdir(parents=True)
     (root / "__pycache__").mkdir()
-    (root / "a.py").write_text("x = 1\n")
-    (root / "sub" / "b.py").write_text("y = 2\n")
+    (root / "a.py").write_text("@njit\ndef f(): pass\n")
+    (root / "sub" / "b.py").write_text("@njit\ndef g(): pass\n")
+    (root / "sub" / "plain.py").write_text("z = 0\n")
     caches = [root / "__pycache__" / "a.f-1.py311.nbi", root / "__pycache__" / "a.f-1.py311.1.nbc",
               root / "sub" / "__pycache__" / "b.g-3.py311.nbi"]
     for c in caches:
@@ -30,7 +31,9 @@ def test_an_edit_anywhere_clears_the_cached_kernels(tmp_path, monkeypatch):
         c.write_bytes(b"cached")
     assert comp.ensure_fresh_cache() is False  # nothing changed: the cache stands
     assert all(c.exists() for c in caches)
-    (tmp_path / "sub" / "b.py").write_text("y = 3\n")  # an edit in another file
+    (tmp_path / "sub" / "plain.py").write_text("z = 1\n")  # no kernel in it: no effect
+    assert comp.ensure_fresh_cache() is False
+    (tmp_path / "sub" / "b.py").write_text("@njit\ndef g(): return 1\n")  # a kernel's file
     assert comp.ensure_fresh_cache() is True
     assert not any(c.exists() for c in caches) and keep.exists()
 
@@ -38,7 +41,7 @@ def test_an_edit_anywhere_clears_the_cached_kernels(tmp_path, monkeypatch):
 def test_the_stamp_follows_numba_cache_dir(tmp_path, monkeypatch):
     pkg, cache = tmp_path / "pkg", tmp_path / "cache"
     pkg.mkdir()
-    (pkg / "a.py").write_text("x = 1\n")
+    (pkg / "a.py").write_text("@njit\ndef f(): pass\n")
     stale = cache / "work" / "persuasive" / "k.f-1.py311.nbi"
     stale.parent.mkdir(parents=True)
     stale.write_bytes(b"cached")

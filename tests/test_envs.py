@@ -411,6 +411,7 @@ def test_vehicles_in_the_ego_lane_or_never_entering_it_are_no_conflict(crossing)
 # -- highway-env: the command ---------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_highway_command_is_deterministic_and_writes_a_video(capsys, tmp_path):
     import imageio.v3 as iio
 
@@ -437,6 +438,12 @@ def test_highway_command_is_deterministic_and_writes_a_video(capsys, tmp_path):
 
 
 def test_highway_command_text_and_bad_input(capsys, tmp_path):
+    assert main(["highway", "--episodes", "1", "--seed", "3", "--planner", "cv"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("highway-env intersection-v")
+    rows = [line.split() for line in lines if line.split()[:1] in (["3"], ["cv"], ["default"])]
+    assert [r[:2] for r in rows] == [["3", "cv"], ["3", "default"], ["cv", "1"],
+                                     ["default", "1"]]
     assert main(["highway", "--episodes", "0"]) == 2
     assert "--episodes" in capsys.readouterr().err
     assert main(["highway", "--video", str(tmp_path / "x.avi")]) == 2

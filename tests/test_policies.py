@@ -330,12 +330,22 @@ def test_planner_runs_every_av_kind(kind):
 
 
 def test_kinds_registry_is_consistent():
-    from persuasive.config import AV_KINDS, HV_KINDS
+    from persuasive.config import AV_KINDS, HV_KINDS, SIMULATED_HV_KINDS
 
-    assert set(AV_KINDS) | set(HV_KINDS) == set(kd.KINDS)
+    assert set(AV_KINDS) | set(SIMULATED_HV_KINDS) == set(kd.KINDS)
+    assert set(HV_KINDS) - set(SIMULATED_HV_KINDS) == {"person"}  # a Python policy only
     for name, spec in kd.KINDS.items():
         assert kd.BY_ID[spec.kind] is spec and spec.name == name
         assert len(spec.log) <= kd.LOG_SIZE
         for side in spec.sides:
-            assert name in (AV_KINDS if side == kd.AV else HV_KINDS)
+            assert name in (AV_KINDS if side == kd.AV else SIMULATED_HV_KINDS)
     assert slot.N_WORK == len(slot.WORK_NAMES)
+
+
+def test_a_person_is_not_simulated():
+    config = Config().with_overrides({"hv.kind": "person"})
+    with pytest.raises(ConfigError, match="driven by a person"):
+        simulate(config, 1)
+    # but a Python policy drives it, and the record says a person drove
+    record = run_python(config, 1, hv=FullThrottle())
+    assert record.config.hv.kind == "person" and np.all(record.log["hv_throttle"] == 1.0)

@@ -380,13 +380,20 @@ def test_non_loopback_bind_requires_the_token_and_ctrl_c_saves_open_trials(
 
 
 def test_closing_the_browser_mid_trial_keeps_a_partial_trial(server, browser):
+    """The person brakes with a gamepad's left trigger half pressed, then the browser closes."""
     from persuasive.simulation import load_record
 
     context = browser.new_context()
+    context.add_init_script("""
+        const pad = {id: "test pad", index: 0, connected: true, mapping: "standard",
+                     timestamp: 0, axes: [0, 0, 0, 0],
+                     buttons: Array.from({length: 17}, (_, i) =>
+                         ({pressed: i === 6, touched: i === 6, value: i === 6 ? 0.5 : 0}))};
+        Object.defineProperty(navigator, "getGamepads", {value: () => [pad, null, null, null]});
+    """)
     page = context.new_page()
     _begin(page, server.url, "P04")
     page.get_by_test_id("start").click()
-    page.keyboard.down("ArrowDown")
     _wait_clock(page, 1.0)
     context.close()
     summary = _summary(server.out, "P04", lambda s: s["trials"] and s["ended"])
@@ -396,7 +403,9 @@ def test_closing_the_browser_mid_trial_keeps_a_partial_trial(server, browser):
     assert 8 <= entry["steps"] < N_STEPS
     record = load_record(server.out / entry["file"])
     assert len(record.frame()) == entry["steps"]
-    assert (record.frame()["hv_accel_mps2"] < 0).mean() >= 0.8  # braking
+    frame = record.frame()
+    assert (frame["hv_input_source"] == "gamepad").all() and (frame["hv_axis"] == -0.5).all()
+    assert (frame["hv_accel_mps2"] == -1.0).all()  # half of u_min = -2 m/s^2
 
 
 # -- 5. counterbalancing and the study file ------------------------------------------------------
@@ -455,6 +464,8 @@ def test_study_file_errors_name_the_field(tmp_path):
     ]:
         with pytest.raises(ConfigError, match=message):
             study_from_dict({**base, **change})
+    consent = study_from_dict({**base, "consent": "One\nparagraph.\n\n  Two.  \n"}).consent
+    assert consent == "One paragraph.\n\nTwo."
     bad = tmp_path / "bad.toml"
     bad.write_text("title = ")
     with pytest.raises(ConfigError, match="bad.toml.*not valid TOML"):

@@ -23,10 +23,26 @@ _STAMP = "persuasive-kernels.stamp"
 _SUFFIXES = (".nbi", ".nbc")
 
 
-def sources_digest() -> str:
-    """A hash of every Python source of the package (path and content)."""
-    h = hashlib.sha256()
+#: Modules without compiled functions whose constants the kernels compile in.
+_CONSTANT_MODULES = ("packing.py", "policies/kinds.py")
+
+
+def kernel_sources() -> list[Path]:
+    """The sources the compiled kernels are made of: every module that compiles functions,
+    and the modules of constants they read."""
+    out = []
     for path in sorted(_PACKAGE.rglob("*.py")):
+        rel = path.relative_to(_PACKAGE).as_posix()
+        if rel in _CONSTANT_MODULES or b"@njit" in path.read_bytes():
+            out.append(path)
+    return out
+
+
+def sources_digest() -> str:
+    """A hash of the kernel sources of the package (path and content): an edit of a command,
+    a figure or the web page does not touch the compiled code."""
+    h = hashlib.sha256()
+    for path in kernel_sources():
         h.update(str(path.relative_to(_PACKAGE)).encode() + b"\0" + path.read_bytes())
     return h.hexdigest()
 

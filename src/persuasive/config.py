@@ -23,7 +23,7 @@ from typing import Any, Literal, get_args
 Role = Literal["leader", "follower"]
 Mode = Literal["paper", "corrected"]
 AVKind = Literal["persuasive", "passive", "cv", "lfg", "yield"]
-HVKind = Literal["lfg", "stubborn", "noisy", "idm", "aggressive", "replay"]
+HVKind = Literal["lfg", "stubborn", "noisy", "idm", "aggressive", "replay", "person"]
 ScenarioKind = Literal["intersection", "crossing", "left-turn", "merge"]
 NoiseKind = Literal["none", "uniform", "gaussian"]
 StreamLayout = Literal["legacy", "per-agent"]
@@ -32,6 +32,8 @@ ROLES: tuple[str, ...] = get_args(Role)
 MODES: tuple[str, ...] = get_args(Mode)
 AV_KINDS: tuple[str, ...] = get_args(AVKind)
 HV_KINDS: tuple[str, ...] = get_args(HVKind)
+#: The human kinds the simulation runs by itself (all but ``person``).
+SIMULATED_HV_KINDS: tuple[str, ...] = tuple(k for k in HV_KINDS if k != "person")
 SCENARIO_KINDS: tuple[str, ...] = get_args(ScenarioKind)
 NOISE_KINDS: tuple[str, ...] = get_args(NoiseKind)
 STREAM_LAYOUTS: tuple[str, ...] = get_args(StreamLayout)
@@ -383,10 +385,12 @@ class HVParams:
 
     ``lfg``: the paper's adaptive-role LFG human; ``stubborn``: the LFG with ``p_a = 0``;
     ``noisy``: a Boltzmann-rational LFG; ``idm``: an IDM driver with gap acceptance;
-    ``aggressive``: full throttle, never yields; ``replay``: a recorded trajectory, open loop.
+    ``aggressive``: full throttle, never yields; ``replay``: a recorded trajectory, open loop;
+    ``person``: a person at the controls (``persuasive drive``; a Python policy, not a compiled
+    kind: ``simulate`` cannot run it, and records of the browser page carry it).
     """
 
-    kind: HVKind = "lfg"  #: lfg | stubborn | noisy | idm | aggressive | replay
+    kind: HVKind = "lfg"  #: lfg | stubborn | noisy | idm | aggressive | replay | person
     role: Role = "leader"  #: initial role of an LFG-type human
     noisy: NoisyParams = field(default_factory=NoisyParams)
     idm: IDMParams = field(default_factory=IDMParams)

@@ -51,7 +51,7 @@ def ovm(h: float, v: float, v1: float, alpha: float, beta: float, kappa: float, 
     return min(max(a, u_min), u_max)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def offers_stop(s0: float, v0: float, P: np.ndarray) -> bool:
     """Whether the library of ``(s0, v0)`` holds the stop-at-the-line trajectory."""
     v_lo = max(P[slot.V_MIN], v0 + P[slot.U_MIN] * P[slot.HORIZON])

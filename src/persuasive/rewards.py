@@ -75,7 +75,7 @@ def zone_positions(S: np.ndarray, P: np.ndarray, win: np.ndarray, pos: np.ndarra
             pos[0, k, m], pos[1, k, m] = path_point(P, slot.PATH_B1, S[k, m])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", _nrt=False)
 def zone_windows(pos: np.ndarray, min_dist_sq: float, win: np.ndarray) -> None:
     """First and one-past-last sample of each trajectory with ``s^2 = pos[0] < min_dist_sq``.
 
@@ -93,7 +93,7 @@ def zone_windows(pos: np.ndarray, min_dist_sq: float, win: np.ndarray) -> None:
         win[m, 1] = hi
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", _nrt=False)
 def zone_windows_s(S: np.ndarray, lo_s: float, hi_s: float, win: np.ndarray) -> None:
     """First and one-past-last sample of each trajectory with ``lo_s < s < hi_s``."""
     n, n_traj = S.shape

@@ -27,7 +27,7 @@ from numba import njit
 LEADER, FOLLOWER = 0, 1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def gaussian_density(e_s: float, e_v: float, w_s: float, w_v: float) -> float:
     """Bivariate normal density ``N((e_s, e_v); 0, diag(w_s, w_v))``."""
     return math.exp(-0.5 * (e_s * e_s / w_s + e_v * e_v / w_v)) / (
@@ -39,7 +39,7 @@ def gaussian_density(e_s: float, e_v: float, w_s: float, w_v: float) -> float:
 _TINY = 2.2250738585072014e-308
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def bayes_update(b_l: float, b_f: float, e_ls: float, e_lv: float, e_fs: float, e_fv: float,
                  w_s: float, w_v: float) -> tuple[float, float]:
     """Posterior ``(P(L), P(F))`` from the prior ``(b_l, b_f)`` and the residuals per role.
@@ -65,7 +65,7 @@ def bayes_update(b_l: float, b_f: float, e_ls: float, e_lv: float, e_fs: float, 
     return b_l, b_f  # the only role the evidence favours has prior 0: the prior stands
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def plausible_leader(b_l: float, b_f: float, own_role: int) -> float:
     """``P(plausible role = L)``: 0 if ``b_l > b_f``, 1 if ``b_l < b_f``, own role on a tie."""
     if b_l > b_f:
@@ -75,7 +75,7 @@ def plausible_leader(b_l: float, b_f: float, own_role: int) -> float:
     return 1.0 if own_role == LEADER else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def transition_into(p_plausible_l: float, p_a: float, out: np.ndarray) -> None:
     """Write ``Pi(p_a)`` for ``P(plausible = L) = p_plausible_l`` into ``out`` (2, 2)."""
     pf = 1.0 - p_plausible_l
@@ -92,7 +92,7 @@ def transition_matrix(p_plausible_l: float, p_a: float) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def next_role(role: int, r: float, Pi: np.ndarray) -> int:
     """The role after a draw ``r`` in (0, 1): a leader leaves if ``r > Pi[L, L]``, etc."""
     if role == LEADER:

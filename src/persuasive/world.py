@@ -121,7 +121,7 @@ def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int) -> S
 # -- measuring and advancing (shared by both loops) --------------------------------------------
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def measure_states(x: np.ndarray, k: int, noisy: bool, meas_noise: np.ndarray,
                    P_av: np.ndarray, P_hv: np.ndarray) -> tuple[float, float, float, float]:
     """The measured ``(s_av, v_av, s_hv, v_hv)`` of the true state ``x`` at step ``k``."""
@@ -134,7 +134,7 @@ def measure_states(x: np.ndarray, k: int, noisy: bool, meas_noise: np.ndarray,
     return ms_av, mv_av, ms_hv, mv_hv
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def advance_states(x: np.ndarray, a_av: float, a_hv: float, k: int, noisy: bool,
                    accel_noise: np.ndarray, dt: float, P_av: np.ndarray, P_hv: np.ndarray,
                    out: np.ndarray) -> tuple[float, float]:

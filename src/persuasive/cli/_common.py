@@ -14,7 +14,8 @@ from typing import Any, Callable
 
 import click
 
-from ..config import (AV_KIND_ALIASES, AV_KINDS, HV_KINDS, MODES, ROLES, SCENARIO_KINDS,
+from ..config import (AV_KIND_ALIASES, AV_KINDS, MODES, ROLES, SCENARIO_KINDS,
+                      SIMULATED_HV_KINDS,
                       Config, ConfigError)
 
 #: Seed of the run the paper shows in its Figs. 2 and 3 (the default of the figure commands).
@@ -85,7 +86,7 @@ def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable
         click.option("--av", type=click.Choice([*AV_KINDS, *AV_KIND_ALIASES]), default=None,
                      help="AV planner [persuasive; mpc is its old name]: persuasive, passive, "
                           "cv, lfg (the 2-LFG case), yield (docs/method.md §11)."),
-        click.option("--hv", type=click.Choice(list(HV_KINDS)), default=None,
+        click.option("--hv", type=click.Choice(list(SIMULATED_HV_KINDS)), default=None,
                      help="Human model [lfg]: lfg, stubborn, noisy, idm, aggressive, replay."),
         click.option("--hv-role", type=click.Choice(list(ROLES)), default=None,
                      help="HV initial role [leader]."),

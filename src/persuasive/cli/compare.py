@@ -40,13 +40,13 @@ def compare(av_kinds, hv_kinds, hv_role, scenario, seeds, workers, mode, config_
     the same initial state and the same human draws whatever the AV. Prints one row per pair
     with 95 % bootstrap intervals, then each AV's paired differences against persuasive.
     """
-    from ..config import AV_KINDS, HV_KINDS
+    from ..config import AV_KINDS, SIMULATED_HV_KINDS
     from ..studies import compare as cmp
 
     base = build_config(config_file, sets, {"mode": mode, "hv.role": hv_role,
                                            "scenario.kind": scenario})
     avs = cmp.parse_kinds(av_kinds, AV_KINDS, "--av", AV_KINDS)
-    hvs = cmp.parse_kinds(hv_kinds, HV_KINDS, "--hv", cmp.DEFAULT_HV_KINDS)
+    hvs = cmp.parse_kinds(hv_kinds, SIMULATED_HV_KINDS, "--hv", cmp.DEFAULT_HV_KINDS)
     if base.simulation.streams == "legacy" and "lfg" in avs:
         click.echo("warning: simulation.streams = legacy: the human's draws depend on whether "
                    "the AV draws (the lfg AV does), so those runs are not paired", err=True)

@@ -74,10 +74,12 @@ def drive(host: str, port: int, study_file: str | None, out: str, seed: int | No
     app = create_app(study, out_dir, token, host)
     sock = bind(host, port)
 
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s", "%H:%M:%S"))
-    logger = logging.getLogger("persuasive.web")
-    logger.addHandler(handler)
+    logger = logging.getLogger("persuasive.web")  # one line per session event, on stderr
+    if not any(getattr(h, "_persuasive_drive", False) for h in logger.handlers):
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s", "%H:%M:%S"))
+        handler._persuasive_drive = True
+        logger.addHandler(handler)
     logger.setLevel(logging.INFO)
     logger.propagate = False
 

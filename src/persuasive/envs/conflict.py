@@ -244,7 +244,8 @@ class ConflictEnv(gym.Env):
         self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32),
                                             dtype=np.float32)
         self._obs_low, self._obs_high = low, high
-        self.world: PythonWorld | None = None
+        self.world: PythonWorld | None = None  #: the closed loop of the current run
+        self.run_seed: int | None = None
         self._figure = None
 
     # -- spaces ----------------------------------------------------------------------------
@@ -286,7 +287,7 @@ class ConflictEnv(gym.Env):
         av, hv = (self._decided, self._agent) if self.other == "av" else \
             (self._agent, self._decided)
         self.world = PythonWorld(self.config, run_seed, av=av, hv=hv)
-        self.seed_run = run_seed
+        self.run_seed = run_seed  # the run simulate(config, run_seed) runs
         self._need_game = bool(self._decided.needs_game)
         self._s0 = float(self.world.x[self._col])
         self._measure_and_decide()

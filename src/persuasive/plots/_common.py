@@ -83,7 +83,7 @@ def _has_role(run: RunRecord, who: str) -> bool:
 PLANNER_NAMES = {"lfg": "LFG", "persuasive": "branch MPC", "passive": "passive MPC",
                  "cv": "constant-velocity MPC", "yield": "always yields"}
 HUMAN_NAMES = {"lfg": "LFG", "stubborn": "stubborn LFG", "noisy": "noisy LFG", "idm": "IDM",
-               "aggressive": "aggressive", "replay": "replay"}
+               "aggressive": "aggressive", "replay": "replay", "person": "a person"}
 
 
 def _planner(run: RunRecord) -> str:

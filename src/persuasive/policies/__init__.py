@@ -26,18 +26,23 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from .. import packing as slot
-from ..config import AV_KINDS, HV_KINDS, Config, ConfigError
+from ..config import AV_KINDS, SIMULATED_HV_KINDS, Config, ConfigError
 from ..roles import FOLLOWER, LEADER
 from . import kinds as kd
 from .kinds import KINDS, KindSpec
 
 #: The kinds each vehicle may use, by side.
-SIDE_KINDS = {kd.AV: AV_KINDS, kd.HV: HV_KINDS}
+SIDE_KINDS = {kd.AV: AV_KINDS, kd.HV: SIMULATED_HV_KINDS}
 
 
 def kind_of(config: Config, side: int) -> KindSpec:
     """The :class:`~persuasive.policies.kinds.KindSpec` driving ``side`` in ``config``."""
-    return KINDS[(config.av if side == kd.AV else config.hv).kind]
+    name = (config.av if side == kd.AV else config.hv).kind
+    if name not in KINDS:
+        raise ConfigError(f"hv.kind = {name!r} is driven by a person, not by the simulation: use "
+                          "'persuasive drive', or persuasive.world.PythonWorld with a Python "
+                          "policy for the HV")
+    return KINDS[name]
 
 
 def _role(name: str) -> float:

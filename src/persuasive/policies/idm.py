@@ -43,7 +43,7 @@ def idm_accel(v: float, v0: float, gap: float, dv: float, T: float, a_max: float
     return a_max * (1.0 - (v / v0) ** delta - (s_star / max(gap, 1e-3)) ** 2)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def idm_step(st: np.ndarray, prm: np.ndarray, s: float, v: float, s_o: float, v_o: float,
              dt: float, P_self: np.ndarray, P_other: np.ndarray, log: np.ndarray) -> float:
     """One step of the IDM driver at ``(s, v)`` with the other vehicle at ``(s_o, v_o)``."""

@@ -18,12 +18,12 @@ from .. import packing as slot
 PRM_N = 0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def aggressive_step(P_self: np.ndarray) -> float:
     return P_self[slot.U_MAX]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def replay_step(prm: np.ndarray, k: int) -> float:
     """The recorded acceleration of step ``k`` [m/s^2] (0 past the end of the recording)."""
     n = int(prm[PRM_N])

@@ -20,7 +20,7 @@ RELEASED = 0  #: state slot: the human has cleared the conflict
 COL_TRAJ, COL_RELEASED, COL_N_ADMISSIBLE = range(3)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def yield_step(st: np.ndarray, s_H: float, lib_r: Lib, P_av: np.ndarray, P_hv: np.ndarray,
                log: np.ndarray) -> float:
     """One step; returns the AV's acceleration [m/s^2]."""

@@ -33,10 +33,10 @@ import numpy as np
 
 from .. import __version__
 from .._files import atomic_write
-from ..config import AV_KINDS, HV_KINDS, Config, ConfigError
+from ..config import AV_KINDS, SIMULATED_HV_KINDS, Config, ConfigError
 
 #: Human kinds compared by default: all but ``replay``, which needs a recording.
-DEFAULT_HV_KINDS = tuple(k for k in HV_KINDS if k != "replay")
+DEFAULT_HV_KINDS = tuple(k for k in SIMULATED_HV_KINDS if k != "replay")
 #: The reference AV of the paired differences.
 REFERENCE_AV = "persuasive"
 #: Keys of each row of ``--json`` (and of ``summary.json``'s rows, which hold more).

@@ -18,7 +18,7 @@ server -> page        when
                       that the person leads only if the study says ``show_belief``
 ``done``              the trial is saved; whether questions follow
 ``finished``          every trial done
-``error``             a refused ``begin`` (bad participant ID, consent not given)
+``error``             a refused ``begin`` (with ``field``), or a trial that failed on the server
 ====================  ===========================================================================
 
 page -> server: ``begin {participant, consent: true}``, ``start {}``, ``input {up, down, axis,
@@ -165,7 +165,9 @@ class Trial:
         """Build the world (scenario, streams, both policies); run in a worker thread."""
         from ..world import PythonWorld
 
-        world = PythonWorld(self.config, self.seed, hv=self.human)
+        # the record says who drove: a person (not a model of the simulation)
+        world = PythonWorld(self.config.with_overrides({"hv.kind": "person"}), self.seed,
+                            hv=self.human)
         columns = tuple(world.av.log_columns)
         for name in ("belief_hv_leader", "belief_other_leader"):
             if name in columns:

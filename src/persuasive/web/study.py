@@ -31,7 +31,8 @@ Override tables may be nested (``[base.scenario]``), dotted (``scenario.kind = "
 quoted-dotted (``"scenario.kind" = "merge"``); they are flattened to the ``section.field``
 keys of :meth:`persuasive.config.Config.with_overrides`. A condition's overrides apply on top
 of ``[base]``. Every trial's configuration is built and its scenario checked when the file is
-read, so a bad study fails before anyone sits down.
+read, so a bad study fails before anyone sits down. Texts (``consent``, ``instructions``) are
+shown as paragraphs: the lines of a paragraph are joined, a blank line starts the next one.
 
 **Counterbalancing.** Conditions are ordered by a balanced Latin square (a Williams design,
 :func:`balanced_latin_square`): every condition once per row and once per position over the
@@ -204,6 +205,14 @@ def _condition_config(base: dict[str, Any], overrides: dict[str, Any], where: st
     return config
 
 
+def paragraphs(text: str) -> str:
+    """Text as the page shows it: lines within a paragraph joined (a TOML string wraps like
+    the file), paragraphs kept apart by one blank line."""
+    parts = re.split(r"\n\s*\n", text.strip())
+    return "\n\n".join(" ".join(line.strip() for line in p.splitlines() if line.strip())
+                       for p in parts if p.strip())
+
+
 def _text(data: dict, key: str, default: str, where: str) -> str:
     value = data.get(key, default)
     if not isinstance(value, str):
@@ -235,10 +244,10 @@ def study_from_dict(data: dict[str, Any], source: str = "study") -> Study:
     show_belief = data.get("show_belief", False)
     if not isinstance(show_belief, bool):
         raise ConfigError(f"show_belief = {show_belief!r} is not a boolean (true | false)")
-    consent = _text(data, "consent", "", "").strip()
+    consent = paragraphs(_text(data, "consent", "", ""))
     if not consent:
         raise ConfigError("consent is required (the text participants accept)")
-    instructions = _text(data, "instructions", DEFAULT_INSTRUCTIONS, "").strip()
+    instructions = paragraphs(_text(data, "instructions", DEFAULT_INSTRUCTIONS, ""))
     base = flatten(data.get("base", {}), "base")
 
     raw_conditions = data.get("conditions")

@@ -38,6 +38,7 @@
     const scheme = location.protocol === "https:" ? "wss://" : "ws://";
     const query = token ? "?token=" + encodeURIComponent(token) : "";
     ws = new WebSocket(scheme + location.host + "/ws" + query);
+    ws.onopen = () => sendInput();
     ws.onmessage = (event) => {
       let msg;
       try { msg = JSON.parse(event.data); } catch (e) { return; }
@@ -50,7 +51,9 @@
   }
 
   function send(obj) {
-    if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(obj));
+    if (!ws || ws.readyState !== WebSocket.OPEN) return false;
+    ws.send(JSON.stringify(obj));
+    return true;
   }
 
   const handlers = {
@@ -200,9 +203,11 @@
     };
     const key = JSON.stringify(msg);
     if (key === lastInput) return;
-    lastInput = key;
-    msg.seq = ++seq;
-    send(msg);
+    msg.seq = seq + 1;
+    if (send(msg)) { // a change made before the socket opened is sent when it opens
+      seq += 1;
+      lastInput = key;
+    }
   }
 
   function onKey(event, down) {
