@@ -383,10 +383,10 @@ class ConflictEnv(gym.Env):
             return None
         if self.world is None:
             raise RuntimeError("call reset() before render()")
-        from ._render import render_frame
+        from ..plots.frame import render_frame
 
         if self._figure is None:
-            from ._render import new_frame_figure
+            from ..plots.frame import new_frame_figure
 
             self._figure = new_frame_figure(RENDER_SIZE_IN, RENDER_DPI)
         return render_frame(self._figure, self.world, self.controlled)

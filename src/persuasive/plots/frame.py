@@ -1,4 +1,5 @@
-"""Frames of :class:`persuasive.envs.conflict.ConflictEnv` (``render_mode="rgb_array"``).
+"""Single top-view frames of a running world: :class:`persuasive.envs.conflict.ConflictEnv`
+(``render_mode="rgb_array"``) draws with them.
 
 The scene is drawn as the package's top view (:func:`persuasive.plots.topview.draw_scene`,
 the vehicles' footprints along their paths, HV blue, AV red) on an explicit Agg canvas; the
@@ -14,8 +15,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..plots._common import _COLORS, _FONT, _style
-from ..plots.topview import _vehicle_patch, _vehicle_xy, draw_scene
+from ._common import _COLORS, _FONT, _style
+from .topview import _vehicle_patch, _vehicle_xy, draw_scene
 
 
 def new_frame_figure(size_in: float, dpi: float) -> Figure:
