@@ -254,14 +254,36 @@ def footprints_overlap(xa: np.ndarray, ya: np.ndarray, ua: tuple[np.ndarray, np.
     directions ``(1, 0)`` and ``(0, 1)`` it is exactly the paper's test ``|s_a| <= (l + w)/2``
     and ``|s_b| <= (l + w)/2``.
     """
-    dx, dy = np.asarray(xb) - np.asarray(xa), np.asarray(yb) - np.asarray(ya)
-    axes = [ua, (-ua[1], ua[0]), ub, (-ub[1], ub[0])]
-    overlap = np.ones(np.broadcast(dx, dy).shape, dtype=bool)
-    for ax, ay in axes:
-        ra = (la / 2) * np.abs(ua[0] * ax + ua[1] * ay) + (wa / 2) * np.abs(-ua[1] * ax + ua[0] * ay)
-        rb = (lb / 2) * np.abs(ub[0] * ax + ub[1] * ay) + (wb / 2) * np.abs(-ub[1] * ax + ub[0] * ay)
-        overlap &= np.abs(dx * ax + dy * ay) <= ra + rb
-    return overlap
+    arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in
+                                   (xa, ya, ua[0], ua[1], xb, yb, ub[0], ub[1])))
+    out = np.empty(arrays[0].shape, dtype=np.bool_)
+    _overlap(*(np.ascontiguousarray(a).ravel() for a in arrays), la, wa, lb, wb, out.ravel())
+    return out
+
+
+@njit(cache=True, _nrt=False)
+def _overlap(xa, ya, uax, uay, xb, yb, ubx, uby, la, wa, lb, wb, out):
+    """The separating-axis test of :func:`footprints_overlap`, element by element."""
+    for i in range(out.size):
+        dx, dy = xb[i] - xa[i], yb[i] - ya[i]
+        hit = True
+        for k in range(4):
+            if k == 0:
+                ax, ay = uax[i], uay[i]
+            elif k == 1:
+                ax, ay = -uay[i], uax[i]
+            elif k == 2:
+                ax, ay = ubx[i], uby[i]
+            else:
+                ax, ay = -uby[i], ubx[i]
+            ra = (la / 2) * abs(uax[i] * ax + uay[i] * ay) + \
+                (wa / 2) * abs(-uay[i] * ax + uax[i] * ay)
+            rb = (lb / 2) * abs(ubx[i] * ax + uby[i] * ay) + \
+                (wb / 2) * abs(-uby[i] * ax + ubx[i] * ay)
+            if not abs(dx * ax + dy * ay) <= ra + rb:
+                hit = False
+                break
+        out[i] = hit
 
 
 __all__ = ["Path", "VehicleShape", "footprints_overlap", "path_point", "path_points",

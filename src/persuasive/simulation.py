@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from . import __version__
 from .config import Config, ConfigError
@@ -318,15 +319,17 @@ def _columns(s: Setup, states, world_log, av_log, hv_log, av_columns, hv_columns
     return log
 
 
+@njit(cache=True, _nrt=False)
 def free_flow_time(s0: float, v0: float, target_s: float, dt: float, u_max: float,
                    v_min: float, v_max: float, limit: int = 100_000) -> float:
     """Time [s] to reach ``target_s`` from ``(s0, v0)`` at full throttle up to ``v_max``, on
-    the loop's time grid (the first step after which ``s >= target_s``)."""
+    the loop's time grid (the first step after which ``s >= target_s``); NaN beyond
+    ``limit`` steps."""
     s, v = s0, v0
     for k in range(limit):
         if s >= target_s:
             return k * dt
-        s, v = saturated_step.py_func(s, v, u_max, dt, v_min, v_max)
+        s, v = saturated_step(s, v, u_max, dt, v_min, v_max)
     return math.nan
 
 
