@@ -232,32 +232,19 @@ def test_belief_observation_is_the_planners_belief():
 
 # -- the README example: the planner as a policy through the env, bit for bit -------------
 
-README_EXAMPLE = """
-import gymnasium as gym
-import numpy as np
-import persuasive.envs                      # registers persuasive/Intersection-v0, ...
-from persuasive import Planner, simulate
+def _readme_example() -> str:
+    """The README's Python block under "## gymnasium and highway-env"."""
+    import re
+    from pathlib import Path
 
-env = gym.make("persuasive/Intersection-v0", controlled="av")  # the agent drives the AV
-obs, info = env.reset(seed=996)
-planner = Planner(env.unwrapped.config)     # the env's configuration: paper mode
-terminated = truncated = False
-while not (terminated or truncated):
-    plan = planner.plan(av=info["av_state"], hv=info["hv_state"],
-                        human_role=info["human_role"])      # quirk Q3 reads the role
-    obs, reward, terminated, truncated, info = env.step(np.array([plan.accel_mps2]))
-
-episode = env.unwrapped.record()            # the RunRecord of the steps taken
-reference = simulate(env.unwrapped.config, 996)
-n = len(episode.states)
-assert np.array_equal(episode.states, reference.states[:n])   # bit for bit
-assert episode.outcome.first_at_line == reference.outcome.first_at_line
-"""
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## gymnasium and highway-env", 1)[1]
+    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
 def test_readme_example_runs():
     namespace = {}
-    exec(compile(README_EXAMPLE, "README", "exec"), namespace)
+    exec(compile(_readme_example(), "README.md", "exec"), namespace)
     assert namespace["truncated"]  # the seed-996 run never has both vehicles clear
 
 

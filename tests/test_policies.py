@@ -137,6 +137,24 @@ def test_noisy_with_a_huge_beta_is_the_lfg():
         np.testing.assert_array_equal(noisy.log["hv_trajectory"], lfg.log["hv_trajectory"])
 
 
+def test_noisy_default_beta_is_visibly_noisy_and_larger_beta_less_so():
+    """The default (0.1) departs from the LFG human's run on a noticeable share of steps;
+    0.5 (the top candidates' values lie a few units apart) departs on far fewer."""
+
+    def share(beta):
+        differ = total = 0
+        for seed in range(1, N_SEEDS + 1):
+            lfg = run(CORRECTED, seed)
+            noisy = run(CORRECTED, seed, **{"hv.kind": "noisy", "hv.noisy.beta": beta})
+            differ += int(np.sum(noisy.log["hv_accel_mps2"] != lfg.log["hv_accel_mps2"]))
+            total += len(lfg.log)
+        return differ / total
+
+    assert Config().hv.noisy.beta == 0.1
+    default, sharper = share(0.1), share(0.5)
+    assert default > 0.04 and sharper < default / 4
+
+
 def test_noisy_with_beta_zero_picks_uniformly():
     picks = []
     for seed in range(1, 9):

@@ -57,3 +57,20 @@ def test_python_example_runs(tmp_path, monkeypatch):
     assert namespace["record"].outcome.first_at_line in (0, 1, 2, 3)
     assert namespace["plan"].feasible
     assert len(namespace["result"].runs) == 1400
+
+
+def test_configuration_and_grid_examples_are_valid(tmp_path):
+    import tomllib
+
+    from persuasive import Config, sweep
+
+    config = Config.from_dict(tomllib.loads(_block("## Configuration", "toml")))
+    assert (config.mode, config.hv.kind, config.scenario.kind) == ("corrected", "idm", "crossing")
+    assert config.vehicle_of("hv").length_m == 4.5
+    grid_file = tmp_path / "grid.toml"
+    grid_file.write_text(_block("## Sweeps on Dask", "toml"))
+    grid = sweep.Grid.from_toml(grid_file)
+    runs = list(grid.runs())
+    assert len(runs) == 4 * 5 * 200
+    # the README shows the example grid file
+    assert runs == list(sweep.Grid.from_toml(ROOT / "examples" / "sweep-persuasion.toml").runs())

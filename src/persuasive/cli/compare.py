@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 
 import click
 
@@ -58,7 +59,7 @@ def compare(av_kinds, hv_kinds, hv_role, scenario, seeds, workers, mode, config_
         from tqdm import tqdm
 
         bar = tqdm(total=len(grid), unit="run", dynamic_ncols=True, smoothing=0.1,
-                   file=click.get_text_stream("stderr"))
+                   file=sys.stderr)
 
         def progress(done: int, total: int) -> None:
             bar.update(done - bar.n)

@@ -299,8 +299,8 @@ def _ci(ci: list, digits: int = 1) -> str:
 def to_markdown(summary: dict[str, Any]) -> str:
     """The comparison as Markdown tables: one row per pair, then the paired differences."""
     head = ["AV", "human", "runs", "AV first % [95 % CI]", "HV first %", "neither %",
-            "collisions", "runs with cc failed", "AV delay s [95 % CI]", "HV delay s [95 % CI]",
-            "min distance p05 m", "AV decision ms"]
+            "collisions", "runs with cc failed", "runs cleared AV / HV", "AV delay s [95 % CI]",
+            "HV delay s [95 % CI]", "min distance p05 m", "AV decision ms"]
     lines = [f"**compare**, {summary['scenario']}, {summary['mode']} mode, "
              f"{summary['streams']} streams, seeds 1..{summary['seeds']}", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -309,15 +309,19 @@ def to_markdown(summary: dict[str, Any]) -> str:
             r["av"], r["hv"], str(r["runs"]),
             _fmt(r["av_first_pct"]) + _ci(r["av_first_pct_ci"]), _fmt(r["hv_first_pct"]),
             _fmt(r["neither_pct"]), str(r["collisions"]), str(r["cc_fail_runs"]),
+            f"{r['runs'] - r['av_not_cleared']} / {r['runs'] - r['hv_not_cleared']}",
             _fmt(r["av_delay_s_mean"], 2) + _ci(r["av_delay_s_mean_ci"], 2),
             _fmt(r["hv_delay_s_mean"], 2) + _ci(r["hv_delay_s_mean_ci"], 2),
             _fmt(r["min_distance_m_p05"], 2), _fmt(r["av_decision_ms_median"], 3),
         ]) + " |")
+    lines += ["", "Delays are means over the runs in which that vehicle cleared the conflict "
+              "before the run ended (\"runs cleared\"); n/a: it never did."]
     if summary["paired"]:
         head = ["human", "AV", "AV first % diff", "collision % diff", "AV delay s diff",
                 "HV delay s diff", "min distance m diff"]
         lines += ["", f"Paired differences against {REFERENCE_AV} (other minus "
-                  f"{REFERENCE_AV}, same seeds, mean [95 % CI]):", "",
+                  f"{REFERENCE_AV}, same seeds, mean [95 % CI]; delays over the seeds where "
+                  "that vehicle cleared in both runs):", "",
                   "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for p in summary["paired"]:
             cells = [p["hv"], p["av"]]
