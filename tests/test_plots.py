@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from matplotlib.colors import to_rgba
 from matplotlib.legend import Legend
-from matplotlib.patches import Circle, Polygon, Rectangle
+from matplotlib.patches import Circle, Polygon
 from matplotlib.transforms import Bbox
 
 import persuasive

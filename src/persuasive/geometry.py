@@ -38,7 +38,6 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from . import packing as slot
 
 # Offsets inside the path's slots (``slot.PATH_B1 ..``) and of :meth:`Path.geometry_vector`.
 _B1, _B2, _X1, _Y1, _UX0, _UY0, _CX, _CY, _R, _PHI1, _TURN, _X2, _Y2, _UX2, _UY2 = range(15)

@@ -54,7 +54,6 @@ headless too, but highway-env's viewer then draws nothing and every frame is bla
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 from dataclasses import asdict, dataclass, field
@@ -666,37 +665,10 @@ def run_highway(episodes: int = 5, planner: str = "persuasive", seed: int = 1,
 
 def write_video(frames: list[np.ndarray], path: str | Path, fps: int = FREQUENCY_HZ) -> Path:
     """Write frames as MP4 (H.264) or GIF, by extension, atomically (as ``persuasive
-    animate``)."""
-    import imageio.v2 as iio2
-    import imageio.v3 as iio3
+    animate``: :func:`persuasive.plots.files.write_frames`)."""
+    from ..plots.files import write_frames
 
-    from .._files import atomic_write
-    from ..plots.files import check_animation_path
-
-    path = Path(path)
-    ext = check_animation_path(path)
-    even = [np.pad(f, ((0, f.shape[0] % 2), (0, f.shape[1] % 2), (0, 0)), constant_values=255)
-            for f in frames]
-
-    def write(tmp: Path) -> None:
-        if ext == ".mp4":
-            writer = iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
-                                     pixelformat="yuv420p", macro_block_size=2,
-                                     ffmpeg_log_level="error")
-            try:
-                for frame in even:
-                    writer.append_data(frame)
-            except BaseException:
-                with contextlib.suppress(Exception):
-                    writer.close()
-                raise
-            writer.close()
-        else:
-            iio3.imwrite(tmp, np.stack(even), extension=".gif", plugin="pillow",
-                         duration=1000.0 / fps, loop=0)
-
-    atomic_write(path, write)
-    return path
+    return write_frames(frames, path, fps)
 
 
 __all__ = ["CONTEST_RANGE_M", "EgoPath", "EpisodeResult", "HighwayReport", "PlannerDriver",

@@ -10,7 +10,6 @@ vehicle footprints).
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 from typing import Iterator
 
@@ -19,12 +18,11 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from .._files import atomic_write
 from ..config import ConfigError
 from ..simulation import RunRecord
 from ._common import (_COLORS, _FONT, AV_COLOR, HUMAN_NAMES, HV_COLOR, _has_role, _planner, _state_times,
                       _style, belief_column, case_title, crossing_time, run_label)
-from .files import check_animation_path
+from .files import check_animation_path, write_frames
 from .topview import (_corners, _scene_handles, _vehicle_patch, _vehicle_xy,
                       _view_limits, draw_intersection)
 
@@ -157,14 +155,6 @@ def animation_frames(run: RunRecord, dpi: float = 120.0, width_in: float = 8.0,
         yield scene.render(k)
 
 
-def _even(frame: np.ndarray) -> np.ndarray:
-    """Pad a frame with white to even height and width (H.264 in yuv420p needs them)."""
-    h, w = frame.shape[:2]
-    if h % 2 == 0 and w % 2 == 0:
-        return frame
-    return np.pad(frame, ((0, h % 2), (0, w % 2), (0, 0)), constant_values=255)
-
-
 def animate(run: RunRecord, path: str | Path, fps: int = 10, dpi: float = 120.0) -> Path:
     """Write the animation of :func:`animation_frames` as MP4 (H.264) or GIF, by extension.
 
@@ -195,33 +185,7 @@ def animate(run: RunRecord, path: str | Path, fps: int = 10, dpi: float = 120.0)
     persuasive.config.ConfigError
         ``fps`` is not an integer >= 1.
     """
-    import imageio.v2 as iio2
-    import imageio.v3 as iio3
-
-    path = Path(path)
-    ext = check_animation_path(path)
+    check_animation_path(path)
     if isinstance(fps, bool) or not isinstance(fps, (int, np.integer)) or fps < 1:
         raise ConfigError(f"fps = {fps!r} is out of range; allowed: integer >= 1")
-    frames = (_even(f) for f in animation_frames(run, dpi=dpi))
-
-    def write(tmp: Path) -> None:
-        if ext == ".mp4":
-            writer = iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
-                                     pixelformat="yuv420p", macro_block_size=2,
-                                     ffmpeg_log_level="error")
-            # Not a with block: on an error imageio's writer leaves ffmpeg running, and it
-            # would write the temporary file again after atomic_write has removed it.
-            try:
-                for frame in frames:
-                    writer.append_data(frame)
-            except BaseException:
-                with contextlib.suppress(Exception):
-                    writer.close()
-                raise
-            writer.close()
-        else:
-            iio3.imwrite(tmp, np.stack(list(frames)), extension=".gif", plugin="pillow",
-                         duration=1000.0 / fps, loop=0)
-
-    atomic_write(path, write)
-    return path
+    return write_frames(animation_frames(run, dpi=dpi), path, int(fps))
