@@ -49,3 +49,25 @@ def test_the_stamp_follows_numba_cache_dir(tmp_path, monkeypatch):
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
     assert comp.ensure_fresh_cache() is True
     assert not stale.exists() and (cache / comp._STAMP).exists()
+
+
+def test_first_use_announces_the_compilation_in_one_line(capsys, monkeypatch):
+    from persuasive.cli import main
+
+    monkeypatch.setattr(comp, "kernels_cached", lambda: False)
+    assert main(["simulate", "--seed", "3", "--json"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("compiling the numerical kernels once") and err.count("\n") == 1
+    monkeypatch.setattr(comp, "kernels_cached", lambda: True)
+    assert main(["simulate", "--seed", "3", "--json"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_kernels_cached_follows_the_cache_index(monkeypatch, tmp_path):
+    from persuasive import Config, simulate
+    from persuasive.world import run_loop
+
+    simulate(Config(), 1)  # compiled (and cached) by now
+    assert comp.kernels_cached()
+    monkeypatch.setattr(run_loop._cache._cache_file, "_index_path", str(tmp_path / "none.nbi"))
+    assert not comp.kernels_cached()

@@ -1,6 +1,6 @@
 """The compiled kernels' on-disk cache: is it warm, and is it up to date?
 
-The kernels are compiled with ``cache=True``: the first process compiles them (about 20 s on
+The kernels are compiled with ``cache=True``: the first process compiles them (about 25 s on
 the 2-core machine CI uses) and writes them next to the sources (or into
 ``NUMBA_CACHE_DIR``); every later process loads them.
 

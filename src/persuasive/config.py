@@ -460,6 +460,21 @@ class Quirks:
         return Quirks(**{k: (v if (v := getattr(self, k)) is not None else base[k]) for k in base})
 
 
+def read_toml(path: str | Path, what: str) -> dict[str, Any]:
+    """The table of a TOML file; a file that cannot be read or parsed is a one-line
+    :class:`ConfigError` naming ``what`` (e.g. "grid file") and the path."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{what} {str(path)!r} cannot be read: "
+                          f"{(exc.strerror or str(exc)).lower()}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{what} {str(path)!r} is not valid TOML: {exc}") from None
+
+
 @dataclass(frozen=True)
 class Config:
     """All parameters of one closed-loop run, the paper's values by default."""
@@ -560,16 +575,7 @@ class Config:
     @classmethod
     def from_toml(cls, path: str | Path) -> Config:
         """Read a TOML file (sections as in :meth:`to_dict`)."""
-        path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ConfigError(f"config file {str(path)!r} cannot be read: {exc.strerror}") from None
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"config file {str(path)!r} is not valid TOML: {exc}") from None
-        return cls.from_dict(data)
+        return cls.from_dict(read_toml(path, "config file"))
 
     def to_toml(self) -> str:
         """The whole configuration as TOML text: every field written out, defaults included.

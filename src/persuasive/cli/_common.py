@@ -130,6 +130,6 @@ def compile_notice() -> None:
     from .._compile import kernels_cached
 
     if not kernels_cached():
-        click.echo("compiling the numerical kernels once (about 20 s; cached for later runs)",
+        click.echo("compiling the numerical kernels once (about 25 s; cached for later runs)",
                    err=True)
         sys.stderr.flush()

@@ -40,11 +40,10 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import tomllib
 from pathlib import Path
 from typing import Any, Iterator, Mapping
 
-from ..config import Config, ConfigError
+from ..config import Config, ConfigError, read_toml
 
 #: The keys a grid file may hold.
 GRID_KEYS = ("seeds", "base", "axes", "cases")
@@ -153,16 +152,7 @@ class Grid:
     @classmethod
     def from_toml(cls, path: str | Path) -> Grid:
         """Read a grid file; a file that cannot be read or parsed is a one-line error."""
-        path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ConfigError(f"grid file {str(path)!r} cannot be read: "
-                              f"{(exc.strerror or str(exc)).lower()}") from None
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"grid file {str(path)!r} is not valid TOML: {exc}") from None
+        data = read_toml(path, "grid file")
         return cls.from_dict(data)
 
     @classmethod

@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..config import Config, ConfigError
+from ..config import Config, ConfigError, read_toml
 
 #: Characters allowed in participant IDs (others are replaced by "_") and condition names.
 SAFE_NAME = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -309,16 +309,7 @@ def study_from_dict(data: dict[str, Any], source: str = "study") -> Study:
 
 def load_study(path: str | Path) -> Study:
     """Read and check a study file (see the module docstring)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"study file {str(path)!r} cannot be read: "
-                          f"{(exc.strerror or str(exc)).lower()}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"study file {str(path)!r} is not valid TOML: {exc}") from None
+    data = read_toml(path, "study file")
     try:
         return study_from_dict(data, str(path))
     except ConfigError as exc:
