@@ -58,8 +58,12 @@ def test_rows_equal_the_runs_they_summarise(comparison):
         assert row["collisions"] == int(mine["collision"].sum())
         lo, hi = row["av_first_pct_ci"]
         assert lo <= row["av_first_pct"] <= hi
-        assert row["av_decision_ms"
-                   "_median"] > 0
+        assert row["av_decision_ms_median"] > 0
+        assert row["av_not_cleared"] == int(mine["av_delay_s"].isna().sum())
+        assert row["hv_not_cleared"] == int(mine["hv_delay_s"].isna().sum())
+        (line,) = [x for x in cmp.to_markdown(comparison.summary).splitlines()
+                   if x.startswith(f"| {row['av']} | {row['hv']} | 6 |")]
+        assert line.split(" | ")[8] == f"{6 - row['av_not_cleared']} / {6 - row['hv_not_cleared']}"
         # each run is what simulate gives for its pair and seed
         seed = int(mine["seed"].iloc[0])
         config = cmp.comparison_base(Config()).with_overrides({"av.kind": row["av"],
