@@ -1,0 +1,386 @@
+"""The human models' likelihoods of logged driving (docs/method.md §13.2-13.3).
+
+Every model scores the logged HV acceleration ``x_k`` of each step against what it would have
+done, under one noise model: the logged acceleration is the model's plus a Gaussian error of
+standard deviation ``sigma`` [m/s^2], fitted (bounded below by ``sigma_min``, see §13.4).
+
+- ``lfg`` (the paper's human, §5): the role is hidden; in role ``r`` the human applies
+  ``a_role[k, r]``, the first acceleration of the game's trajectory for that role. Emission
+  ``N(x_k; a_role[k, r], sigma^2)``; roles follow the forward filter of
+  :mod:`persuasive.fitting.filter` with ``Pi(p_a)``. Parameters ``p_a``, ``pi0 = P(r_0 =
+  L)``, ``sigma``.
+- ``stubborn``: the ``lfg`` with ``p_a = 0`` (the role never changes). ``pi0``, ``sigma``.
+- ``noisy`` (Boltzmann-rational LFG, §11.2): in role ``r`` it picks trajectory ``c`` with
+  probability ``softmax(beta Q_r)_c`` (exact ties at the maximum on the lowest index), so the
+  emission is the mixture ``sum_c P_r(c) N(x_k; a_first[k, c], sigma^2)``; ``beta = inf`` is
+  the ``lfg``. Parameters ``p_a``, ``pi0``, ``beta``, ``sigma``.
+- ``idm`` (§11.2): deterministic given its parameters and the logged states (its waiting time
+  and commitment follow the measured states), scored by the compiled
+  ``persuasive.policies.idm.idm_step``; emission ``N(x_k; a_idm, sigma^2)``.
+
+:func:`hmm_loglik` returns, for a batch of ``G`` parameter vectors at once, each run's
+log-likelihood given each initial role; :func:`best_initial_role` then maximises over ``pi0``
+exactly (the log-likelihood is concave in it). :func:`idm_sse` returns each run's sum of squared
+residuals for ``G`` IDM parameter vectors (``sigma`` is then profiled in closed form).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ..policies.idm import idm_step
+from .filter import (emission_lik, filter_loglik, filter_predict, filter_update_lik,
+                     smooth_roles)
+
+#: Emission kinds of :func:`hmm_loglik`.
+EMIT_LFG, EMIT_NOISY = 0, 1
+
+_LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+@njit(cache=True, inline="always")
+def _log_normal(x: float, mu: float, sigma: float) -> float:
+    z = (x - mu) / sigma
+    return -0.5 * z * z - math.log(sigma) - _LOG_SQRT_2PI
+
+
+@njit(cache=True, inline="always")
+def _log_normal_c(x: float, mu: float, sigma: float, log_c: float) -> float:
+    """``log N(x; mu, sigma^2)`` with ``log_c = log(sigma) + log(sqrt(2 pi))`` given."""
+    z = (x - mu) / sigma
+    return -0.5 * z * z - log_c
+
+
+@njit(cache=True)
+def boltzmann_log_emission(x: float, q: np.ndarray, a_first: np.ndarray, beta: float,
+                           sigma: float) -> float:
+    """``log sum_c P(c) N(x; a_first[c], sigma^2)`` with ``P(c) ~ exp(beta (q_c - max q))``,
+    exact ties at the maximum on the lowest index (the ``noisy`` human's rule,
+    ``persuasive.policies.lfg.boltzmann_choice``); ``beta = inf`` keeps only the first
+    maximiser."""
+    n = q.shape[0]
+    q_max, first = q[0], 0
+    for c in range(1, n):
+        if q[c] > q_max:
+            q_max, first = q[c], c
+    # log weights lw_c = beta (q_c - max q) (0 for the first maximiser, -inf for the others)
+    m = -np.inf
+    for c in range(n):
+        if q[c] == q_max and c != first:
+            continue
+        lw = 0.0 if c == first else beta * (q[c] - q_max)
+        if lw == -np.inf:
+            continue
+        v = lw + _log_normal(x, a_first[c], sigma)
+        if v > m:
+            m = v
+    if m == -np.inf:
+        return -np.inf
+    num, den = 0.0, 0.0
+    for c in range(n):
+        if q[c] == q_max and c != first:
+            continue
+        lw = 0.0 if c == first else beta * (q[c] - q_max)
+        if lw == -np.inf:
+            continue
+        den += math.exp(lw)
+        num += math.exp(lw + _log_normal(x, a_first[c], sigma) - m)
+    return m + math.log(num) - math.log(den)
+
+
+@njit(cache=True)
+def step_log_emissions(kind: int, x: float, a_role: np.ndarray, q: np.ndarray,
+                       a_first: np.ndarray, sigma: float, beta: float,
+                       out: np.ndarray) -> None:
+    """``log p(x | r)`` for ``r`` = L, F at one step into ``out`` ``(2,)`` (the plain
+    definition; :func:`hmm_loglik` computes the same faster)."""
+    if kind == EMIT_LFG:
+        log_c = math.log(sigma) + _LOG_SQRT_2PI
+        out[0] = _log_normal_c(x, a_role[0], sigma, log_c)
+        out[1] = _log_normal_c(x, a_role[1], sigma, log_c)
+    else:
+        out[0] = boltzmann_log_emission(x, q[0], a_first, beta, sigma)
+        out[1] = boltzmann_log_emission(x, q[1], a_first, beta, sigma)
+
+
+@njit(cache=True, inline="always")
+def _boltzmann_weights(q: np.ndarray, q_max: np.ndarray, first: np.ndarray, beta: float,
+                       w: np.ndarray, den: np.ndarray) -> None:
+    """The noisy human's unnormalised choice weights ``w`` ``(2, n_traj)`` per role and their
+    sums ``den`` ``(2,)``: ``exp(beta (q_c - max q))``, exact ties at the maximum on the first
+    maximiser (0 for the others); weights that underflow are 0."""
+    for r in range(2):
+        qm, f = q_max[r], first[r]
+        total = 0.0
+        for c in range(q.shape[1]):
+            if c == f:
+                wc = 1.0
+            elif q[r, c] == qm:
+                wc = 0.0
+            else:
+                lw = beta * (q[r, c] - qm)
+                wc = math.exp(lw) if lw > -745.0 else 0.0
+            w[r, c] = wc
+            total += wc
+        den[r] = total
+
+
+@njit(cache=True, inline="always")
+def _gauss_terms(x: float, a_first: np.ndarray, inv_s: float, phi: np.ndarray) -> None:
+    """``phi_c = exp(-z_c^2 / 2)``, ``z_c = (x - a_first[c]) / sigma`` (0 where it
+    underflows)."""
+    for c in range(a_first.shape[0]):
+        z = (x - a_first[c]) * inv_s
+        zz = z * z
+        phi[c] = math.exp(-0.5 * zz) if zz < 1400.0 else 0.0
+
+
+@njit(cache=True)
+def hmm_loglik_run(kind: int, a: int, b: int, accel: np.ndarray, a_role: np.ndarray,
+                   pl: np.ndarray, q: np.ndarray, a_first: np.ndarray, p_a: np.ndarray,
+                   sigma: np.ndarray, beta: np.ndarray, inv_s: np.ndarray, log_c: np.ndarray,
+                   out: np.ndarray) -> None:
+    """:func:`hmm_loglik` of the run in rows ``a:b`` into ``out`` ``(G, 2)``."""
+    G = p_a.shape[0]
+    alpha = np.empty((2, G, 2))
+    logscale = np.zeros((2, G))
+    ll = np.empty((G, 2))
+    lik = np.empty((G, 2))
+    log_ref = np.empty(G)
+    T = np.empty((2, 2))
+    phi = np.empty(a_first.shape[1])
+    w = np.empty((2, a_first.shape[1]))
+    den = np.empty(2)
+    q_max = np.empty(2)
+    first = np.empty(2, np.int64)
+    for k in range(a, b):
+        x = accel[k]
+        if kind == EMIT_NOISY:
+            for r in range(2):
+                q_max[r], first[r] = q[k, r, 0], 0
+                for c in range(1, q.shape[2]):
+                    if q[k, r, c] > q_max[r]:
+                        q_max[r], first[r] = q[k, r, c], c
+        for g in range(G):
+            if kind == EMIT_LFG:
+                z0 = (x - a_role[k, 0]) * inv_s[g]
+                z1 = (x - a_role[k, 1]) * inv_s[g]
+                ll[g, 0] = -0.5 * z0 * z0 - log_c[g]
+                ll[g, 1] = -0.5 * z1 * z1 - log_c[g]
+            else:
+                # rows of a Newton stencil share sigma or beta with the row before: reuse
+                if g == 0 or sigma[g] != sigma[g - 1]:
+                    _gauss_terms(x, a_first[k], inv_s[g], phi)
+                if g == 0 or beta[g] != beta[g - 1]:
+                    _boltzmann_weights(q[k], q_max, first, beta[g], w, den)
+                for r in range(2):
+                    num = 0.0
+                    for c in range(phi.shape[0]):
+                        if phi[c] > 0.0:
+                            num += w[r, c] * phi[c]
+                    if num > 0.0:
+                        ll[g, r] = math.log(num / den[r]) - log_c[g]
+                    else:  # every term underflowed: the plain log-sum-exp
+                        ll[g, r] = boltzmann_log_emission(x, q[k, r], a_first[k], beta[g],
+                                                          sigma[g])
+        emission_lik(ll, lik, log_ref)
+        for r0 in range(2):
+            if k == a:
+                for g in range(G):
+                    alpha[r0, g, 0], alpha[r0, g, 1] = 1.0 - r0, float(r0)
+            else:
+                filter_predict(alpha[r0], p_a, pl[k - 1, 0], pl[k - 1, 1], T)
+            filter_update_lik(alpha[r0], logscale[r0], ll, lik, log_ref)
+    for r0 in range(2):
+        filter_loglik(alpha[r0], logscale[r0], out[:, r0])
+
+
+@njit(cache=True, parallel=True)
+def hmm_loglik(kind: int, starts: np.ndarray, accel: np.ndarray, a_role: np.ndarray,
+               pl: np.ndarray, q: np.ndarray, a_first: np.ndarray, p_a: np.ndarray,
+               sigma: np.ndarray, beta: np.ndarray, out: np.ndarray) -> None:
+    """Each run's log-likelihood for ``G`` parameter vectors, given each initial role.
+
+    ``kind``: :data:`EMIT_LFG` (``lfg``, ``stubborn`` with ``p_a = 0``) or :data:`EMIT_NOISY`.
+    ``p_a``, ``sigma``, ``beta``: ``(G,)``, one parameter vector per row (``beta`` is read by
+    ``noisy`` only). Evidence as in :class:`persuasive.fitting.evidence.Evidence`. Writes
+    ``out`` ``(n_runs, G, 2)``: ``log p(run i | theta_g, r_0 = L)`` and ``.. r_0 = F``: two
+    forward filters per row (:mod:`persuasive.fitting.filter`), one per initial role, fed the
+    same emissions. The runs in parallel (:func:`hmm_loglik_serial`: one after the other).
+    """
+    inv_s = 1.0 / sigma
+    log_c = np.log(sigma) + _LOG_SQRT_2PI
+    for i in prange(starts.shape[0] - 1):
+        hmm_loglik_run(kind, starts[i], starts[i + 1], accel, a_role, pl, q, a_first, p_a,
+                       sigma, beta, inv_s, log_c, out[i])
+
+
+@njit(cache=True)
+def hmm_loglik_serial(kind: int, starts: np.ndarray, accel: np.ndarray, a_role: np.ndarray,
+                      pl: np.ndarray, q: np.ndarray, a_first: np.ndarray, p_a: np.ndarray,
+                      sigma: np.ndarray, beta: np.ndarray, out: np.ndarray) -> None:
+    """:func:`hmm_loglik` on one thread (for small batches, where starting threads costs more
+    than it saves)."""
+    inv_s = 1.0 / sigma
+    log_c = np.log(sigma) + _LOG_SQRT_2PI
+    for i in range(starts.shape[0] - 1):
+        hmm_loglik_run(kind, starts[i], starts[i + 1], accel, a_role, pl, q, a_first, p_a,
+                       sigma, beta, inv_s, log_c, out[i])
+
+
+@njit(cache=True)
+def _pi0_score(table: np.ndarray, g: int, pi0: float) -> float:
+    total = 0.0
+    for i in range(table.shape[0]):
+        a, b = table[i, g, 0], table[i, g, 1]
+        m = a if a > b else b
+        if m == -np.inf:
+            return -np.inf
+        v = pi0 * math.exp(a - m) + (1.0 - pi0) * math.exp(b - m)
+        if v <= 0.0:
+            return -np.inf
+        total += m + math.log(v)
+    return total
+
+
+@njit(cache=True)
+def _pi0_slope(table: np.ndarray, g: int, pi0: float) -> float:
+    """d/d pi0 of the log-likelihood (decreasing in pi0: the log-likelihood is concave)."""
+    total = 0.0
+    for i in range(table.shape[0]):
+        a, b = table[i, g, 0], table[i, g, 1]
+        m = a if a > b else b
+        if m == -np.inf:
+            continue
+        A, B = math.exp(a - m), math.exp(b - m)
+        d = pi0 * A + (1.0 - pi0) * B
+        if d <= 0.0:
+            return np.inf if A > B else -np.inf
+        total += (A - B) / d
+    return total
+
+
+@njit(cache=True)
+def best_initial_role(table: np.ndarray, pi0_in: np.ndarray, ell: np.ndarray,
+                      pi0: np.ndarray) -> None:
+    """The log-likelihood of each row ``g`` of ``table`` ``(n_runs, G, 2)``
+    (:func:`hmm_loglik`) at ``pi0 = P(r_0 = L)``: at ``pi0_in[g]``, or, where that is NaN,
+    at the maximiser over [0, 1]. The log-likelihood ``sum_i log(pi0 L_i(L) + (1 - pi0)
+    L_i(F))`` is concave in ``pi0``, so its slope's sign change is found by bisection (60
+    halvings). Writes the log-likelihood into ``ell`` ``(G,)`` and ``pi0`` into ``pi0``
+    ``(G,)``."""
+    for g in range(table.shape[1]):
+        if not math.isnan(pi0_in[g]):
+            p = pi0_in[g]
+        elif _pi0_slope(table, g, 0.0) <= 0.0:
+            p = 0.0
+        elif _pi0_slope(table, g, 1.0) >= 0.0:
+            p = 1.0
+        else:
+            lo, hi = 0.0, 1.0
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                if _pi0_slope(table, g, mid) > 0.0:
+                    lo = mid
+                else:
+                    hi = mid
+            p = 0.5 * (lo + hi)
+        pi0[g] = p
+        ell[g] = _pi0_score(table, g, p)
+
+
+@njit(cache=True, parallel=True)
+def smooth_runs(kind: int, starts: np.ndarray, accel: np.ndarray, a_role: np.ndarray,
+                pl: np.ndarray, q: np.ndarray, a_first: np.ndarray, p_a: float, pi0: float,
+                sigma: float, beta: float, out: np.ndarray, run_ll: np.ndarray) -> None:
+    """``P(r_k = L | the whole run)`` at every step of every run (forward-backward,
+    :func:`persuasive.fitting.filter.smooth_roles`) into ``out`` ``(n,)``, and each run's
+    log-likelihood into ``run_ll`` ``(n_runs,)``."""
+    for i in prange(starts.shape[0] - 1):
+        a, b = starts[i], starts[i + 1]
+        ll = np.empty((b - a, 2))
+        e = np.empty(2)
+        for k in range(a, b):
+            step_log_emissions(kind, accel[k], a_role[k], q[k], a_first[k], sigma, beta, e)
+            ll[k - a, 0], ll[k - a, 1] = e[0], e[1]
+        run_ll[i] = smooth_roles(ll, pl[a:b], p_a, pi0, out[a:b])
+
+
+#: Slots of an IDM parameter vector, as ``persuasive.policies.idm`` reads them.
+IDM_NAMES = ("desired_speed_mps", "time_gap_s", "max_accel_mps2", "comfort_decel_mps2",
+             "delta", "jam_gap_m", "critical_gap_s", "impatience_per_s")
+
+
+@njit(cache=True)
+def idm_sse_run(a: int, b: int, states: np.ndarray, accel: np.ndarray, P_hv: np.ndarray,
+                P_av: np.ndarray, dt: float, prm: np.ndarray, out: np.ndarray) -> None:
+    """:func:`idm_sse` of the run in rows ``a:b`` into ``out`` ``(G,)``."""
+    st = np.zeros(8)
+    log = np.zeros(16)
+    for g in range(prm.shape[0]):
+        st[:] = 0.0
+        total = 0.0
+        for k in range(a, b):
+            acc = idm_step(st, prm[g], states[k, 2], states[k, 3], states[k, 0], states[k, 1],
+                           dt, P_hv, P_av, log)
+            r = accel[k] - acc
+            total += r * r
+        out[g] = total
+
+
+@njit(cache=True, parallel=True)
+def idm_sse(starts: np.ndarray, states: np.ndarray, accel: np.ndarray, P_hv: np.ndarray,
+            P_av: np.ndarray, dt: np.ndarray, prm: np.ndarray, out: np.ndarray) -> None:
+    """Each run's sum of squared residuals ``sum_k (x_k - a_idm,k)^2`` for ``G`` IDM parameter
+    vectors ``prm`` ``(G, 8)`` (:data:`IDM_NAMES`) into ``out`` ``(n_runs, G)``; the runs in
+    parallel (:func:`idm_sse_serial`: one after the other).
+
+    The driver's state (waiting time, commitment) starts fresh and follows the measured
+    states ``states`` ``(n, 4)``; the step is ``persuasive.policies.idm.idm_step`` with the HV as
+    itself.
+    """
+    for i in prange(starts.shape[0] - 1):
+        idm_sse_run(starts[i], starts[i + 1], states, accel, P_hv[i], P_av[i], dt[i], prm,
+                    out[i])
+
+
+@njit(cache=True)
+def idm_sse_serial(starts: np.ndarray, states: np.ndarray, accel: np.ndarray,
+                   P_hv: np.ndarray, P_av: np.ndarray, dt: np.ndarray, prm: np.ndarray,
+                   out: np.ndarray) -> None:
+    """:func:`idm_sse` on one thread."""
+    for i in range(starts.shape[0] - 1):
+        idm_sse_run(starts[i], starts[i + 1], states, accel, P_hv[i], P_av[i], dt[i], prm,
+                    out[i])
+
+
+@njit(cache=True)
+def idm_accelerations(starts: np.ndarray, states: np.ndarray, P_hv: np.ndarray,
+                      P_av: np.ndarray, dt: np.ndarray, prm: np.ndarray,
+                      out: np.ndarray) -> None:
+    """The IDM's acceleration at every logged step for one parameter vector ``prm`` ``(8,)``
+    into ``out`` ``(n,)``."""
+    st = np.zeros(8)
+    log = np.zeros(16)
+    for i in range(starts.shape[0] - 1):
+        st[:] = 0.0
+        for k in range(starts[i], starts[i + 1]):
+            out[k] = idm_step(st, prm, states[k, 2], states[k, 3], states[k, 0], states[k, 1],
+                              dt[i], P_hv[i], P_av[i], log)
+
+
+def check_idm_vector(prm: np.ndarray) -> np.ndarray:
+    """An IDM parameter matrix ``(G, 8)`` as float64 C-contiguous."""
+    prm = np.ascontiguousarray(np.atleast_2d(prm), dtype=np.float64)
+    if prm.shape[1] != len(IDM_NAMES):
+        raise ValueError(f"IDM parameters need {len(IDM_NAMES)} columns, got {prm.shape[1]}")
+    return prm
+
+
+__all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "best_initial_role",
+           "boltzmann_log_emission", "hmm_loglik", "hmm_loglik_run", "hmm_loglik_serial",
+           "idm_accelerations", "idm_sse", "idm_sse_serial",
+           "smooth_runs", "step_log_emissions"]
