@@ -1,0 +1,412 @@
+"""Maximum-likelihood fits of the human models, their intervals and their comparison
+(docs/method.md §13.4-13.6).
+
+Parameters and their coordinates (the fits work on these):
+
+======== ================================ ===================================
+name      meaning                          coordinate
+======== ================================ ===================================
+``p_a``   willingness to change role       ``p_a`` in [0, 1]
+``pi0``   ``P(initial role = leader)``     maximised exactly (concave, §13.4)
+``sigma`` acceleration noise [m/s^2]       ``log sigma``, ``sigma >= sigma_min``
+``beta``  rationality (``noisy``)          ``log beta`` in [log 1e-3, log 1e3], or inf
+IDM       the IDM's and its gap's          ``persuasive.fitting.idm``
+======== ================================ ===================================
+
+**Exact data.** Simulated runs without noise reproduce the LFG's accelerations to the last bit,
+so the likelihood grows without bound as ``sigma -> 0``. ``sigma`` is bounded below by
+``sigma_min`` (default 0.001 m/s^2: two accelerations closer than that count as the same);
+when the fit ends on that bound the data are *exact*: each emission is then, in effect, an
+indicator of "this role reproduces the logged acceleration", the likelihood in ``p_a`` is the
+probability of the role sequences that explain the actions, and the log-likelihoods of all
+models that reproduce the data share the constant ``n log(1 / (sigma_min sqrt(2 pi)))``, so
+comparisons stay meaningful.
+
+**Intervals** (95 %): profile likelihood, the other parameters maximised at every point. The
+interval is where twice the drop of the profile log-likelihood stays below the chi-square(1)
+quantile 3.84. When the estimate sits on a bound (``p_a = 1``, ``p_a = 0``, ``pi0`` in {0, 1},
+``sigma = sigma_min``, ``beta = inf``), the interval is one-sided from the signed root of the
+likelihood ratio, drop below ``1.645^2 / 2 = 1.35``, and reaches the bound.
+
+**Comparison**: ``AIC = 2 k - 2 l``, ``BIC = k log n - 2 l`` (``n``: logged steps, ``k``: fitted
+parameters; ``pi0`` counts). The selected model has the smallest BIC.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .evidence import Evidence
+from .models import EMIT_LFG, EMIT_NOISY, best_initial_role, hmm_loglik, hmm_loglik_serial
+from .optimize import hessian_at, maximise_rows
+
+#: Default lower bound of the noise's standard deviation [m/s^2] (exact data end on it).
+SIGMA_MIN = 1e-3
+#: Upper bound of the noise's standard deviation [m/s^2].
+SIGMA_MAX = 10.0
+#: Bounds of the noisy human's rationality [1/reward]; beta = inf is the LFG.
+BETA_MIN, BETA_MAX = 1e-3, 1e3
+#: Drop of the log-likelihood at a two-sided 95 % limit: chi2(1) quantile / 2.
+DROP_TWO_SIDED = 3.841458820694124 / 2.0
+#: Drop at a one-sided 95 % limit (estimate on a bound): 1.645^2 / 2.
+DROP_ONE_SIDED = 1.6448536269514722 ** 2 / 2.0
+#: Human kinds a fit knows, in the order they are reported.
+MODELS = ("lfg", "stubborn", "noisy", "idm")
+#: Below this many step-rows a kernel call runs on one thread.
+PARALLEL_WORK = 200_000
+#: The ``p_a`` grid of the profile (step 0.02).
+P_GRID = np.linspace(0.0, 1.0, 51)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One parameter's estimate and its 95 % interval (``None`` where it has none)."""
+
+    value: float
+    low: float | None
+    high: float | None
+    method: str  #: "profile", "profile, one-sided", "fixed", ...
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        out = {"estimate": _num(self.value), "ci95": [_num(self.low), _num(self.high)],
+               "method": self.method}
+        if self.note:
+            out["note"] = self.note
+        return out
+
+
+def _num(x):
+    if x is None:
+        return None
+    x = float(x)
+    if math.isnan(x):
+        return None
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return x
+
+
+@dataclass
+class ModelFit:
+    """A fitted human model."""
+
+    model: str
+    params: dict[str, Estimate]
+    loglik: float
+    n_params: int
+    n_obs: int
+    exact: bool  #: sigma ended on sigma_min: the data are reproduced to within it
+    theta: dict[str, float]  #: the point estimate as the likelihood reads it
+    run_loglik: np.ndarray = field(repr=False)  #: per run, at the estimate
+    profile: dict | None = field(default=None, repr=False)  #: the profile over p_a
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def aic(self) -> float:
+        return 2.0 * self.n_params - 2.0 * self.loglik
+
+    @property
+    def bic(self) -> float:
+        return self.n_params * math.log(max(self.n_obs, 1)) - 2.0 * self.loglik
+
+    def to_dict(self) -> dict:
+        out = {"model": self.model, "loglik": _num(self.loglik), "n_params": self.n_params,
+               "n_obs": self.n_obs, "aic": _num(self.aic), "bic": _num(self.bic),
+               "exact": self.exact,
+               "params": {k: v.to_dict() for k, v in self.params.items()}}
+        if self.notes:
+            out["notes"] = list(self.notes)
+        if self.profile is not None:
+            out["profile"] = {k: [_num(v) for v in vals] for k, vals in self.profile.items()}
+        return out
+
+
+# -- the hidden-role models: lfg, stubborn, noisy ---------------------------------------------
+
+#: Coordinates of a row: p_a, log sigma, log beta (its upper bound stands for beta = inf, the
+#: LFG's own choice), pi0 (NaN: maximised exactly).
+P_A, LOG_SIGMA, LOG_BETA, PI0 = 0, 1, 2, 3
+#: Finite-difference steps and trust-region scales of the coordinates.
+_H = np.array([1e-4, 1e-4, 1e-3, 1e-4])
+_SCALE = np.array([0.1, 0.5, 1.0, 0.1])
+
+
+class RoleObjective:
+    """The log-likelihood of a hidden-role model for parameter rows ``(M, 4)`` =
+    ``(p_a, log sigma, log beta, pi0)``; ``pi0 = NaN`` is maximised exactly."""
+
+    def __init__(self, ev: Evidence, model: str, sigma_min: float):
+        if model not in ("lfg", "stubborn", "noisy"):
+            raise ValueError(f"not a hidden-role model: {model!r}")
+        self.ev, self.model = ev, model
+        self.emit = EMIT_NOISY if model == "noisy" else EMIT_LFG
+        self.sigma_min = sigma_min
+        self.lo = np.array([0.0, math.log(sigma_min), math.log(BETA_MIN), 0.0])
+        self.hi = np.array([1.0, math.log(SIGMA_MAX), math.log(BETA_MAX), 1.0])
+        self.calls = 0  #: kernel calls
+        self.rows = 0  #: parameter rows scored
+
+    @property
+    def free(self) -> list[int]:
+        """The coordinates the Newton iterations move (``pi0`` is maximised exactly)."""
+        return {"lfg": [P_A, LOG_SIGMA], "stubborn": [LOG_SIGMA],
+                "noisy": [P_A, LOG_SIGMA, LOG_BETA]}[self.model]
+
+    def beta(self, u: np.ndarray) -> np.ndarray:
+        if self.model != "noisy":
+            return np.full(len(u), np.inf)
+        return np.where(u >= self.hi[LOG_BETA], np.inf, np.exp(u))
+
+    def table(self, X: np.ndarray) -> np.ndarray:
+        """Each run's log-likelihood per row and initial role ``(n_runs, M, 2)``."""
+        ev = self.ev
+        X = np.atleast_2d(X)
+        p = X[:, P_A] if self.model != "stubborn" else np.zeros(len(X))
+        out = np.empty((ev.n_runs, len(X), 2))
+        work = ev.n_steps * len(X) * (12 if self.emit == EMIT_NOISY else 1)
+        kernel = hmm_loglik if work >= PARALLEL_WORK and ev.n_runs > 1 else hmm_loglik_serial
+        kernel(self.emit, ev.starts, ev.accel, ev.a_role, ev.pl, ev.q, ev.a_first,
+                   np.ascontiguousarray(p), np.ascontiguousarray(np.exp(X[:, LOG_SIGMA])),
+                   np.ascontiguousarray(self.beta(X[:, LOG_BETA])), out)
+        self.calls += 1
+        self.rows += len(X)
+        return out
+
+    def evaluate(self, X: np.ndarray):
+        """``(loglik (M,), pi0 (M,))``, ``pi0`` maximised where the row's is NaN."""
+        X = np.atleast_2d(X)
+        table = self.table(X)
+        ell, pi0 = np.empty(len(X)), np.empty(len(X))
+        best_initial_role(table, np.ascontiguousarray(X[:, PI0]), ell, pi0)
+        return ell, pi0
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        return self.evaluate(X)[0]
+
+    def maximise(self, rows: np.ndarray, free: list[int]):
+        """Maximise every row over ``free`` (:func:`persuasive.fitting.optimize
+        .maximise_rows`)."""
+        return maximise_rows(self, rows, free, self.lo, self.hi, _H, _SCALE)
+
+    def run_loglik(self, x: np.ndarray) -> np.ndarray:
+        """Each run's log-likelihood at the parameter vector ``x`` (its ``pi0`` given)."""
+        table = self.table(x[None])
+        a, b = table[:, 0, 0], table[:, 0, 1]
+        pi0 = float(x[PI0])
+        with np.errstate(divide="ignore"):
+            return np.logaddexp(np.log(pi0) + a, np.log1p(-pi0) + b)
+
+
+def initial_sigma(ev: Evidence, sigma_min: float) -> float:
+    """A start for ``sigma``: the RMS of the smaller of the two roles' residuals per step."""
+    r = np.min(np.abs(ev.accel[:, None] - ev.a_role), axis=1)
+    return float(max(sigma_min, math.sqrt(float(np.mean(r * r)))))
+
+
+def profile_interval(prof, x_hat: float, ell_hat: float, lo_bound: float, hi_bound: float,
+                     width: float | None = None, grid: np.ndarray | None = None,
+                     grid_vals: np.ndarray | None = None,
+                     at_bound_tol: float = 1e-9) -> tuple[float, float, bool]:
+    """A 95 % profile-likelihood interval of one coordinate.
+
+    ``prof(values (m,)) -> (m,)``: the profile log-likelihood at several values, in one
+    batch. Each limit is bracketed (from ``grid``/``grid_vals``, profile values already known;
+    else around ``x_hat +- width``, the limits of the quadratic approximation; else walking out
+    to the bound), the bracket narrowed by two rounds of 6 points, and the limit interpolated
+    linearly. Both limits share each batch. Returns ``(low, high, one_sided)``: on a bound the
+    interval is one-sided (drop :data:`DROP_ONE_SIDED`) and reaches that bound.
+    """
+    on = (x_hat - lo_bound <= at_bound_tol, hi_bound - x_hat <= at_bound_tol)
+    one_sided = on[0] or on[1]
+    target = ell_hat - (DROP_ONE_SIDED if one_sided else DROP_TWO_SIDED)
+    ends = (lo_bound, hi_bound)
+
+    class Side:
+        def __init__(self, k):
+            self.k, self.inner, self.f_in = k, x_hat, ell_hat
+            self.outer = self.f_out = None
+            self.result = ends[k] if on[k] else None
+            self.narrowed = 0
+            self.tries = 0
+
+    sides = [Side(0), Side(1)]
+    for sd in sides:
+        if sd.result is None and grid is not None:
+            sel = (grid < x_hat) if sd.k == 0 else (grid > x_hat)
+            cand, vals = grid[sel], grid_vals[sel]
+            order = np.argsort(-cand) if sd.k == 0 else np.argsort(cand)
+            for xg, vg in zip(cand[order], vals[order]):
+                if not vg >= target:
+                    sd.outer, sd.f_out = xg, vg
+                    break
+                sd.inner, sd.f_in = xg, vg
+            if sd.outer is None and abs(sd.inner - ends[sd.k]) <= at_bound_tol:
+                sd.result = ends[sd.k]
+    while True:
+        todo = [sd for sd in sides if sd.result is None and sd.narrowed < 2]
+        if not todo:
+            break
+        batch = []
+        for sd in todo:
+            sign = -1.0 if sd.k == 0 else 1.0
+            if sd.outer is not None:
+                xs = np.linspace(sd.inner, sd.outer, 8)[1:-1]
+            elif sd.tries == 0 and width is not None and math.isfinite(width) and width > 0:
+                xs = np.clip(x_hat + sign * width * np.array([0.6, 0.8, 1.0, 1.25, 1.6, 2.5]),
+                             lo_bound, hi_bound)
+            else:
+                xs = np.linspace(sd.inner, ends[sd.k], 7)[1:]
+            batch.append(xs)
+        vals = prof(np.concatenate(batch))
+        k = 0
+        for sd, xs in zip(todo, batch):
+            vs = vals[k:k + len(xs)]
+            k += len(xs)
+            bracketed = sd.outer is not None
+            below = np.flatnonzero(~(vs >= target))
+            if below.size == 0:
+                sd.inner, sd.f_in = xs[-1], vs[-1]
+                if not bracketed and abs(xs[-1] - ends[sd.k]) <= at_bound_tol:
+                    sd.result = ends[sd.k]
+            else:
+                j = below[0]
+                if j > 0:
+                    sd.inner, sd.f_in = xs[j - 1], vs[j - 1]
+                sd.outer, sd.f_out = xs[j], vs[j]
+            sd.narrowed += 1 if bracketed else 0
+            sd.tries += 1
+            if sd.tries > 12 and sd.outer is None:
+                sd.result = ends[sd.k]
+    out = []
+    for sd in sides:
+        if sd.result is not None:
+            out.append(float(sd.result))
+        elif not (np.isfinite(sd.f_in) and np.isfinite(sd.f_out)) or sd.f_in == sd.f_out:
+            out.append(float(0.5 * (sd.inner + sd.outer)))
+        else:
+            out.append(float(sd.inner + (target - sd.f_in) * (sd.outer - sd.inner)
+                             / (sd.f_out - sd.f_in)))
+    return out[0], out[1], one_sided
+
+
+def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
+                   intervals: bool = True, start: dict | None = None) -> ModelFit:
+    """Fit ``lfg``, ``stubborn`` or ``noisy`` to the evidence (see the module docstring).
+
+    ``start``: a parameter vector to try as a start as well (``noisy`` takes the ``lfg``
+    estimate, its ``beta = inf`` limit, so that it never fits worse than the LFG).
+    """
+    obj = RoleObjective(ev, model, sigma_min)
+    lo, hi, free = obj.lo, obj.hi, obj.free
+    t0 = math.log(initial_sigma(ev, sigma_min))
+    notes: list[str] = []
+    # 1. starts over p_a (and beta), each maximised over the rest; then Newton over all
+    us = [math.log(0.03), math.log(0.3), math.log(3.0)] if model == "noisy" else [hi[LOG_BETA]]
+    ps = np.linspace(0.0, 1.0, 11) if P_A in free else np.zeros(1)
+    starts = np.array([[p, t0, u, np.nan] for p in ps for u in us])
+    if start is not None:
+        starts = np.vstack([starts, [start["p_a"], math.log(start["sigma"]),
+                                     hi[LOG_BETA], np.nan]])
+    xs, fs = obj.maximise(starts, [c for c in free if c != P_A])
+    best = np.argsort(-fs)[:3]
+    xs, fs = obj.maximise(xs[best], free)
+    j = int(np.argmax(fs))
+    x_hat, ell_hat = xs[j], float(fs[j])
+    profile = grid_vals = None
+    # 2. the profile over p_a on its grid (each row maximised over the other coordinates)
+    if P_A in free:
+        nuis = [c for c in free if c != P_A]
+        rows = np.tile(x_hat, (len(P_GRID), 1))
+        rows[:, P_A] = P_GRID
+        xs, grid_vals = obj.maximise(rows, nuis)
+        j = int(np.argmax(grid_vals))
+        if grid_vals[j] > ell_hat + 1e-6:  # another mode: restart the joint maximisation there
+            x2, f2 = obj.maximise(xs[j][None], free)
+            if f2[0] > ell_hat:
+                x_hat, ell_hat = x2[0], float(f2[0])
+        profile = {"p_a": P_GRID.tolist(), "loglik": grid_vals.tolist()}
+    # the point estimate, pi0 included
+    ell_chk, pi0_hat = obj.evaluate(x_hat[None])
+    x_hat = x_hat.copy()
+    x_hat[PI0] = float(pi0_hat[0])
+    run_ll = obj.run_loglik(x_hat)
+    p_hat = float(x_hat[P_A]) if model != "stubborn" else 0.0
+    sigma_hat = float(math.exp(x_hat[LOG_SIGMA]))
+    beta_hat = float(obj.beta(x_hat[LOG_BETA:LOG_BETA + 1])[0]) if model == "noisy" else math.inf
+    exact = bool(x_hat[LOG_SIGMA] <= lo[LOG_SIGMA] + 1e-9)
+    theta = {"p_a": p_hat, "pi0": float(x_hat[PI0]), "sigma": sigma_hat, "beta": beta_hat}
+    if exact:
+        notes.append(f"sigma ended on its floor sigma_min = {sigma_min:g} m/s^2: the model "
+                     "reproduces the logged accelerations to within it (exact data)")
+    if model == "noisy" and math.isinf(beta_hat):
+        notes.append("beta = inf: the LFG's own choice explains the data at least as well as "
+                     "any finite rationality")
+    x_free = x_hat.copy()
+    x_free[PI0] = np.nan  # pi0 maximised at every profile point
+    # the Hessian at the estimate predicts the nuisance coordinates along each profile and
+    # the interval's half-width (the quadratic approximation); Newton then corrects them
+    if intervals:
+        _, H = hessian_at(obj, x_free, free, lo, hi, _H)
+
+    def profile_of(coord: int):
+        nuis = [c for c in free if c != coord]
+        base = x_free if coord != PI0 else x_hat
+        slope = np.zeros(len(nuis))
+        if coord in free and nuis:
+            j = free.index(coord)
+            idx = [free.index(c) for c in nuis]
+            try:
+                slope = -np.linalg.solve(H[np.ix_(idx, idx)], H[idx, j])
+            except np.linalg.LinAlgError:
+                pass
+
+        def prof(values: np.ndarray) -> np.ndarray:
+            rows = np.tile(base, (len(values), 1))
+            rows[:, coord] = values
+            if coord in free:
+                rows[:, nuis] += np.outer(values - base[coord], slope)
+                for c in nuis:
+                    rows[:, c] = np.clip(rows[:, c], lo[c], hi[c])
+            return obj.maximise(rows, nuis)[1]
+        return prof
+
+    def half_width(coord: int) -> float | None:
+        if coord not in free:
+            return None
+        try:
+            var = -np.linalg.inv(H)[free.index(coord), free.index(coord)]
+        except np.linalg.LinAlgError:
+            return None
+        return math.sqrt(2.0 * DROP_TWO_SIDED * var) if var > 0 else None
+
+    params: dict[str, Estimate] = {}
+    names = {P_A: "p_a", PI0: "pi0", LOG_SIGMA: "sigma", LOG_BETA: "beta"}
+    coords = [c for c in (P_A, PI0, LOG_SIGMA, LOG_BETA) if c in free or c == PI0]
+    for c in coords:
+        name = names[c]
+        value = theta[name]
+        if not intervals:
+            params[name] = Estimate(value, None, None, "point")
+            continue
+        a, b, one = profile_interval(profile_of(c), float(x_hat[c]), ell_hat, lo[c], hi[c],
+                                     half_width(c), P_GRID if c == P_A else None,
+                                     grid_vals if c == P_A else None)
+        if c == LOG_SIGMA:
+            a, b = math.exp(a), math.exp(b)
+        elif c == LOG_BETA:
+            a = math.exp(a)
+            b = math.inf if b >= hi[LOG_BETA] else math.exp(b)
+        params[name] = Estimate(value, a, b, "profile, one-sided" if one else "profile")
+    if model == "stubborn":
+        params = {"p_a": Estimate(0.0, None, None, "fixed"), **params}
+    k = {"lfg": 3, "stubborn": 2, "noisy": 4}[model]
+    return ModelFit(model, params, ell_hat, k, ev.n_steps, exact, theta, run_ll, profile,
+                    notes)
+
+
+__all__ = ["BETA_MAX", "BETA_MIN", "Estimate", "MODELS", "ModelFit", "RoleObjective",
+           "SIGMA_MIN", "fit_role_model", "initial_sigma", "profile_interval"]
