@@ -27,6 +27,7 @@ def _register() -> None:
     from .bench import bench
     from .compare import compare
     from .drive import drive
+    from .fit import fit
     from .highway import highway
     from .plots import animate, plot, plot_compare
     from .reproduce import reproduce
@@ -36,6 +37,7 @@ def _register() -> None:
     for command in (simulate, reproduce, compare, sweep, bench, plot, animate, drive):
         cli.add_command(command)
     cli.add_command(highway)
+    cli.add_command(fit)
     plot.add_command(plot_sweep)
     plot.add_command(plot_compare)
 

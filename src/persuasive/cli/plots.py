@@ -37,7 +37,15 @@ def _runs(single: bool, run: dict):
     from ..simulation import load_record, simulate
 
     source = run.pop("source", None)
+    fit_run = run.pop("fit_run", None)
     if source is not None:
+        from ..fitting.output import is_fit_file, load_fitted_run
+
+        if is_fit_file(source):  # a fit's runs, with the human's smoothed role
+            return (load_fitted_run(source, 0 if fit_run is None else fit_run),)
+        if fit_run is not None:
+            raise click.UsageError("--run applies only to a fit's file (persuasive fit --out "
+                                   "FILE.parquet)")
         return (load_record(source),)
     compile_notice()
     if single:
@@ -68,13 +76,21 @@ def _single_option(func: Callable) -> Callable:
 def _from_option(func: Callable) -> Callable:
     return click.option("--from", "source", type=click.Path(dir_okay=False), default=None,
                         help="Plot a saved run instead of simulating one: a Parquet log of "
-                             "'simulate --out' or a recorded trial of 'drive'.")(func)
+                             "'simulate --out', a recorded trial of 'drive', or a fit's runs "
+                             "('fit --out FILE.parquet', with --run).")(func)
+
+
+def _fit_run_option(func: Callable) -> Callable:
+    return click.option("--run", "fit_run", type=click.IntRange(min=0), default=None,
+                        metavar="K", help="With --from a fit's file: the run to plot [0]; "
+                                          "its smoothed role is drawn on the role row.")(func)
 
 
 @plot.command()
 @run_options(seed_default=PAPER_SEED, seed_help=_SEED_HELP)
 @_single_option
 @_from_option
+@_fit_run_option
 @_out_option("Figure file: .png, .svg or .pdf.")
 def profile(single, out, **run) -> None:
     """Roles, beliefs, speeds and accelerations over time (the paper's Fig. 2)."""

@@ -21,6 +21,10 @@ from ._common import (_COLORS, _FONT, AV_COLOR, DOUBLE_COLUMN_IN, SINGLE_COLUMN_
                       _style, _subtitle, _titles, _vehicle_handles, belief_column,
                       crossing_time)
 
+#: The log column of a fitted run holding the human's smoothed ``P(role = L)``
+#: (``persuasive fit --out FILE.parquet``).
+FIT_COLUMN = "hv_fit_p_leader"
+
 #: Rows of the profile figure: (key, y label).
 PROFILE_ROWS = (("role", "role"), ("belief", "P(other = leader)"), ("speed", "speed [m/s]"),
                 ("accel", "accel. [m/s$^2$]"))
@@ -54,6 +58,10 @@ def _profile_column(axes: Sequence[Axes], run: RunRecord) -> None:
                       gid=f"{who}-speed")
         ax_accel.plot(t_states, _step_line(run.log[f"{who}_accel_mps2"]),
                       drawstyle="steps-post", color=color, gid=f"{who}-accel")
+    if FIT_COLUMN in run.log:
+        # the human's role as a fit of its driving infers it: P(role = L), smoothed
+        ax_role.plot(t_states, _step_line(run.log[FIT_COLUMN]), drawstyle="steps-post",
+                     color=_COLORS["hv"], lw=1.0, ls=":", zorder=4, gid="hv-role-fit")
     if not _has_role(run, "av"):
         # Above the L level, where only the crossing markers pass.
         ax_role.text(0.99, 0.96, f"AV ({_planner(run)}): no role",
@@ -88,6 +96,9 @@ def _profile(runs: Sequence[RunRecord], width_in: float) -> Figure:
         axes[i, 0].set_ylabel(label, fontsize=_FONT["label"])
     handles = _vehicle_handles() + [
         Line2D([], [], color="0.3", ls="--", lw=0.9, label="reaches the crossing line")]
+    if any(FIT_COLUMN in run.log for run in runs):
+        handles.append(Line2D([], [], color=_COLORS["hv"], ls=":", lw=1.0,
+                              label="HV P(leader), fitted"))
     fig.legend(handles=handles, loc="outside lower center", ncols=2 if n == 1 else 3,
                frameon=False, fontsize=_FONT["legend"])
     return fig

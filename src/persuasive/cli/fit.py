@@ -1,0 +1,140 @@
+"""``persuasive fit``: fit human models to recorded driving (docs/method.md §13).
+
+Reads per-step Parquet logs (``simulate --out``, ``drive`` trials, the files ``replay``
+reads), re-solves the human's game at every logged step, fits each human model by maximum
+likelihood (one parameter set for all runs, or one per participant), prints the estimates with
+95 % intervals and the comparison (log-likelihood, AIC, BIC), and optionally writes the report
+(``.json``) or the runs with the human's smoothed role per step (``.parquet``, drawn by
+``persuasive plot profile --from FILE --run K``). Every input is checked before anything is
+written; a bad log ends the command with one line naming it and exit status 2.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import click
+
+from ..config import SCENARIO_KINDS
+from ._common import compile_notice
+
+MODEL_CHOICES = ("lfg", "stubborn", "noisy", "idm", "all")
+
+
+def _fmt(x, digits: int = 3) -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, str):
+        return x
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return f"{x:.{digits}g}" if abs(x) < 1e-3 and x != 0 else f"{x:.{digits}f}"
+
+
+def _estimate_text(name: str, est) -> str:
+    if est.low is None and est.high is None:
+        return f"{name} = {_fmt(est.value)} ({est.method})"
+    return f"{name} = {_fmt(est.value)} [{_fmt(est.low)}, {_fmt(est.high)}] ({est.method})"
+
+
+def _print_report(report, header: str) -> None:
+    ev = report.evidence
+    click.echo(f"{header}{ev.n_runs} run{'s' * (ev.n_runs != 1)}, {ev.n_steps} steps; "
+               f"sigma_min = {report.sigma_min:g} m/s^2")
+    rows = report.comparison()
+    click.echo("| model | parameters | log-likelihood | AIC | BIC | delta BIC | exact |")
+    click.echo("|---|---|---|---|---|---|---|")
+    for r in rows:
+        click.echo(f"| {r['model']} | {r['n_params']} | {r['loglik']:.2f} | {r['aic']:.2f} | "
+                   f"{r['bic']:.2f} | {r['delta_bic']:.2f} | {'yes' if r['exact'] else 'no'} |")
+    click.echo(f"selected (smallest BIC): {report.selected}")
+    for r in rows:
+        fit = report.fits[r["model"]]
+        click.echo(f"{fit.model}: " + "; ".join(_estimate_text(k, v)
+                                                for k, v in fit.params.items()))
+        for note in fit.notes:
+            click.echo(f"  note: {note}")
+    if report.role_model is not None:
+        click.echo(f"roles smoothed under {report.role_model}: mean P(leader) at the first "
+                   f"step {_mean_first(report):.3f}, at the last {_mean_last(report):.3f}")
+
+
+def _mean_first(report) -> float:
+    ev = report.evidence
+    return float(report.p_leader[ev.starts[:-1]].mean())
+
+
+def _mean_last(report) -> float:
+    ev = report.evidence
+    return float(report.p_leader[ev.starts[1:] - 1].mean())
+
+
+@click.command()
+@click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option("--model", "model", type=click.Choice(list(MODEL_CHOICES)), default="all",
+              show_default=True, help="Human model to fit; all fits and compares them.")
+@click.option("--per-participant", is_flag=True,
+              help="One fit per participant of drive trials (<participant>-tNN-<condition>"
+                   ".parquet) instead of one for all runs.")
+@click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default=None,
+              help="The model's scenario; logs of another are refused [the first log's].")
+@click.option("--sigma-min", type=click.FloatRange(min=0.0, min_open=True), default=1e-3,
+              show_default=True, metavar="M/S^2",
+              help="Floor of the acceleration noise (exact data end on it).")
+@click.option("--intervals", type=click.Choice(["all", "selected", "none"]), default="all",
+              show_default=True, help="Which fitted models get 95 % intervals.")
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Write the report (.json) or the runs with their smoothed roles "
+                   "(.parquet, for 'plot profile --from FILE --run K').")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_json) -> None:
+    """Fit human models to recorded driving (simulate --out logs, drive trials)."""
+    from .._files import check_output_file
+    from ..config import ConfigError
+    from ..fitting import (OUT_EXTENSIONS, evidence_of, fit_groups, fit_models, load_logs,
+                           report_dict, write_fit_parquet, write_json)
+    from ..fitting.estimate import MODELS
+
+    ext = check_output_file(out, OUT_EXTENSIONS, "fit") if out else None
+    compile_notice()
+    t0 = time.perf_counter()
+    runs = load_logs(logs, scenario)
+    if per_participant:
+        for log in runs:
+            if log.participant is None:
+                raise ConfigError(f"--per-participant: log file {log.source!r} is not a drive "
+                                  "trial (<participant>-tNN-<condition>.parquet written by "
+                                  "'persuasive drive')")
+    models = MODELS if model == "all" else (model,)
+    ev = evidence_of(runs)
+    if intervals == "all":
+        wanted = True
+    elif intervals == "none":
+        wanted = False
+    else:
+        wanted = None
+    reports = []
+    for report in (fit_groups(ev, models, sigma_min, wanted if wanted is not None else False)
+                   if per_participant else
+                   [fit_models(ev, models, sigma_min, wanted if wanted is not None else False)]):
+        if wanted is None:  # intervals for the selected model only: refit it with them
+            sub = report.evidence
+            report = fit_models(sub, models, sigma_min, [report.selected], report.group)
+        reports.append(report)
+    elapsed = time.perf_counter() - t0
+    payload = report_dict(reports)
+    payload["seconds"] = round(elapsed, 3)
+    if out:
+        if ext == ".json":
+            write_json(out, payload)
+        else:
+            write_fit_parquet(out, reports, payload)
+    if as_json:
+        click.echo(json.dumps(payload, allow_nan=False))
+        return
+    for report in reports:
+        header = f"participant {report.group}: " if report.group is not None else "fit of "
+        _print_report(report, header)
+    click.echo(f"time: {elapsed:.2f} s" + (f"; written to {out}" if out else ""))
