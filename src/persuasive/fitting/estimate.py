@@ -187,10 +187,10 @@ class RoleObjective:
     def __call__(self, X: np.ndarray) -> np.ndarray:
         return self.evaluate(X)[0]
 
-    def maximise(self, rows: np.ndarray, free: list[int]):
+    def maximise(self, rows: np.ndarray, free: list[int], iters: int = 40):
         """Maximise every row over ``free`` (:func:`persuasive.fitting.optimize
         .maximise_rows`)."""
-        return maximise_rows(self, rows, free, self.lo, self.hi, _H, _SCALE)
+        return maximise_rows(self, rows, free, self.lo, self.hi, _H, _SCALE, iters=iters)
 
     def run_loglik(self, x: np.ndarray) -> np.ndarray:
         """Each run's log-likelihood at the parameter vector ``x`` (its ``pi0`` given)."""
@@ -304,21 +304,24 @@ def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
     lo, hi, free = obj.lo, obj.hi, obj.free
     t0 = math.log(initial_sigma(ev, sigma_min))
     notes: list[str] = []
-    # 1. starts over p_a (and beta), each maximised over the rest; then Newton over all
-    us = [math.log(0.03), math.log(0.3), math.log(3.0)] if model == "noisy" else [hi[LOG_BETA]]
-    ps = np.linspace(0.0, 1.0, 11) if P_A in free else np.zeros(1)
+    # 1. starts over p_a (and beta), each maximised a little over the rest; then Newton over
+    #    every free coordinate from the best three
+    us = [math.log(0.1), math.log(3.0)] if model == "noisy" else [hi[LOG_BETA]]
+    ps = (np.linspace(0.0, 1.0, 6 if model == "noisy" else 11) if P_A in free
+          else np.zeros(1))
     starts = np.array([[p, t0, u, np.nan] for p in ps for u in us])
     if start is not None:
         starts = np.vstack([starts, [start["p_a"], math.log(start["sigma"]),
                                      hi[LOG_BETA], np.nan]])
-    xs, fs = obj.maximise(starts, [c for c in free if c != P_A])
+    xs, fs = obj.maximise(starts, [c for c in free if c != P_A], iters=8)
     best = np.argsort(-fs)[:3]
     xs, fs = obj.maximise(xs[best], free)
     j = int(np.argmax(fs))
     x_hat, ell_hat = xs[j], float(fs[j])
     profile = grid_vals = None
-    # 2. the profile over p_a on its grid (each row maximised over the other coordinates)
-    if P_A in free:
+    # 2. the profile over p_a on its grid (each row maximised over the other coordinates):
+    #    its intervals' brackets, and a search for another mode
+    if P_A in free and intervals:
         nuis = [c for c in free if c != P_A]
         rows = np.tile(x_hat, (len(P_GRID), 1))
         rows[:, P_A] = P_GRID

@@ -198,6 +198,17 @@ def read_log(path: str | Path) -> RunLog:
                   np.stack(cols[:4], axis=1), cols[4], meta)
 
 
+def run_log_of(record, source: str = "") -> RunLog:
+    """The :class:`RunLog` of a :class:`persuasive.simulation.RunRecord` in memory (what
+    :func:`read_log` reads from its saved file)."""
+    cols = [np.asarray(record.log[c], dtype=np.float64) for c in NEEDED_COLUMNS]
+    meta = {"config_toml": record.config.to_toml(), "seed": record.seed,
+            "streams": record.streams, "final_state": [float(x) for x in record.states[-1]],
+            "version": record.version}
+    return RunLog(source or f"seed {record.seed}", record.config, int(record.seed), None,
+                  np.stack(cols[:4], axis=1), cols[4], meta)
+
+
 @dataclass
 class Evidence:
     """The evidence of a set of runs, stored one run after the other (``n`` steps in all).
@@ -313,4 +324,4 @@ def load_logs(paths: Sequence[str | Path], scenario: str | None = None) -> list[
 
 
 __all__ = ["Evidence", "NEEDED_COLUMNS", "RunLog", "evidence_of", "human_view", "human_views",
-           "load_logs", "read_log"]
+           "load_logs", "read_log", "run_log_of"]

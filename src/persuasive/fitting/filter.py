@@ -20,8 +20,8 @@ of :mod:`persuasive.fitting.models` compute them).
 - ``logscale`` ``(G,)``: the log of that scale.
 
 Each emission enters relative to the likelier role (one ``exp`` per step and row), and
-``alpha`` is rescaled by an exact power of two when its sum leaves ``[2^-600, 2^600]``, so no
-rounding is added and nothing underflows. :func:`filter_loglik` reads the log-likelihood so
+``alpha`` is brought back to a sum in [0.5, 1) by an exact power of two after every update,
+so no rounding is added and nothing underflows. :func:`filter_loglik` reads the log-likelihood so
 far, ``logscale + log(alpha_L + alpha_F)``, and :func:`filter_posterior` the role's
 posterior ``alpha_L / (alpha_L + alpha_F)``.
 
@@ -36,6 +36,15 @@ identity and the filter is the LFG's own Bayes belief about a constant role (§5
 
 :func:`smooth_roles` runs forward and backward for one parameter vector and returns
 ``P(r_k = L | all observations)``.
+
+**One filter per initial role.** A role whose share of ``alpha`` underflows (below ``e^-745``
+of the other's) is dropped; it comes back only if a transition feeds it. That is exact
+whenever both roles are fed (``p_a > 0`` and a chance to change) or a filter starts from a
+known role, but a single filter started from a mixed prior could drop the initial role that
+later steps favour (with ``p_a = 0`` nothing feeds it again). So the offline likelihood runs
+one filter per initial role and mixes them by ``pi0`` (which also makes the maximisation over
+``pi0`` exact), and an online posterior should keep two rows per ``p_a`` value, one per
+initial role, weighted by its prior.
 """
 
 from __future__ import annotations
@@ -47,9 +56,8 @@ from numba import njit
 
 from ..roles import transition_into
 
-#: ``alpha`` is rescaled (by a power of two) when its sum leaves ``[2^-_EXP, 2^_EXP]``.
-_EXP = 600
-_LO, _HI = 2.0 ** -_EXP, 2.0 ** _EXP
+#: Below this sum an update is redone in the log domain (the product may have lost digits).
+_TINY = 2.0 ** -900
 _LN2 = math.log(2.0)
 
 
@@ -65,14 +73,16 @@ def role_transition(p_a: float, pl_if_leader: float, pl_if_follower: float,
 
 
 @njit(cache=True, _nrt=False)
-def _rescale(alpha: np.ndarray, logscale: np.ndarray, g: int) -> None:
+def _normalise(alpha: np.ndarray, logscale: np.ndarray, g: int) -> None:
+    """Bring ``alpha[g]``'s sum into [0.5, 1) by an exact power of two."""
     s = alpha[g, 0] + alpha[g, 1]
-    if s > 0.0 and (s < _LO or s > _HI):
+    if s > 0.0:
         e = math.frexp(s)[1]
-        f = math.ldexp(1.0, -e)
-        alpha[g, 0] *= f
-        alpha[g, 1] *= f
-        logscale[g] += e * _LN2
+        if e != 0:
+            f = math.ldexp(1.0, -e)
+            alpha[g, 0] *= f
+            alpha[g, 1] *= f
+            logscale[g] += e * _LN2
 
 
 @njit(cache=True, _nrt=False)
@@ -80,35 +90,36 @@ def filter_update_lik(alpha: np.ndarray, logscale: np.ndarray, log_lik: np.ndarr
                       lik: np.ndarray, log_ref: np.ndarray) -> None:
     """Take one emission ``log_lik`` ``(G, 2)`` (``(1, 2)``: shared by every row), split by
     :func:`emission_lik` into ``lik`` (the likelier role's entry 1) and ``log_ref``:
-    ``alpha[g, r] *= lik[g, r]``, ``logscale[g] += log_ref[g]``. An offline pass splits each
-    emission once and takes it into the filters of both initial roles.
+    ``alpha[g, r] *= lik[g, r]``, ``logscale[g] += log_ref[g]``, then ``alpha[g]`` is brought
+    back to a sum in [0.5, 1) by an exact power of two. An offline pass splits each emission
+    once and takes it into the filters of both initial roles.
 
-    When the likelier role has no mass and the other's ratio underflowed to 0, the update is
-    redone relative to the role that has mass, so that only an observation impossible under
-    every role with mass empties ``alpha``.
+    When the product is tiny (the roles that have mass are much less likely than the other),
+    the update is redone in the log domain relative to the roles that have mass, so that only
+    an observation impossible under every role with mass empties ``alpha``.
     """
     shared = lik.shape[0] == 1
     for g in range(alpha.shape[0]):
         j = 0 if shared else g
         a0, a1 = alpha[g, 0], alpha[g, 1]
-        if log_ref[j] == -np.inf:
+        if log_ref[j] == -np.inf or not (a0 + a1 > 0.0):
             alpha[g, 0] = alpha[g, 1] = 0.0
             continue
         b0, b1 = a0 * lik[j, 0], a1 * lik[j, 1]
-        if b0 + b1 > 0.0 or not (a0 + a1 > 0.0):
+        if b0 + b1 >= _TINY:
             alpha[g, 0], alpha[g, 1] = b0, b1
             logscale[g] += log_ref[j]
-        else:  # underflow: refer the emission to the roles that have mass
-            l0 = log_lik[j, 0] if a0 > 0.0 else -np.inf
-            l1 = log_lik[j, 1] if a1 > 0.0 else -np.inf
+        else:
+            l0 = math.log(a0) + log_lik[j, 0] if a0 > 0.0 else -np.inf
+            l1 = math.log(a1) + log_lik[j, 1] if a1 > 0.0 else -np.inf
             m = l0 if l0 > l1 else l1
-            if m == -np.inf:
+            if m == -np.inf or math.isnan(m):
                 alpha[g, 0] = alpha[g, 1] = 0.0
                 continue
-            alpha[g, 0] = a0 * math.exp(l0 - m) if a0 > 0.0 else 0.0
-            alpha[g, 1] = a1 * math.exp(l1 - m) if a1 > 0.0 else 0.0
+            alpha[g, 0] = math.exp(l0 - m)
+            alpha[g, 1] = math.exp(l1 - m)
             logscale[g] += m
-        _rescale(alpha, logscale, g)
+        _normalise(alpha, logscale, g)
 
 
 @njit(cache=True, _nrt=False)
@@ -209,15 +220,10 @@ def filter_posterior(alpha: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def smooth_roles(log_lik: np.ndarray, pl: np.ndarray, p_a: float, prior_leader: float,
+def _smooth_from(log_lik: np.ndarray, pl: np.ndarray, p_a: float, prior_leader: float,
                  out: np.ndarray) -> float:
-    """Forward-backward over one run for one parameter vector.
-
-    ``log_lik`` ``(n, 2)``: the emissions per step and role; ``pl`` ``(n, 2)``: the human's
-    ``P(plausible = L)`` per step and own role. Writes ``P(r_k = L | obs_0..n-1)`` into
-    ``out`` ``(n,)`` and returns the run's log-likelihood (``-inf`` when impossible; ``out``
-    is then NaN).
-    """
+    """Forward-backward from one prior; ``out``: ``P(r_k = L | data)``; returns the
+    log-likelihood (``-inf``: ``out`` untouched)."""
     n = log_lik.shape[0]
     filt = np.empty((n, 2))
     alpha = np.empty((1, 2))
@@ -234,7 +240,6 @@ def smooth_roles(log_lik: np.ndarray, pl: np.ndarray, p_a: float, prior_leader: 
     ll = np.empty(1)
     filter_loglik(alpha, logscale, ll)
     if ll[0] == -np.inf:
-        out[:] = np.nan
         return -np.inf
     T = np.empty((2, 2))
     s0, s1 = filt[n - 1, 0], filt[n - 1, 1]
@@ -252,6 +257,46 @@ def smooth_roles(log_lik: np.ndarray, pl: np.ndarray, p_a: float, prior_leader: 
         s0, s1 = s0 / z, s1 / z
         out[k] = s0
     return ll[0]
+
+
+@njit(cache=True)
+def smooth_roles(log_lik: np.ndarray, pl: np.ndarray, p_a: float, prior_leader: float,
+                 out: np.ndarray) -> float:
+    """Forward-backward over one run for one parameter vector.
+
+    ``log_lik`` ``(n, 2)``: the emissions per step and role; ``pl`` ``(n, 2)``: the human's
+    ``P(plausible = L)`` per step and own role. Writes ``P(r_k = L | obs_0..n-1)`` into
+    ``out`` ``(n,)`` and returns the run's log-likelihood (``-inf`` when impossible; ``out``
+    is then NaN).
+
+    One pass per initial role, mixed by their weights: a filter keeps a role whose share
+    underflows (``e^-745``) only if a transition feeds it again, so a single filter started
+    from a mixed prior could drop the initial role the later steps favour (with ``p_a = 0``
+    nothing ever feeds it); started from a known role, each pass keeps every path that
+    matters.
+    """
+    n = log_lik.shape[0]
+    post = np.empty((2, n))
+    lls = np.empty(2)
+    for r0 in range(2):
+        prior = 1.0 - r0
+        weight = prior_leader if r0 == 0 else 1.0 - prior_leader
+        lls[r0] = _smooth_from(log_lik, pl, p_a, prior, post[r0]) if weight > 0.0 else -np.inf
+        if lls[r0] > -np.inf:
+            lls[r0] += math.log(weight)
+    m = max(lls[0], lls[1])
+    if m == -np.inf:
+        out[:] = np.nan
+        return -np.inf
+    w0, w1 = math.exp(lls[0] - m), math.exp(lls[1] - m)
+    for k in range(n):
+        v = 0.0
+        if w0 > 0.0:
+            v += w0 * post[0, k]
+        if w1 > 0.0:
+            v += w1 * post[1, k]
+        out[k] = v / (w0 + w1)
+    return m + math.log(w0 + w1)
 
 
 __all__ = ["emission_lik", "filter_loglik", "filter_posterior", "filter_predict",

@@ -96,20 +96,19 @@ def fit_idm(ev: Evidence, sigma_min: float = SIGMA_MIN, intervals: bool = True) 
             starts.append(y)
     starts = np.array(starts)
     ll = obj.loglik(starts)
-    order = np.argsort(-ll)[:3]
+    order = np.argsort(-ll)[:2]
     best_y, best_ll = starts[order[0]], float(ll[order[0]])
 
     def neg(y):
         return -float(obj.loglik(np.clip(y, _LO, _HI)[None])[0])
 
-    for j in order:
+    for j in order:  # the best two starts: Nelder-Mead, gap scans, Nelder-Mead again
         y = starts[j]
-        for _ in range(2):
+        for maxfev in (400, 300):
             res = minimize(neg, y, method="Nelder-Mead", bounds=list(zip(_LO, _HI)),
-                           options={"xatol": 1e-5, "fatol": 1e-9, "maxfev": 800,
+                           options={"xatol": 1e-5, "fatol": 1e-9, "maxfev": maxfev,
                                     "adaptive": True})
-            y = np.clip(res.x, _LO, _HI)
-            y = _scan_gaps(obj, y)
+            y = _scan_gaps(obj, np.clip(res.x, _LO, _HI))
         v = -neg(y)
         if v > best_ll:
             best_y, best_ll = y, v

@@ -7,8 +7,9 @@ kernels score a whole batch of parameter vectors in one call (:func:`persuasive.
 every row together: one call per iteration evaluates, for every row, the proposed point and a
 finite-difference stencil around it (gradient and Hessian over the free coordinates), and
 each row takes its own trust-region step (``d <= 3`` free coordinates; the step solves
-``(-H + lambda I) s = g`` with ``lambda`` chosen so that ``|s| <= radius``). Bounds are kept by
-projection; a coordinate pushed against its bound stays there.
+``(-H + lambda I) s = g`` with ``lambda`` chosen so that ``|s| <= radius``). A coordinate on
+its bound and pushed out of it leaves that row's Newton system (the others solve their own
+part), and every step is projected into the bounds.
 """
 
 from __future__ import annotations
@@ -157,6 +158,16 @@ def _maximise_rows(f, x0, free, lo, hi, h, scale, iters, tol, radius0):
         if rows.size == 0:
             break
         gs, Hs = grad[rows] * sc, hess[rows] * np.outer(sc, sc)[None]
+        # coordinates held by a bound (on it, pushed out of it) leave the Newton system, so
+        # that the others solve their own part (a projected full step would stall there)
+        xr = x[rows][:, free]
+        held = (((xr <= lo[free]) & (gs < 0)) | ((xr >= hi[free]) & (gs > 0)))
+        if held.any():
+            gs = np.where(held, 0.0, gs)
+            keep = ~held
+            Hs = Hs * (keep[:, :, None] & keep[:, None, :])
+            big = np.abs(Hs).max(axis=(1, 2)) + 1.0
+            Hs = Hs - np.einsum("ga,ab->gab", held * big[:, None], np.eye(len(free)))
         s = _trust_step(gs, Hs, radius[rows]) * sc
         new = x[rows].copy()
         new[:, free] += s

@@ -1,0 +1,437 @@
+"""Fitting human models to logged driving (``persuasive.fitting``, docs/method.md §13).
+
+Layers: the transition is the LFG's own ``Pi``; the evidence replays the LFG human bit for bit;
+the forward filter equals brute-force enumeration of role sequences (tolerance 1e-10,
+relative, on log-likelihoods), and with constant roles it is the LFG's Bayes belief (1e-9);
+the exact maximisation over ``pi0``; then fits of simulated datasets with known parameters
+(the interval holds the truth and excludes the wrong answer; model selection names the kind);
+the files a fit writes; bad logs refused in one line.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from persuasive import Config, simulate
+from persuasive.config import ConfigError
+from persuasive.fitting import (evidence_of, fit_models, load_fitted_run, load_logs,
+                                read_log, write_fit_parquet)
+from persuasive.fitting.estimate import SIGMA_MIN, fit_role_model
+from persuasive.fitting.evidence import Evidence, run_log_of
+from persuasive.fitting.filter import (filter_loglik, filter_posterior, filter_start,
+                                       filter_step, role_transition, smooth_roles)
+from persuasive.fitting.models import (EMIT_LFG, EMIT_NOISY, best_initial_role, hmm_loglik,
+                                       hmm_loglik_serial, step_log_emissions)
+from persuasive.fitting.optimize import maximise_rows
+from persuasive.game import full_prediction
+from persuasive.roles import gaussian_density, transition_matrix
+from persuasive.simulation import static_setup
+
+
+@functools.lru_cache(maxsize=None)
+def dataset(kind: str = "lfg", p_a: float = 0.5, role: str = "leader", noise: float = 0.0,
+            runs: int = 20, first_seed: int = 1, mode: str = "corrected"):
+    """Runs of the recovery design: even runs against the persuasive AV, odd ones against the
+    passive AV, both assuming p_a_hat = 1 (benchmarks/fit_recovery.py)."""
+    extra = {}
+    if kind == "idm":
+        extra = {"hv.idm.critical_gap_s": 1.5, "hv.idm.time_gap_s": 1.2,
+                 "hv.idm.desired_speed_mps": 9.0}
+    cs = [Config(mode=mode).with_overrides({"hv.kind": kind, "roles.p_a": p_a, "hv.role": role,
+                                            "simulation.accel_noise_mps2": noise,
+                                            "mpc.p_a_hat": 1.0, "av.kind": av, **extra})
+          for av in ("persuasive", "passive")]
+    records = [simulate(cs[j % 2], first_seed + j) for j in range(runs)]
+    return records, evidence_of([run_log_of(r, f"run{j}") for j, r in enumerate(records)])
+
+
+# -- the transition -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("p_a", [0.0, 0.3, 1.0])
+@pytest.mark.parametrize("pl_l,pl_f", [(0.0, 0.0), (1.0, 1.0), (1.0, 0.0)])
+def test_the_transition_is_the_lfgs_pi_per_own_role(p_a, pl_l, pl_f):
+    T = np.empty((2, 2))
+    role_transition(p_a, pl_l, pl_f, T)
+    np.testing.assert_array_equal(T[:, 0], transition_matrix(pl_l, p_a)[:, 0])
+    np.testing.assert_array_equal(T[:, 1], transition_matrix(pl_f, p_a)[:, 1])
+    np.testing.assert_allclose(T.sum(axis=0), 1.0)
+    if (pl_l, pl_f) == (1.0, 0.0):  # an exact belief tie: the plausible role is one's own
+        np.testing.assert_array_equal(T, np.eye(2))
+
+
+# -- the evidence -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("mode,extra", [
+    ("paper", {}),
+    ("corrected", {"hv.role": "follower", "roles.p_a": 0.4}),
+    ("corrected", {"simulation.measurement_noise": "gaussian", "simulation.noise_s_m": 0.05,
+                   "simulation.noise_v_mps": 0.05, "roles.p_a": 0.6}),
+    ("paper", {"av.kind": "lfg", "roles.p_a": 0.7}),
+])
+def test_the_evidence_replays_the_lfg_human_bit_for_bit(mode, extra):
+    config = Config(mode=mode).with_overrides(extra)
+    records = [simulate(config, seed) for seed in (3, 996)]
+    ev = evidence_of([run_log_of(r) for r in records])
+    for i, rec in enumerate(records):
+        a, b = ev.starts[i], ev.starts[i + 1]
+        role = (rec.log["hv_role"] != "leader").astype(int)
+        steps = np.arange(b - a)
+        # the acceleration of the role it acted in, the plausible role it used, its belief
+        np.testing.assert_array_equal(ev.a_role[a:b][steps, role], rec.log["hv_accel_mps2"])
+        np.testing.assert_array_equal(ev.pl[a:b][steps, role], rec.log["hv_plausible_leader"])
+        np.testing.assert_array_equal(ev.belief[a + 1:b, 0],
+                                      rec.log["hv_belief_other_leader"][:-1])
+        np.testing.assert_array_equal(ev.belief[a, :], [0.5, 0.5])
+
+
+def test_the_evidence_holds_the_noisy_humans_choice_probabilities():
+    config = Config(mode="corrected").with_overrides({"hv.kind": "noisy", "roles.p_a": 0.5})
+    rec = simulate(config, 11)
+    ev = evidence_of([run_log_of(rec)])
+    beta = config.hv.noisy.beta
+    role = (rec.log["hv_role"] != "leader").astype(int)
+    for k, c in enumerate(rec.log["hv_trajectory"]):
+        q = ev.q[k, role[k]]
+        first = int(np.argmax(q))
+        w = np.where(q == q.max(), 0.0, np.exp(beta * (q - q.max())))
+        w[first] = 1.0
+        assert ev.a_first[k, c] == rec.log["hv_accel_mps2"][k]
+        assert math.isclose(w[c] / w.sum(), rec.log["hv_choice_probability"][k], rel_tol=1e-12)
+
+
+# -- the forward filter -------------------------------------------------------------------------
+
+
+def _log_sum(values):
+    values = np.asarray(values, float)
+    m = values.max()
+    return m + math.log(np.exp(values - m).sum()) if np.isfinite(m) else -math.inf
+
+
+def _emissions(ev, kind, sigma, beta, rows):
+    out = np.empty((len(rows), 2))
+    e = np.empty(2)
+    for j, k in enumerate(rows):
+        step_log_emissions(kind, ev.accel[k], ev.a_role[k], ev.q[k], ev.a_first[k], sigma,
+                           beta, e)
+        out[j] = e
+    return out
+
+
+def _paths(ll, pl, p_a, pi0):
+    """log p(path, data) of every role sequence, from the LFG's own Pi per step."""
+    n = ll.shape[0]
+    out = {}
+    for path in itertools.product((0, 1), repeat=n):
+        lp = math.log(pi0) if path[0] == 0 else math.log1p(-pi0) if pi0 < 1 else -math.inf
+        for k in range(n):
+            lp += ll[k, path[k]]
+            if k + 1 < n:
+                t = transition_matrix(pl[k, path[k]], p_a)[path[k + 1], path[k]]
+                lp += math.log(t) if t > 0 else -math.inf
+        out[path] = lp
+    return out
+
+
+def _pieces(ev, pieces):
+    """Evidence made of row ranges ``[(a, b), ...]`` of ``ev``, each as a run."""
+    rows = np.concatenate([np.arange(a, b) for a, b in pieces])
+    starts = np.concatenate([[0], np.cumsum([b - a for a, b in pieces])]).astype(np.int64)
+    n = len(pieces)
+    return Evidence([ev.runs[0]] * n, starts, ev.accel[rows], ev.a_role[rows], ev.pl[rows],
+                    ev.belief[rows], ev.q[rows], ev.a_first[rows], ev.states[rows],
+                    ev.P_hv[:1].repeat(n, 0), ev.P_av[:1].repeat(n, 0), ev.dt[:1].repeat(n))
+
+
+@pytest.mark.parametrize("kind,sigma,beta", [(EMIT_LFG, 0.4, math.inf),
+                                             (EMIT_NOISY, 0.3, 0.2),
+                                             (EMIT_LFG, 0.01, math.inf),
+                                             (EMIT_NOISY, 0.002, 40.0)])
+def test_the_forward_pass_equals_brute_force_enumeration(kind, sigma, beta):
+    records, ev_all = dataset(p_a=0.5, runs=4, first_seed=2)
+    # two stretches of 9 steps: the first steps (with the belief ties of steps 0 and 1), and
+    # the steps around the first role change
+    changes = [(i, int(np.flatnonzero(r.log["hv_next_role"] != r.log["hv_role"])[0]))
+               for i, r in enumerate(records) if r.outcome.hv_role_changes]
+    assert changes
+    i, k = changes[0]
+    a = ev_all.starts[i] + max(0, k - 4)
+    ev = _pieces(ev_all, [(0, 9), (a, a + 9)])
+    p_a = np.array([0.0, 0.37, 1.0])
+    out = np.empty((ev.n_runs, 3, 2))
+    serial = np.empty_like(out)
+    args = (kind, ev.starts, ev.accel, ev.a_role, ev.pl, ev.q, ev.a_first, p_a,
+            np.full(3, sigma), np.full(3, beta))
+    hmm_loglik(*args, out)
+    hmm_loglik_serial(*args, serial)
+    np.testing.assert_array_equal(out, serial)
+    for i in range(ev.n_runs):
+        rows = range(ev.starts[i], ev.starts[i + 1])
+        ll = _emissions(ev, kind, sigma, beta, rows)
+        pl = ev.pl[ev.starts[i]:ev.starts[i + 1]]
+        for g, p in enumerate(p_a):
+            paths = _paths(ll, pl, p, 0.5)
+            for r0 in (0, 1):
+                want = _log_sum([v for path, v in paths.items() if path[0] == r0]) \
+                    - math.log(0.5)
+                got = out[i, g, r0]
+                if math.isinf(want):
+                    assert got == want
+                else:
+                    assert math.isclose(got, want, rel_tol=1e-10, abs_tol=1e-9), (i, g, r0)
+            # smoothing: P(r_k = L | all the data) by enumeration
+            smoothed = np.empty(len(rows))
+            total = smooth_roles(ll, pl, p, 0.6, smoothed)
+            paths = _paths(ll, pl, p, 0.6)
+            assert math.isclose(total, _log_sum(list(paths.values())), rel_tol=1e-10,
+                                abs_tol=1e-9)
+            for k in range(len(rows)):
+                lead = _log_sum([v for path, v in paths.items() if path[k] == 0])
+                assert math.isclose(smoothed[k], math.exp(lead - total), abs_tol=1e-9)
+
+
+def test_the_filter_survives_emissions_thousands_of_nats_apart():
+    # the role with all the mass is 3000 nats less likely than the other at every step
+    n = 40
+    ll = np.zeros((n, 2))
+    ll[:, 0] = -3000.0
+    pl = np.full((n, 2), 1.0)  # plausible leader: a follower may become leader
+    alpha, logscale = np.empty((1, 2)), np.empty(1)
+    filter_start(alpha, logscale, 1.0, ll[0:1])
+    for k in range(1, n):
+        filter_step(alpha, logscale, np.zeros(1), pl[k - 1, 0], pl[k - 1, 1], ll[k:k + 1])
+    out = np.empty(1)
+    filter_loglik(alpha, logscale, out)
+    assert out[0] == pytest.approx(-3000.0 * n, rel=1e-12)  # the leader it stays, p_a = 0
+    filter_posterior(alpha, out)
+    assert out[0] == 1.0
+
+
+def test_with_constant_roles_the_filter_is_the_lfgs_own_belief():
+    """The human's belief about the AV (§5.5) is the same forward pass with p_a = 0 and the
+    Gaussian residual emissions."""
+    config = Config(mode="corrected").with_overrides({"roles.p_a": 0.5})
+    rec = simulate(config, 7)
+    _, P_av, P_hv, disc = static_setup(config)
+    w_s, w_v = config.roles.w_s_m2, config.roles.w_v_m2ps2
+    log = rec.log
+    alpha, logscale = np.empty((1, 2)), np.empty(1)
+    post = np.empty(1)
+    pred = None
+    for k in range(len(log["step"])):
+        s_av, v_av = log["av_meas_s_m"][k], log["av_meas_v_mps"][k]
+        if pred is None:
+            pred = ((s_av, v_av), (s_av, v_av))
+        dens = [gaussian_density(abs(s_av - ps), abs(v_av - pv), w_s, w_v) for ps, pv in pred]
+        ll = np.log(np.array([dens]))
+        if k == 0:
+            filter_start(alpha, logscale, 0.5, ll)
+        else:  # p_a = 0: the identity, whatever the plausible role
+            filter_step(alpha, logscale, np.zeros(1), 1.0, 0.0, ll)
+        filter_posterior(alpha, post)
+        assert post[0] == pytest.approx(log["hv_belief_other_leader"][k], rel=1e-9, abs=1e-12)
+        game = full_prediction((log["hv_meas_s_m"][k], log["hv_meas_v_mps"][k]), (s_av, v_av),
+                               P_hv, P_av, disc)
+        pred = (game.other_state("leader", 1), game.other_state("follower", 1))
+
+
+def test_the_initial_role_is_maximised_exactly():
+    rng = np.random.default_rng(5)
+    table = rng.normal(-20.0, 3.0, size=(9, 3, 2))
+    table[:, 1, 1] -= 50.0  # every run far likelier starting as leader: pi0 = 1
+    table[0, 2, 0] = -np.inf  # run 0 cannot start as leader
+    ell, pi0 = np.empty(3), np.empty(3)
+    best_initial_role(table, np.full(3, np.nan), ell, pi0)
+    grid = np.linspace(0.0, 1.0, 20001)
+    for g in range(3):
+        with np.errstate(divide="ignore"):
+            dense = np.logaddexp(np.log(grid)[:, None] + table[None, :, g, 0],
+                                 np.log1p(-grid)[:, None] + table[None, :, g, 1]).sum(axis=1)
+        assert ell[g] >= dense.max() - 1e-9
+        assert abs(pi0[g] - grid[np.argmax(dense)]) <= 1e-4
+    assert pi0[1] == 1.0
+    # a given pi0 is used as given
+    best_initial_role(table, np.full(3, 0.25), ell, pi0)
+    assert np.all(pi0 == 0.25)
+
+
+def test_the_lockstep_newton_finds_bounded_maxima():
+    def f(X):  # a concave quadratic, maximal at (0.3, -1.0)
+        d = X - np.array([0.3, -1.0])
+        return -4.0 * d[:, 0] ** 2 - d[:, 1] ** 2 - 0.5 * d[:, 0] * d[:, 1]
+
+    h, scale = np.array([1e-4, 1e-4]), np.array([0.5, 0.5])
+    starts = np.array([[0.0, 0.0], [0.9, 1.9], [-0.9, -1.9]])
+    x, fx = maximise_rows(f, starts, [0, 1], np.array([-1.0, -2.0]), np.array([1.0, 2.0]), h,
+                          scale)
+    np.testing.assert_allclose(x, [[0.3, -1.0]] * 3, atol=1e-5)
+    np.testing.assert_allclose(fx, 0.0, atol=1e-9)
+    # the maximum outside the bounds: the bound, and the other coordinate's best there
+    x, _ = maximise_rows(f, starts, [0, 1], np.array([0.5, -2.0]), np.array([1.0, 2.0]), h,
+                         scale)
+    np.testing.assert_allclose(x[:, 0], 0.5, atol=1e-9)
+    np.testing.assert_allclose(x[:, 1], -1.0 - 0.25 * 0.2, atol=1e-5)
+    # a coordinate left out stays where it is
+    x, _ = maximise_rows(f, starts, [1], np.array([-1.0, -2.0]), np.array([1.0, 2.0]), h, scale)
+    np.testing.assert_array_equal(x[:, 0], starts[:, 0])
+
+
+# -- fits of simulated data ---------------------------------------------------------------------
+
+
+def test_p_a_of_a_reluctant_human_is_recovered_and_p_a_1_excluded():
+    _, ev = dataset(p_a=0.3, role="leader", runs=20)
+    fit = fit_role_model(ev, "lfg")
+    e = fit.params["p_a"]
+    assert e.low <= 0.3 <= e.high and e.high < 1.0
+    assert abs(e.value - 0.3) < 0.15
+    assert e.method == "profile"
+    assert fit.exact and fit.theta["sigma"] == pytest.approx(SIGMA_MIN)
+    assert any("exact data" in note for note in fit.notes)
+    assert fit.params["pi0"].value == 1.0 and fit.params["pi0"].method.endswith("one-sided")
+
+
+def test_a_willing_human_gets_a_one_sided_interval_at_p_a_1():
+    _, ev = dataset(p_a=1.0, role="leader", runs=20)
+    e = fit_role_model(ev, "lfg").params["p_a"]
+    assert e.value == 1.0 and e.high == 1.0 and e.method == "profile, one-sided"
+    assert 0.6 < e.low < 1.0
+
+
+def test_acceleration_noise_is_estimated_and_p_a_still_recovered():
+    _, ev = dataset(p_a=0.5, role="follower", noise=0.1, runs=20)
+    fit = fit_role_model(ev, "lfg")
+    # uniform noise of half-width 0.1 has standard deviation 0.1 / sqrt(3)
+    assert fit.theta["sigma"] == pytest.approx(0.1 / math.sqrt(3), rel=0.1)
+    assert not fit.exact
+    s = fit.params["sigma"]
+    assert s.low < fit.theta["sigma"] < s.high
+    e = fit.params["p_a"]
+    assert e.low <= 0.5 <= e.high and e.high - e.low < 0.6
+
+
+@pytest.mark.parametrize("kind,noise", [("stubborn", 0.0), ("noisy", 0.1), ("idm", 0.1),
+                                        ("lfg", 0.1)])
+def test_model_selection_names_the_generating_kind(kind, noise):
+    _, ev = dataset(kind=kind, p_a=0.7 if kind != "stubborn" else 1.0, noise=noise, runs=16)
+    report = fit_models(ev, intervals=False)
+    assert report.selected == kind
+    rows = report.comparison()
+    assert rows[0]["model"] == kind and rows[1]["delta_bic"] > 0
+    assert report.fits["noisy"].loglik >= report.fits["lfg"].loglik - 1e-6  # nested
+
+
+def test_stubborn_data_select_the_stubborn_human():
+    _, ev = dataset(kind="stubborn", runs=12)
+    report = fit_models(ev, ["lfg", "stubborn"], intervals=False)
+    assert report.selected == "stubborn"
+    # the stubborn model is the LFG at p_a = 0: the same likelihood, one parameter fewer
+    assert report.fits["lfg"].theta["p_a"] == pytest.approx(0.0, abs=1e-6)
+    assert report.fits["lfg"].loglik == pytest.approx(report.fits["stubborn"].loglik, abs=1e-6)
+
+
+def test_smoothed_roles_follow_the_true_roles_where_the_roles_act_differently():
+    records, ev = dataset(p_a=0.5, role="leader", runs=12)
+    report = fit_models(ev, ["lfg"], intervals=False)
+    assert report.role_model == "lfg"
+    for i, rec in enumerate(records):
+        a, b = ev.starts[i], ev.starts[i + 1]
+        truth = rec.log["hv_role"] == "leader"
+        differ = ev.a_role[a:b, 0] != ev.a_role[a:b, 1]
+        p = report.p_leader[a:b]
+        np.testing.assert_array_equal(p[differ] > 0.5, truth[differ])
+        assert np.all((p[differ] < 1e-6) | (p[differ] > 1 - 1e-6))
+
+
+# -- files ----------------------------------------------------------------------------------------
+
+
+def test_a_fits_parquet_gives_back_each_run_with_its_smoothed_role(tmp_path):
+    from persuasive.plots import profile_single
+
+    records, _ = dataset(p_a=0.5, runs=4)
+    paths = []
+    for j, rec in enumerate(records):
+        path = tmp_path / f"run{j}.parquet"
+        rec.save(path)
+        paths.append(str(path))
+    ev = evidence_of(load_logs(paths))
+    report = fit_models(ev, ["lfg", "stubborn"], intervals=False)
+    out = tmp_path / "fit.parquet"
+    write_fit_parquet(out, [report], {"selected": report.selected})
+    for j, rec in enumerate(records):
+        run = load_fitted_run(out, j)
+        np.testing.assert_array_equal(run.states, rec.states)
+        assert run.outcome == rec.outcome and run.seed == rec.seed
+        a, b = ev.starts[j], ev.starts[j + 1]
+        np.testing.assert_array_equal(run.log["hv_fit_p_leader"], report.p_leader[a:b])
+        for name, col in rec.log.items():
+            np.testing.assert_array_equal(run.log[name], col)
+    fig = profile_single(load_fitted_run(out, 1))
+    assert any(line.get_gid() == "hv-role-fit" for ax in fig.axes for line in ax.lines)
+    with pytest.raises(ConfigError, match="out of range"):
+        load_fitted_run(out, 4)
+
+
+def _bad(tmp_path, name, frame=None, meta=True):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    rec = simulate(Config(), 1)
+    path = tmp_path / name
+    if frame is None:
+        frame = rec.frame()
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    if meta:
+        rec_meta = read_log_meta(rec)
+        table = table.replace_schema_metadata({b"persuasive.run": rec_meta})
+    pq.write_table(table, path)
+    return str(path)
+
+
+def read_log_meta(rec):
+    import json
+
+    return json.dumps({"config_toml": rec.config.to_toml(), "seed": rec.seed,
+                       "streams": rec.streams, "final_state": [float(x) for x in rec.states[-1]],
+                       "version": rec.version})
+
+
+def test_bad_logs_are_refused_in_one_line_naming_the_file(tmp_path):
+    rec = simulate(Config(), 1)
+    frame = rec.frame()
+    csv = tmp_path / "run.csv"
+    frame.to_csv(csv, index=False)
+    cases = {
+        str(csv): "CSV log",
+        str(tmp_path / "missing.parquet"): "cannot be read",
+        _bad(tmp_path, "nometa.parquet", meta=False): "holds no run record",
+        _bad(tmp_path, "cols.parquet", frame.drop(columns=["hv_accel_mps2"])): "lacks the columns",
+        _bad(tmp_path, "empty.parquet", frame.iloc[:0]): "empty",
+        _bad(tmp_path, "nan.parquet", frame.assign(
+            av_meas_v_mps=np.where(frame["step"] == 7, np.nan, frame["av_meas_v_mps"]))):
+            "non-finite value (nan) in av_meas_v_mps at step 7",
+    }
+    for path, words in cases.items():
+        with pytest.raises(ConfigError) as info:
+            read_log(path)
+        text = str(info.value)
+        assert words in text and path in text and "\n" not in text
+    # scenarios: another than the first log's, or than the one asked for
+    good = tmp_path / "good.parquet"
+    rec.save(good)
+    merge = tmp_path / "merge.parquet"
+    simulate(Config().with_overrides({"scenario.kind": "merge"}), 1).save(merge)
+    with pytest.raises(ConfigError, match="is of scenario 'merge', not the model's"):
+        load_logs([str(good), str(merge)])
+    with pytest.raises(ConfigError, match="not the model's 'merge'"):
+        load_logs([str(good)], scenario="merge")
+    with pytest.raises(ConfigError, match="no log"):
+        load_logs([])
