@@ -22,8 +22,8 @@ leader its chances to change role (it tries to lead), the passive AV one who sta
 follower (it yields).
 
 Per dataset one JSON line goes to ``OUT/results.jsonl`` as soon as it is done: run the same
-command again to resume. ``OUT/meta.json`` records a digest of the fitting package and this
-script; results of other code are refused (start a new ``--out``). The summary (coverage,
+command again to resume. ``OUT/meta.json`` records a digest of the fitting modules and of the
+design; results of other code are refused (start a new ``--out``). The summary (coverage,
 mean absolute error, interval width, the informative steps per dataset, selection accuracy)
 is printed and written to ``OUT/summary.md`` and ``OUT/summary.json``.
 
@@ -139,14 +139,19 @@ def run_task(setting: dict, d: int, runs: int) -> dict:
 
 
 def code_digest() -> str:
-    """A hash of the fitting package and this script (results of other code are refused)."""
+    """A hash of the fitting modules that make the results and of the study's design."""
     import persuasive
 
     root = Path(persuasive.__file__).parent
     h = hashlib.sha256()
-    for path in sorted((root / "fitting").rglob("*.py")):
+    for name in ("filter", "evidence", "models", "optimize", "estimate", "idm", "comparison"):
+        path = root / "fitting" / f"{name}.py"
         h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
-    h.update(Path(__file__).read_bytes())
+    import inspect
+
+    for func in (settings, key, configs, informative_steps, run_task):  # the design
+        h.update(inspect.getsource(func).encode())
+    h.update(repr((P_VALUES, ROLES, NOISES, IDM_TRUE)).encode())
     return h.hexdigest()[:16]
 
 

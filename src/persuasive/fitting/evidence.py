@@ -159,18 +159,21 @@ def read_log(path: str | Path) -> RunLog:
                           "scenario, vehicles) to re-solve the human's game with; give the "
                           "Parquet log (simulate --out FILE.parquet, or a drive trial)")
     try:
-        table = pq.read_table(path, columns=None)
+        pf = pq.ParquetFile(path)
+        schema = pf.schema_arrow
+        raw = (schema.metadata or {}).get(RECORD_METADATA)
+        missing = [c for c in NEEDED_COLUMNS if c not in schema.names]
+        table = pf.read(columns=list(NEEDED_COLUMNS)) if raw is not None and not missing \
+            else None
     except OSError as exc:
         reason = (exc.strerror or str(exc).splitlines()[0] or "cannot be read").lower()
         raise ConfigError(f"log file {name!r} cannot be read: {reason}") from None
     except Exception as exc:  # noqa: BLE001 - pyarrow raises several kinds for a bad file
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ConfigError(f"log file {name!r} cannot be read: {text}") from None
-    raw = (table.schema.metadata or {}).get(RECORD_METADATA)
     if raw is None:
         raise ConfigError(f"log file {name!r} holds no run record (write it with 'persuasive "
                           "simulate --out FILE.parquet' or 'persuasive drive')")
-    missing = [c for c in NEEDED_COLUMNS if c not in table.column_names]
     if missing:
         raise ConfigError(f"log file {name!r} lacks the columns a fit needs: "
                           f"{', '.join(missing)}")

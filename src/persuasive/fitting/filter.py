@@ -20,8 +20,8 @@ of :mod:`persuasive.fitting.models` compute them).
 - ``logscale`` ``(G,)``: the log of that scale.
 
 Each emission enters relative to the likelier role (one ``exp`` per step and row), and
-``alpha`` is brought back to a sum in [0.5, 1) by an exact power of two after every update,
-so no rounding is added and nothing underflows. :func:`filter_loglik` reads the log-likelihood so
+``alpha`` is brought back to a sum in [0.5, 1) by an exact power of two whenever its sum
+leaves ``[2^-200, 2^200]``, so no rounding is added and nothing underflows. :func:`filter_loglik` reads the log-likelihood so
 far, ``logscale + log(alpha_L + alpha_F)``, and :func:`filter_posterior` the role's
 posterior ``alpha_L / (alpha_L + alpha_F)``.
 
@@ -58,6 +58,8 @@ from ..roles import transition_into
 
 #: Below this sum an update is redone in the log domain (the product may have lost digits).
 _TINY = 2.0 ** -900
+#: ``alpha`` is renormalised when its sum leaves ``[_LO, _HI]``.
+_LO, _HI = 2.0 ** -200, 2.0 ** 200
 _LN2 = math.log(2.0)
 
 
@@ -74,9 +76,10 @@ def role_transition(p_a: float, pl_if_leader: float, pl_if_follower: float,
 
 @njit(cache=True, _nrt=False)
 def _normalise(alpha: np.ndarray, logscale: np.ndarray, g: int) -> None:
-    """Bring ``alpha[g]``'s sum into [0.5, 1) by an exact power of two."""
+    """Bring ``alpha[g]``'s sum into [0.5, 1) by an exact power of two, once it has left
+    ``[2^-200, 2^200]``."""
     s = alpha[g, 0] + alpha[g, 1]
-    if s > 0.0:
+    if s > 0.0 and (s < _LO or s > _HI):
         e = math.frexp(s)[1]
         if e != 0:
             f = math.ldexp(1.0, -e)
@@ -91,8 +94,9 @@ def filter_update_lik(alpha: np.ndarray, logscale: np.ndarray, log_lik: np.ndarr
     """Take one emission ``log_lik`` ``(G, 2)`` (``(1, 2)``: shared by every row), split by
     :func:`emission_lik` into ``lik`` (the likelier role's entry 1) and ``log_ref``:
     ``alpha[g, r] *= lik[g, r]``, ``logscale[g] += log_ref[g]``, then ``alpha[g]`` is brought
-    back to a sum in [0.5, 1) by an exact power of two. An offline pass splits each emission
-    once and takes it into the filters of both initial roles.
+    back to a sum in [0.5, 1) by an exact power of two if its sum has left
+    ``[2^-200, 2^200]``. An offline pass splits each emission once and takes it into the
+    filters of both initial roles.
 
     When the product is tiny (the roles that have mass are much less likely than the other),
     the update is redone in the log domain relative to the roles that have mass, so that only

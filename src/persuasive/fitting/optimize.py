@@ -41,6 +41,20 @@ def _stencil(x: np.ndarray, free: list[int], lo: np.ndarray, hi: np.ndarray,
     return np.stack(pts, axis=1), c
 
 
+def _evaluate(f: Callable[[np.ndarray], np.ndarray], pts: np.ndarray) -> np.ndarray:
+    """``f`` at the stencil points ``(G, P, D)`` in one call; the point ``x`` (column 0) is
+    scored only in rows where it is not the centre (column 1)."""
+    G, P, D = pts.shape
+    apart = np.any(pts[:, 0] != pts[:, 1], axis=1)
+    flat = np.concatenate([pts[:, 1:].reshape(-1, D), pts[apart, 0]])
+    v = f(flat)
+    vals = np.empty((G, P))
+    vals[:, 1:] = v[:G * (P - 1)].reshape(G, P - 1)
+    vals[:, 0] = vals[:, 1]
+    vals[apart, 0] = v[G * (P - 1):]
+    return vals
+
+
 def _derivatives(vals: np.ndarray, x: np.ndarray, c: np.ndarray, free: list[int],
                  h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gradient at ``x`` and Hessian ``(G, d)``, ``(G, d, d)`` from stencil values."""
@@ -128,8 +142,7 @@ def _maximise_rows(f, x0, free, lo, hi, h, scale, iters, tol, radius0):
         if rows.size == 0:
             break
         pts, c = _stencil(prop[rows], free, lo, hi, h)
-        P = pts.shape[1]
-        vals = f(pts.reshape(-1, D)).reshape(rows.size, P)
+        vals = _evaluate(f, pts)
         f_new = vals[:, 0]
         g_new, H_new = _derivatives(vals, prop[rows], c, free, h)
         ok = np.isfinite(vals).all(axis=1)
@@ -189,7 +202,7 @@ def hessian_at(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, free: list[
     ``(D,)`` (finite differences, one call)."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         pts, c = _stencil(x[None], free, lo, hi, h)
-        vals = f(pts.reshape(-1, x.shape[0])).reshape(1, -1)
+        vals = _evaluate(f, pts)
         g, H = _derivatives(vals, x[None], c, free, h)
     return g[0], H[0]
 
