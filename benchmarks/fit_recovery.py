@@ -22,10 +22,11 @@ leader its chances to change role (it tries to lead), the passive AV one who sta
 follower (it yields).
 
 Per dataset one JSON line goes to ``OUT/results.jsonl`` as soon as it is done: run the same
-command again to resume. ``OUT/meta.json`` records a digest of the fitting modules and of the
-design; results of other code are refused (start a new ``--out``). The summary (coverage,
-mean absolute error, interval width, the informative steps per dataset, selection accuracy)
-is printed and written to ``OUT/summary.md`` and ``OUT/summary.json``.
+command again to resume. ``OUT/meta.json`` records a digest of the code of the fitting
+modules and of the design (docstrings and comments aside); results of other code are refused
+(start a new ``--out``). The summary (coverage, mean absolute error, interval width, the
+informative steps per dataset, selection accuracy) is printed and written to
+``OUT/summary.md`` and ``OUT/summary.json``.
 
 **Timing** (``--timing``): 1000 runs of 61 steps are written as Parquet logs, then fitted with
 the ``lfg`` model: the command end to end (``persuasive fit DIR/*.parquet --model lfg``) and
@@ -138,19 +139,37 @@ def run_task(setting: dict, d: int, runs: int) -> dict:
     return out
 
 
+def _code_of(source: str) -> str:
+    """The syntax tree of Python source without docstrings (comments are not in it): what
+    runs, whatever the documentation says."""
+    import ast
+
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef,
+                              ast.AsyncFunctionDef)) and body
+                and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree)
+
+
 def code_digest() -> str:
-    """A hash of the fitting modules that make the results and of the study's design."""
+    """A hash of the code of the fitting modules that make the results and of the study's
+    design (docstrings and comments left out)."""
+    import inspect
+    import textwrap
+
     import persuasive
 
     root = Path(persuasive.__file__).parent
     h = hashlib.sha256()
     for name in ("filter", "evidence", "models", "optimize", "estimate", "idm", "comparison"):
         path = root / "fitting" / f"{name}.py"
-        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
-    import inspect
-
+        h.update(name.encode() + b"\0" + _code_of(path.read_text()).encode())
     for func in (settings, key, configs, informative_steps, run_task):  # the design
-        h.update(inspect.getsource(func).encode())
+        h.update(_code_of(textwrap.dedent(inspect.getsource(func))).encode())
     h.update(repr((P_VALUES, ROLES, NOISES, IDM_TRUE)).encode())
     return h.hexdigest()[:16]
 

@@ -175,3 +175,15 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(capsys, tmp_path, logs
     code, _, err = run(capsys, "fit", logs[0], "--sigma-min", "0")
     assert code == 2 and "--sigma-min" in err
     assert sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".json") == []
+
+
+def test_a_fit_is_deterministic(capsys, logs):
+    reports = []
+    for _ in range(2):
+        code, out, _ = run(capsys, "fit", *logs[:4], "--model", "all", "--intervals",
+                           "selected", "--json")
+        assert code == 0
+        payload = json.loads(out)
+        payload.pop("seconds")
+        reports.append(payload)
+    assert reports[0] == reports[1]
