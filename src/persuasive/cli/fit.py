@@ -61,6 +61,25 @@ def _print_report(report, header: str) -> None:
                    f"step {_mean_first(report):.3f}, at the last {_mean_last(report):.3f}")
 
 
+def _fit(ev, models, sigma_min: float, intervals: str, group: str | None = None):
+    """One :class:`persuasive.fitting.FitReport`; ``intervals = "selected"``: every model
+    without intervals, then the selected one again with them."""
+    from ..fitting import FitReport, fit_models, smooth
+    from ..fitting.comparison import ROLE_MODELS
+    from ..fitting.estimate import MODELS
+
+    if intervals != "selected":
+        return fit_models(ev, models, sigma_min, intervals == "all", group)
+    first = fit_models(ev, models, sigma_min, False, group)
+    fits = dict(first.fits)
+    fits[first.selected] = fit_models(ev, [first.selected], sigma_min, True).fits[
+        first.selected]
+    selected = min(fits.values(), key=lambda f: (f.bic, MODELS.index(f.model))).model
+    role_model = selected if selected in ROLE_MODELS else first.role_model
+    p_leader = smooth(ev, fits[role_model]) if role_model is not None else None
+    return FitReport(ev, fits, selected, role_model, p_leader, group, sigma_min)
+
+
 def _mean_first(report) -> float:
     ev = report.evidence
     return float(report.p_leader[ev.starts[:-1]].mean())
@@ -93,8 +112,8 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
     """Fit human models to recorded driving (simulate --out logs, drive trials)."""
     from .._files import check_output_file
     from ..config import ConfigError
-    from ..fitting import (OUT_EXTENSIONS, evidence_of, fit_groups, fit_models, load_logs,
-                           report_dict, write_fit_parquet, write_json)
+    from ..fitting import (OUT_EXTENSIONS, evidence_of, load_logs, report_dict,
+                           write_fit_parquet, write_json)
     from ..fitting.estimate import MODELS
 
     ext = check_output_file(out, OUT_EXTENSIONS, "fit") if out else None
@@ -109,20 +128,14 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
                                   "'persuasive drive')")
     models = MODELS if model == "all" else (model,)
     ev = evidence_of(runs)
-    if intervals == "all":
-        wanted = True
-    elif intervals == "none":
-        wanted = False
+    if per_participant:
+        groups: dict[str, list[int]] = {}
+        for i, log in enumerate(runs):
+            groups.setdefault(log.participant, []).append(i)
+        reports = [_fit(ev.subset(idx), models, sigma_min, intervals, name)
+                   for name, idx in sorted(groups.items())]
     else:
-        wanted = None
-    reports = []
-    for report in (fit_groups(ev, models, sigma_min, wanted if wanted is not None else False)
-                   if per_participant else
-                   [fit_models(ev, models, sigma_min, wanted if wanted is not None else False)]):
-        if wanted is None:  # intervals for the selected model only: refit it with them
-            sub = report.evidence
-            report = fit_models(sub, models, sigma_min, [report.selected], report.group)
-        reports.append(report)
+        reports = [_fit(ev, models, sigma_min, intervals)]
     elapsed = time.perf_counter() - t0
     payload = report_dict(reports)
     payload["seconds"] = round(elapsed, 3)

@@ -1,5 +1,5 @@
 """Fitting several human models to the same runs, comparing them, and the human's smoothed
-role per step (docs/method.md §13.5-13.6).
+role per step (docs/method.md §13.6).
 
 :func:`fit_models` fits each model of ``models`` (maximum likelihood, one parameter set shared
 by every run), ranks them by BIC (AIC beside it), and smooths the role of every run under the

@@ -7,7 +7,7 @@ Parameters and their coordinates (the fits work on these):
 name      meaning                          coordinate
 ======== ================================ ===================================
 ``p_a``   willingness to change role       ``p_a`` in [0, 1]
-``pi0``   ``P(initial role = leader)``     maximised exactly (concave, §13.4)
+``pi0``   ``P(initial role = leader)``     maximised exactly (concave, §13.5)
 ``sigma`` acceleration noise [m/s^2]       ``log sigma``, ``sigma >= sigma_min``
 ``beta``  rationality (``noisy``)          ``log beta`` in [log 1e-3, log 1e3], or inf
 IDM       the IDM's and its gap's          ``persuasive.fitting.idm``
