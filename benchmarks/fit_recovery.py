@@ -1,8 +1,8 @@
 """Parameter recovery and model selection of ``persuasive fit`` (docs/method.md §13.7).
 
     python benchmarks/fit_recovery.py [--datasets 100] [--runs 50] [--workers 2]
-                                      [--out results/fit-recovery] [--smoke] [--timing]
-                                      [--drive results/drive]
+                                      [--out results/fit-recovery] [--only KIND[:P_A]]
+                                      [--smoke] [--timing] [--drive results/drive]
 
 **Recovery.** Datasets of ``--runs`` runs are simulated with a known human and fitted:
 
@@ -26,7 +26,13 @@ command again to resume. ``OUT/meta.json`` records a digest of the code of the f
 modules and of the design (docstrings and comments aside); results of other code are refused
 (start a new ``--out``). The summary (coverage, mean absolute error, interval width, the
 informative steps per dataset, selection accuracy) is printed and written to
-``OUT/summary.md`` and ``OUT/summary.json``.
+``OUT/summary.md`` and ``OUT/summary.json``. An *informative step* is one where the human
+could change role (its role is not its plausible role) and the two roles act differently; if
+each were an observed Bernoulli(``p_a``) trial, no unbiased estimate could err by less than
+``sqrt(p_a (1 - p_a) / m)`` (``m`` such steps per dataset), a mean absolute error of
+``sqrt(2 / pi)`` times that: the summary prints this bound beside the error. ``--only
+KIND[:P_A]`` runs the settings of one kind (e.g. ``lfg:0.7`` with ``--runs 200``: the error
+shrinks with the information).
 
 **Timing** (``--timing``): 1000 runs of 61 steps are written as Parquet logs, then fitted with
 the ``lfg`` model: the command end to end (``persuasive fit DIR/*.parquet --model lfg``) and
@@ -41,6 +47,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import math
 import os
 import subprocess
 import sys
@@ -177,9 +184,9 @@ def code_digest() -> str:
 def summarise(rows: list[dict], n_datasets: int) -> tuple[dict, str]:
     """Coverage, error and selection tables (markdown) from the result lines."""
     rec_lines = ["| p_a | initial role | accel. noise | datasets | coverage of 95 % CI | "
-                 "MAE | mean CI width | one-sided CIs | informative steps per dataset | "
-                 "p_a estimate mean |",
-                 "|---|---|---|---|---|---|---|---|---|---|"]
+                 "MAE | binomial MAE bound | mean CI width | one-sided CIs | "
+                 "informative steps per dataset | p_a estimate mean |",
+                 "|---|---|---|---|---|---|---|---|---|---|---|"]
     summary = {"recovery": [], "selection": []}
     for s in settings():
         if s["kind"] != "lfg":
@@ -193,12 +200,16 @@ def summarise(rows: list[dict], n_datasets: int) -> tuple[dict, str]:
         one = np.mean(["one-sided" in r["method"] for r in rs])
         info = np.mean([r["informative_steps"] for r in rs])
         mean = np.mean([r["p_hat"] for r in rs])
+        # if every informative step were an observed Bernoulli(p_a) trial of a role change,
+        # the best unbiased estimate would err by sqrt(p (1 - p) / m) (standard error), a mean
+        # absolute error of sqrt(2 / pi) times that for normal errors
+        bound = math.sqrt(2 / math.pi * s["p_a"] * (1 - s["p_a"]) / info) if info else math.nan
         summary["recovery"].append({**s, "datasets": len(rs), "coverage": cover, "mae": mae,
-                                    "mean_width": width, "one_sided": one,
+                                    "mae_bound": bound, "mean_width": width, "one_sided": one,
                                     "informative_steps": info, "mean_estimate": mean})
         rec_lines.append(f"| {s['p_a']:.1f} | {s['role']} | {s['noise']:g} | {len(rs)} | "
-                         f"{100 * cover:.0f} % | {mae:.3f} | {width:.3f} | {100 * one:.0f} % | "
-                         f"{info:.0f} | {mean:.3f} |")
+                         f"{100 * cover:.0f} % | {mae:.3f} | {bound:.3f} | {width:.3f} | "
+                         f"{100 * one:.0f} % | {info:.0f} | {mean:.3f} |")
     sel_lines = ["| generating kind | initial role | accel. noise | datasets | selected by BIC "
                  "| by AIC | BIC picks |", "|---|---|---|---|---|---|---|"]
     by_kind: dict[str, list] = {}
@@ -253,8 +264,8 @@ def recovery(args) -> None:
             if line.strip():
                 row = json.loads(line)
                 done[row["key"]] = row
-    tasks = [(s, d) for d in range(args.datasets) for s in settings()
-             if key(s, d) not in done]
+    chosen = [s for s in settings() if _matches(s, args.only)]
+    tasks = [(s, d) for d in range(args.datasets) for s in chosen if key(s, d) not in done]
     print(f"{len(done)} datasets done, {len(tasks)} to go ({args.runs} runs each, "
           f"{args.workers} workers)", flush=True)
     t0 = time.perf_counter()
@@ -270,7 +281,7 @@ def recovery(args) -> None:
                     el = time.perf_counter() - t0
                     print(f"  {i}/{len(tasks)} datasets in {el:.0f} s "
                           f"(about {el / i * (len(tasks) - i):.0f} s to go)", flush=True)
-    rows = [done[key(s, d)] for d in range(args.datasets) for s in settings()
+    rows = [done[key(s, d)] for d in range(args.datasets) for s in chosen
             if key(s, d) in done]
     summary, text = summarise(rows, args.datasets)
     summary.update({"datasets_per_setting": args.datasets, "runs_per_dataset": args.runs,
@@ -278,6 +289,14 @@ def recovery(args) -> None:
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     (out / "summary.md").write_text(text + "\n")
     print(text)
+
+
+def _matches(setting: dict, only: str | None) -> bool:
+    """``--only KIND[:P_A]``: the settings of one kind (and one p_a)."""
+    if not only:
+        return True
+    kind, _, p = only.partition(":")
+    return setting["kind"] == kind and (not p or setting["p_a"] == float(p))
 
 
 def timing(args) -> None:
@@ -330,6 +349,8 @@ def main() -> None:
     ap.add_argument("--smoke", action="store_true", help="2 datasets of 10 runs per setting")
     ap.add_argument("--timing", action="store_true", help="only the 1000-run timing")
     ap.add_argument("--drive", default=None, help="fit the recorded trials in this folder")
+    ap.add_argument("--only", default=None, metavar="KIND[:P_A]",
+                    help="only the settings of one kind (and p_a), e.g. lfg:0.7")
     args = ap.parse_args()
     if args.smoke:
         args.datasets, args.runs = 2, 10
