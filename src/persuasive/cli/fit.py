@@ -18,7 +18,6 @@ import time
 import click
 
 from ..config import SCENARIO_KINDS
-from ._common import compile_notice
 
 MODEL_CHOICES = ("lfg", "stubborn", "noisy", "idm", "all")
 
@@ -80,6 +79,52 @@ def _fit(ev, models, sigma_min: float, intervals: str, group: str | None = None)
     return FitReport(ev, fits, selected, role_model, p_leader, group, sigma_min)
 
 
+def _warm_up() -> None:
+    """Compile every kernel a fit may call (the parallel ones are chosen by the data's size)
+    on a one-step run, so that a later, larger fit never compiles silently."""
+    import numpy as np
+
+    from .. import packing as slot
+    from ..fitting.models import (EMIT_LFG, EMIT_NOISY, hmm_loglik, hmm_loglik_serial,
+                                  idm_sse, idm_sse_serial)
+
+    starts = np.array([0, 1], np.int64)
+    args = (starts, np.zeros(1), np.zeros((1, 2)), np.ones((1, 2)), np.zeros((1, 2, 3)),
+            np.zeros((1, 3)), np.full(1, 0.5), np.ones(1), np.ones(1))
+    for kernel in (hmm_loglik, hmm_loglik_serial):
+        for kind in (EMIT_LFG, EMIT_NOISY):
+            kernel(kind, *args, np.empty((1, 1, 2)))
+    P = np.zeros((1, slot.N_SLOTS))
+    P[:, slot.U_MIN], P[:, slot.U_MAX], P[:, slot.YIELD_S], P[:, slot.CLEAR_S] = -2, 1, -6, 7
+    prm = np.array([[10.0, 1.5, 1.0, 1.5, 4.0, 2.0, 1.0, 0.0]])
+    states = np.array([[-20.0, 4.0, -20.0, 4.0]])
+    for kernel in (idm_sse, idm_sse_serial):
+        kernel(starts, states, np.zeros(1), P, P, np.full(1, 0.1), prm, np.empty((1, 1)))
+
+
+def _notice_compile() -> None:
+    """The compile notice (its usual line) when the closed loop's or the fit's kernels are not
+    cached yet, and then the fit's kernels compiled at once: a first fit takes about 30 s
+    more on the 2-core machine CI uses."""
+    import os
+
+    from ._common import compile_notice
+    from ..fitting.models import hmm_loglik
+
+    try:
+        index = hmm_loglik._cache._cache_file._index_path  # numba's cache layout
+        source = hmm_loglik.py_func.__code__.co_filename
+        cached = os.path.getmtime(index) >= os.path.getmtime(source)
+    except (AttributeError, OSError):
+        cached = False
+    if cached:
+        compile_notice()
+        return
+    click.echo("compiling the numerical kernels once (about 30 s; cached for later runs)",
+               err=True)
+    _warm_up()
+
+
 def _mean_first(report) -> float:
     ev = report.evidence
     return float(report.p_leader[ev.starts[:-1]].mean())
@@ -117,7 +162,7 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
     from ..fitting.estimate import MODELS
 
     ext = check_output_file(out, OUT_EXTENSIONS, "fit") if out else None
-    compile_notice()
+    _notice_compile()
     t0 = time.perf_counter()
     runs = load_logs(logs, scenario)
     if per_participant:
