@@ -4,8 +4,8 @@ role per step (docs/method.md §13.6).
 :func:`fit_models` fits each model of ``models`` (maximum likelihood, one parameter set shared
 by every run), ranks them by BIC (AIC beside it), and smooths the role of every run under the
 role model (the selected one if it has a role, else the ``lfg``): ``P(role_k = L | the whole
-run)`` by forward-backward at the estimate. :func:`fit_groups` does it per group of runs (per
-participant of a ``drive`` study).
+run)`` by forward-backward at the estimate (``persuasive fit --per-participant`` calls it
+once per participant of a ``drive`` study).
 """
 
 from __future__ import annotations
@@ -130,14 +130,4 @@ def fit_models(ev: Evidence, models: Sequence[str] = MODELS, sigma_min: float = 
     return FitReport(ev, fits, selected, role_model, p_leader, group, sigma_min)
 
 
-def fit_groups(ev: Evidence, models: Sequence[str] = MODELS, sigma_min: float = SIGMA_MIN,
-               intervals: bool | Sequence[str] = True) -> list[FitReport]:
-    """:func:`fit_models` per participant (runs without one are refused by the caller)."""
-    groups: dict[str, list[int]] = {}
-    for i, log in enumerate(ev.runs):
-        groups.setdefault(log.participant or "-", []).append(i)
-    return [fit_models(ev.subset(idx), models, sigma_min, intervals, group=name)
-            for name, idx in sorted(groups.items())]
-
-
-__all__ = ["FitReport", "ROLE_MODELS", "fit_groups", "fit_models", "smooth"]
+__all__ = ["FitReport", "ROLE_MODELS", "fit_models", "smooth"]

@@ -338,7 +338,7 @@ def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
                 x_hat, ell_hat = x2[0], float(f2[0])
         profile = {"p_a": P_GRID.tolist(), "loglik": grid_vals.tolist()}
     # the point estimate, pi0 included
-    ell_chk, pi0_hat = obj.evaluate(x_hat[None])
+    _, pi0_hat = obj.evaluate(x_hat[None])
     x_hat = x_hat.copy()
     x_hat[PI0] = float(pi0_hat[0])
     run_ll = obj.run_loglik(x_hat)

@@ -357,30 +357,7 @@ def idm_sse_serial(starts: np.ndarray, states: np.ndarray, accel: np.ndarray,
                     out[i])
 
 
-@njit(cache=True)
-def idm_accelerations(starts: np.ndarray, states: np.ndarray, P_hv: np.ndarray,
-                      P_av: np.ndarray, dt: np.ndarray, prm: np.ndarray,
-                      out: np.ndarray) -> None:
-    """The IDM's acceleration at every logged step for one parameter vector ``prm`` ``(8,)``
-    into ``out`` ``(n,)``."""
-    st = np.zeros(8)
-    log = np.zeros(16)
-    for i in range(starts.shape[0] - 1):
-        st[:] = 0.0
-        for k in range(starts[i], starts[i + 1]):
-            out[k] = idm_step(st, prm, states[k, 2], states[k, 3], states[k, 0], states[k, 1],
-                              dt[i], P_hv[i], P_av[i], log)
-
-
-def check_idm_vector(prm: np.ndarray) -> np.ndarray:
-    """An IDM parameter matrix ``(G, 8)`` as float64 C-contiguous."""
-    prm = np.ascontiguousarray(np.atleast_2d(prm), dtype=np.float64)
-    if prm.shape[1] != len(IDM_NAMES):
-        raise ValueError(f"IDM parameters need {len(IDM_NAMES)} columns, got {prm.shape[1]}")
-    return prm
-
-
 __all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "best_initial_role",
            "boltzmann_log_emission", "hmm_loglik", "hmm_loglik_run", "hmm_loglik_serial",
-           "idm_accelerations", "idm_sse", "idm_sse_serial",
+           "idm_sse", "idm_sse_serial",
            "smooth_runs", "step_log_emissions"]
