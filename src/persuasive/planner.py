@@ -4,8 +4,11 @@
 by default) inside a user's own loop, e.g. a vehicle stack at 10 Hz. It is the same compiled
 step the closed loop calls (``persuasive.policies.step.policy_step``), and it keeps between
 calls what the policy keeps: for the MPC, the belief on the human's role and the stored
-one-step prediction of the human. It uses corrected mode by default (the paper's equations);
-pass a configuration to change any parameter, quirk, planner kind or scenario.
+one-step prediction of the human. It uses corrected mode by default (the paper's equations),
+and with it the worst-case safety shield (docs/method.md §12): every acceleration it returns
+keeps a fallback that avoids the human whatever it does within its limits (``Plan.shielded``
+says when the shield overrode the policy). Pass a configuration to change any parameter,
+quirk, planner kind, shield or scenario.
 
 Example
 -------
@@ -32,6 +35,7 @@ from .policies import kinds as kd
 from .policies import kind_of, policy_params
 from .policies.step import policy_init, policy_step_buffers
 from .roles import FOLLOWER, LEADER
+from .safety.shield import N_CONFLICT, VERDICTS, conflict_vector, shield_step
 from .scenarios import build_scenario
 
 State = tuple[float, float]
@@ -54,6 +58,10 @@ class Plan:
     feasible: bool  #: some candidate met the chance constraint
     belief_hv_leader: float  #: P(HV = leader) after this call's update
     candidates: np.ndarray  #: per-candidate diagnostics ``(n_traj, 10)`` (``persuasive.mpc``)
+    proposed_accel_mps2: float = math.nan  #: the policy's acceleration before the shield
+    shielded: bool = False  #: the shield overrode the policy (``accel_mps2`` is its fallback)
+    shield_verdict: str | None = None  #: admitted | brake | go | uncertified; None: no shield
+    model_confidence: float = math.nan  #: the MPC's confidence in its human model
 
 
 class Planner:
@@ -89,6 +97,9 @@ class Planner:
         self._draws = np.zeros(2)
         self._state = np.zeros(kd.STATE_SIZE)
         self._k = 0
+        self._conflict = np.empty(N_CONFLICT)
+        conflict_vector(self._P_av, self._P_hv, self._conflict)
+        self._shielded = self.config.shield != "off"
         self.reset()
 
     def reset(self) -> None:
@@ -139,9 +150,14 @@ class Planner:
             self._P_av, self._P_hv, self._disc, self.config.simulation.dt_s, self._diag,
             *self._ahead_a, *self._ahead_b, self._ahead, self._log, self.work)
         self._k += 1
-        return self._plan(float(accel))
+        proposed, verdict = float(accel), None
+        if self._shielded:
+            accel, code = shield_step(x_R[0], x_R[1], proposed, self.config.simulation.dt_s,
+                                      x_H[0], x_H[1], self._conflict)
+            verdict = VERDICTS[code]
+        return self._plan(float(accel), proposed, verdict)
 
-    def _plan(self, accel: float) -> Plan:
+    def _plan(self, accel: float, proposed: float, verdict: str | None) -> Plan:
         n = self.config.library.n_samples
         col = self._spec.log.index("trajectory")
         k = int(self._log[col]) if not math.isnan(self._log[col]) else -1
@@ -167,6 +183,11 @@ class Planner:
             feasible=feasible,
             belief_hv_leader=self.belief_hv_leader,
             candidates=self._diag.copy() if mpc else np.full_like(self._diag, np.nan),
+            proposed_accel_mps2=proposed,
+            shielded=verdict not in (None, "admitted"),
+            shield_verdict=verdict,
+            model_confidence=float(self._log[self._spec.log.index("model_confidence")])
+            if "model_confidence" in self._spec.log else math.nan,
         )
 
 

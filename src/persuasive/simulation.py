@@ -31,6 +31,7 @@ from .packing import N_WORK, WORK_NAMES, discounts, pack
 from .policies import kinds as kd
 from .policies import kind_of, load_replay, policy_params
 from .roles import LEADER
+from .safety import measures
 from .scenarios import Scenario, build_scenario, first_arrival
 
 #: Labels of ``first_at_line`` / ``first_at_conflict_point``.
@@ -60,6 +61,14 @@ class RunOutcome:
     hv_rms_accel_mps2: float
     av_rms_jerk_mps3: float  #: RMS of the acceleration differences over dt [m/s^3]
     hv_rms_jerk_mps3: float
+    # safety outside the model (docs/method.md §12.6)
+    collision_caused_by_av: bool  #: an overlap that is not a rear-end by the human
+    rear_end_by_human: bool  #: the human drove into the AV from behind in a shared lane
+    min_gap_m: float  #: smallest distance between the two footprints [m] (0: they touched)
+    pet_s: float  #: post-encroachment time at the conflict [s]
+    min_ttc_s: float  #: minimum time to collision along the paths [s]
+    shield_interventions: int  #: steps where the shield overrode the AV's policy
+    av_max_brake_mps2: float  #: the AV's strongest braking [m/s^2] (0: it never braked)
 
 
 #: Outcome fields that are times or distances (floats), for tables.
@@ -306,6 +315,7 @@ def _columns(s: Setup, states, world_log, av_log, hv_log, av_columns, hv_columns
         x, y, heading = scenario.positions(who, states[:-1, j])
         log[f"{who}_x_m"], log[f"{who}_y_m"], log[f"{who}_heading_rad"] = x, y, heading
     log.update({name: world_log[:, j] for j, name in enumerate(WORLD_LOG)})
+    log["shield_verdict"] = log["shield_verdict"].astype(np.int64)
     for who, names, raw in (("hv", hv_columns, hv_log), ("av", av_columns, av_log)):
         for j, name in enumerate(names):
             col = raw[:, j]
@@ -375,10 +385,15 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
         accel = log[f"{who}_accel_mps2"]
         times[f"{who}_rms_accel_mps2"] = _rms(accel)
         times[f"{who}_rms_jerk_mps3"] = _rms(np.diff(accel) / dt)
+    overlap = scenario.collides(after[:, 0], after[:, 2])
+    rear = measures.rear_end_mask(scenario, after[:, 0], after[:, 2])
+    shared = scenario.lane_shared
+    occ_av, occ_hv = scenario.av.occupancy, scenario.hv.occupancy
+    verdicts = log.get("shield_verdict")
     return RunOutcome(
         first_at_line=line,
         first_at_conflict_point=conflict,
-        collision=bool(np.any(scenario.collides(after[:, 0], after[:, 2]))),
+        collision=bool(np.any(overlap)),
         min_distance_to_line_m=float(d[: idx_end + 2].min()),
         min_distance_m=float(d.min()),
         idx_end=int(idx_end),
@@ -386,6 +401,17 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
         hv_role_changes=changes["hv"],
         av_role_changes=changes["av"],
         **times,
+        collision_caused_by_av=bool(np.any(overlap & ~rear)),
+        rear_end_by_human=bool(np.any(overlap & rear)),
+        min_gap_m=float(measures.min_gap(scenario, states[:, 0], states[:, 2]).min()),
+        pet_s=float(measures.pet(states[:, 0], states[:, 2], occ_av, occ_hv, dt)),
+        min_ttc_s=float(measures.min_ttc(states[:, 0], states[:, 1], states[:, 2], states[:, 3],
+                                         *occ_av, *occ_hv, shared,
+                                         0.5 * (scenario.av.vehicle.length_m
+                                                + scenario.hv.vehicle.length_m))),
+        shield_interventions=int(np.sum(verdicts > 0)) if verdicts is not None else 0,
+        av_max_brake_mps2=float(max(0.0, -np.min(log["av_accel_mps2"])))
+        if len(log["av_accel_mps2"]) else 0.0,
     )
 
 

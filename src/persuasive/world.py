@@ -43,11 +43,13 @@ from .library import lib_buffers, new_lib
 from .mpc import AHEAD_S, AHEAD_V, AHEAD_VALID, N_DIAG
 from .policies import kinds as kd
 from .policies.step import policy_init, policy_role, policy_step
+from .safety.shield import N_CONFLICT, conflict_vector, shield_step
 
-# Columns of the world's own per-step log.
+# Columns of the world's own per-step log: the measurements, the applied accelerations, the
+# AV policy's proposal and the shield's verdict (-1: no shield; persuasive.safety.shield).
 WORLD_LOG = ("av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m", "hv_meas_v_mps", "av_accel_mps2",
-             "hv_accel_mps2")
-(W_AV_S, W_AV_V, W_HV_S, W_HV_V, W_AV_A, W_HV_A) = range(len(WORLD_LOG))
+             "hv_accel_mps2", "av_proposed_accel_mps2", "shield_verdict")
+(W_AV_S, W_AV_V, W_HV_S, W_HV_V, W_AV_A, W_HV_A, W_AV_PROPOSED, W_SHIELD) = range(len(WORLD_LOG))
 
 
 # -- random streams ----------------------------------------------------------------------------
@@ -186,6 +188,9 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
     policy_init(av_kind, av_prm, av_st, P_av[slot.PRIOR_L])
     policy_init(hv_kind, hv_prm, hv_st, P_hv[slot.PRIOR_L])
     need_game, need_av_lib, av_uses_libs = needs[0], needs[1], needs[2]
+    shielded = P_av[slot.SHIELD] != slot.SHIELD_OFF
+    conflict = np.empty(N_CONFLICT)
+    conflict_vector(P_av, P_hv, conflict)
     no_draws = np.zeros(2)
     x = np.empty(4)
     x[:] = x0
@@ -219,9 +224,14 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
         a_av = policy_step(av_kind, kd.AV, av_prm, av_st, k, ms_av, mv_av, ms_hv, mv_hv,
                            av_draw, policy_role(hv_kind, hv_st), lib_h, lib_r, idx, q_values,
                            P_av, P_hv, disc, dt, diag, lib_h1a, lib_h1b, ahead, av_log[k], work)
+        row = world_log[k]
+        row[W_AV_PROPOSED] = a_av
+        row[W_SHIELD] = -1.0
+        if shielded:
+            a_av, verdict = shield_step(ms_av, mv_av, a_av, dt, ms_hv, mv_hv, conflict)
+            row[W_SHIELD] = verdict
         if timed:
             av_time_ns[k] = (_clock_ns() - t1) + (t_libs if av_uses_libs else 0)
-        row = world_log[k]
         row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
         row[W_AV_A], row[W_HV_A] = advance_states(x, a_av, a_hv, k, noisy, accel_noise, dt,
                                                   P_av, P_hv, x)
@@ -333,6 +343,9 @@ class PythonWorld:
         self.n_steps = n = config.simulation.n_steps
         self.dt = config.simulation.dt_s
         self.games = GameCache(s.P_av, s.P_hv, s.disc)
+        self.conflict = np.empty(N_CONFLICT)
+        conflict_vector(s.P_av, s.P_hv, self.conflict)
+        self.shielded = s.P_av[slot.SHIELD] != slot.SHIELD_OFF
         st = s.streams
         for policy, side, draws, rng in ((self.av, kd.AV, st.draws_av, st.av_rng),
                                          (self.hv, kd.HV, st.draws_hv, st.hv_rng)):
@@ -374,10 +387,14 @@ class PythonWorld:
         obs.human_role = int(getattr(self.hv, "role", -1))
         t1 = time.perf_counter_ns()
         a_av = float(self.av.act(obs))
+        row = self.world_log[k]
+        row[W_AV_PROPOSED], row[W_SHIELD] = a_av, -1.0
+        if self.shielded:  # the same filter as the compiled loop, after any AV policy
+            a_av, verdict = shield_step(ms_av, mv_av, a_av, self.dt, ms_hv, mv_hv, self.conflict)
+            row[W_SHIELD] = verdict
         own = t_game if getattr(self.av, "needs_game", False) else 0
         self.av_ms[k] = (time.perf_counter_ns() - t1 + own) / 1e6
         self.av_log[k, :len(self.av.log_columns)] = _last_log(self.av)
-        row = self.world_log[k]
         row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
         row[W_AV_A], row[W_HV_A] = advance_states(self.x, a_av, a_hv, k, st.noisy,
                                                   st.accel_noise, self.dt, s.P_av, s.P_hv,

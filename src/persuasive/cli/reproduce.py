@@ -7,7 +7,8 @@ from pathlib import Path
 
 import click
 
-from ._common import build_config, check_workers, compile_notice, config_options
+from ._common import (build_config, check_workers, compile_notice, config_options,
+                      shield_option)
 
 
 @click.command()
@@ -19,6 +20,7 @@ from ._common import build_config, check_workers, compile_notice, config_options
 @click.option("--scenario", type=click.Choice(["intersection", "crossing", "left-turn",
                                                "merge"]), default=None,
               help="Run the tables in another scenario [intersection, the paper's].")
+@shield_option
 @config_options
 @click.option("--out", type=click.Path(file_okay=False), default=None,
               help="Results folder [results/<table>-<mode>-<settings hash>/]; with 'all', one "
@@ -27,8 +29,8 @@ from ._common import build_config, check_workers, compile_notice, config_options
               help="Replace a results folder made with other settings.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, force, as_json,
-              quiet) -> None:
+def reproduce(table, seeds, workers, scenario, shield, mode, config_file, sets, out, force,
+              as_json, quiet) -> None:
     """Rerun the paper's Table 1 and/or Table 2 beside the published numbers.
 
     Each row sets its own agents, p_a and p_a_hat on top of the base configuration
@@ -38,7 +40,8 @@ def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, for
     from .. import experiments as ex
     from .._files import check_output_folder
 
-    base = build_config(config_file, sets, {"mode": mode, "scenario.kind": scenario})
+    base = build_config(config_file, sets, {"mode": mode, "scenario.kind": scenario,
+                                           "av.shield": shield})
     tables = ex.TABLES if table == "all" else (table,)
     grids = {t: ex.table_grid(t, base, seeds) for t in tables}
     folders = {}

@@ -14,7 +14,8 @@ both loops:
 
 AV kinds: ``persuasive`` (the paper's branch MPC; alias ``mpc``), ``passive``, ``cv``,
 ``lfg``, ``yield``. Human kinds: ``lfg``, ``stubborn``, ``noisy``, ``idm``, ``aggressive``,
-``replay``. Each module's docstring states the kind's definition and parameters.
+``replay``, and the humans that test the safety shield, ``adversary``, ``deceptive``,
+``random`` (:mod:`.adversarial`). Each module's docstring states the kind's definition and parameters.
 """
 
 from __future__ import annotations
@@ -83,6 +84,8 @@ def policy_params(config: Config, side: int) -> np.ndarray:
     if spec.kind == kd.REPLAY:
         accel = load_replay(config).accel_mps2
         return np.concatenate([[float(accel.size)], accel])
+    if spec.kind == kd.RANDOM:
+        return np.array([config.hv.random.hold_min_s, config.hv.random.hold_max_s])
     return np.zeros(1)
 
 
