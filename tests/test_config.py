@@ -68,7 +68,7 @@ def test_old_av_name_mpc_is_the_persuasive_planner():
 
 
 def test_packed_vectors_hold_the_defaults():
-    P_av, P_hv = pack(Config())
+    P_av, P_hv = pack(Config(), build_scenario(Config()))
     assert P_av.shape == P_hv.shape == (slot.N_SLOTS,)
     scene = build_scenario(Config())
     assert scene.av.zone == scene.hv.zone == (-7.5, 7.5) and scene.min_dist_m == 7.5
@@ -104,7 +104,7 @@ def test_per_vehicle_slots_follow_each_vehicles_overrides():
     # (shared); the AV keeps [vehicle]'s values.
     c = Config(hv=HVParams(vehicle=VehicleOverrides(length_m=4.0, v_max_mps=8.0,
                                                     u_min_mps2=-3.0)))
-    P_av, P_hv = pack(c)
+    P_av, P_hv = pack(c, build_scenario(c))
     assert (P_hv[slot.V_MAX], P_hv[slot.U_MIN], P_hv[slot.LENGTH]) == (8.0, -3.0, 4.0)
     assert (P_av[slot.V_MAX], P_av[slot.U_MIN], P_av[slot.LENGTH]) == (10.0, -2.0, 5.0)
     assert (P_hv[slot.YIELD_S], P_av[slot.YIELD_S]) == (-6.0, -6.5)
@@ -399,7 +399,7 @@ def test_quirks_resolve_per_mode(mode, expected):
     for name in KEPT_IN_BOTH:
         assert getattr(q, name) is True, name
     assert q.q7_arrival_tolerance_m == 0.2  # [m]
-    for P in pack(Config(mode=mode)):
+    for P in pack(Config(mode=mode), build_scenario(Config(mode=mode))):
         assert (P[slot.QUIRK_BRANCH_OFFSET], P[slot.QUIRK_BELIEF_OFFSET],
                 P[slot.QUIRK_LEADER_AGG_MAX]) == (float(expected),) * 3
         assert (P[slot.QUIRK_UNDISCOUNTED_COLLISION], P[slot.QUIRK_TIME_LIKE_STOP_TEST]) == (

@@ -151,7 +151,7 @@ def test_crossing_at_90_is_the_intersection_bit_for_bit(mode, monkeypatch):
     # and through the euclidean kernels (distances between centres on the paths)
     monkeypatch.setitem(SCENARIOS, "crossing",
                         lambda c: crossing.build(c, perpendicular_at_90=False))
-    import persuasive.simulation as sim
+    import persuasive.record as sim
 
     sim.static_setup.cache_clear()
     try:
@@ -231,7 +231,7 @@ def test_impossible_starts_are_a_clear_error():
 
 def _merge_game(x_av, x_hv, **overrides):
     config = SCENARIO_CONFIGS["merge"].with_overrides(overrides)
-    P_av, P_hv = pack(config)
+    P_av, P_hv = pack(config, build_scenario(config))
     return full_prediction(x_hv, x_av, P_hv, P_av, discounts(config)), P_av
 
 

@@ -6,6 +6,7 @@ import pytest
 from persuasive import Config, ConfigError, Planner, simulate
 from persuasive.library import trajectory_library
 from persuasive.packing import pack
+from persuasive.scenarios import build_scenario
 
 
 def test_defaults_to_corrected_mode_and_returns_a_full_plan():
@@ -13,7 +14,8 @@ def test_defaults_to_corrected_mode_and_returns_a_full_plan():
     assert planner.config.mode == "corrected"
     plan = planner.plan((-20.0, 4.0), (-22.0, 4.3))
     assert planner.kind == "persuasive"
-    lib = trajectory_library(-20.0, 4.0, pack(planner.config)[0])  # the AV's library
+    P_av = pack(planner.config, build_scenario(planner.config))[0]
+    lib = trajectory_library(-20.0, 4.0, P_av)  # the AV's library
     k = plan.candidate
     np.testing.assert_array_equal(plan.s_m, lib.s[k])
     np.testing.assert_array_equal(plan.a_mps2, lib.a[k])

@@ -22,7 +22,7 @@ from persuasive.kinematics import saturated_step
 from persuasive.policies import kinds as kd
 from persuasive.policies import policy_params
 from persuasive.safety import shield as sh
-from persuasive.simulation import setup, static_setup
+from persuasive.record import setup, static_setup
 from persuasive.world import WORLD_LOG, run_loop
 
 SCENARIOS = {
@@ -358,7 +358,7 @@ def test_feasible_shield_aware_steps_are_never_overridden():
 
 def test_paper_mode_has_no_shield_and_corrected_mode_has_it():
     assert Config().shield == "off" and Config(mode="corrected").shield == "worst-case"
-    P_av, _ = slot.pack(Config())
+    P_av = static_setup(Config())[1]
     assert P_av[slot.SHIELD] == slot.SHIELD_OFF
     from persuasive import simulate
 

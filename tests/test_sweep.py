@@ -568,7 +568,9 @@ def test_plot_sweep_needs_a_sweep_folder(capsys, tmp_path):
 
 
 def test_bench_sweep_tiny():
-    result = sweep.bench_sweep(sizes=(8,), workers=2, repeats=1)
+    from persuasive.bench_sweep import bench_sweep
+
+    result = bench_sweep(sizes=(8,), workers=2, repeats=1)
     (size,) = result["sizes"]
     assert size["runs"] == 8 and size["same_results"] is True
     assert size["pool_runs_per_s"] > 0 and size["sweep_runs_per_s"] > 0

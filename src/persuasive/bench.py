@@ -36,6 +36,7 @@ from .game import predict_buffers
 from .library import lib_buffers
 from .packing import N_WORK, WORK_NAMES, discounts, pack
 from .planner import Planner
+from .scenarios import build_scenario
 from .simulation import simulate
 
 
@@ -46,7 +47,7 @@ def bench_config(av: str = "persuasive", scenario: str = "intersection") -> Conf
 
 
 def _game_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
-    P_av, P_hv = pack(config)
+    P_av, P_hv = pack(config, build_scenario(config))
     disc = discounts(config)
     n, n_traj = config.library.n_samples, config.library.n_traj
     (be, we), (bo, wo) = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
@@ -140,7 +141,7 @@ def _reference_times(config: Config, run, n: int = 5) -> dict[str, float]:
     """The straightforward NumPy path on ``n`` states of one run (it is slow)."""
     from . import reference
 
-    P_av, P_hv = pack(config)
+    P_av, P_hv = pack(config, build_scenario(config))
     disc = discounts(config)
     states = run.states
     picks = states[np.linspace(0, len(states) - 2, n).astype(int)]

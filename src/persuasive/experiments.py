@@ -28,7 +28,8 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
+from ._compile import warm_up
 from ._files import OutputError, atomic_folder, atomic_write
 from .config import Config, ConfigError
 from .simulation import simulate
@@ -188,12 +189,6 @@ def _die_with_parent(parent_pid: int) -> None:
                 os._exit(1)
 
     threading.Thread(target=watch, name="persuasive-parent-watch", daemon=True).start()
-
-
-def warm_up() -> None:
-    """Load (or compile, on first use) the kernels in this process before workers start."""
-    simulate(Config().with_overrides({"simulation.n_steps": 1}), 1)
-    simulate(Config().with_overrides({"simulation.n_steps": 1, "av.kind": "lfg"}), 1)
 
 
 def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = None,

@@ -118,16 +118,13 @@ def sqrt_threshold(c: float) -> float:
     return x
 
 
-def pack(config, scenario=None) -> tuple[np.ndarray, np.ndarray]:
+def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     """The kernel parameter vectors ``(P_av, P_hv)`` of ``config``: each ``(N_SLOTS,)``.
 
-    ``scenario``: the :class:`persuasive.scenarios.Scenario` built from ``config`` (built here
-    when not given); it supplies each vehicle's path, lines and window and the conflict kind.
+    ``scenario``: the :class:`persuasive.scenarios.Scenario` built from ``config``
+    (``build_scenario(config)``; the scenarios sit above this module, which they read their
+    slots from); it supplies each vehicle's path, lines and window and the conflict kind.
     """
-    if scenario is None:
-        from .scenarios import build_scenario
-
-        scenario = build_scenario(config)
     lib, rw, roles, q = config.library, config.reward, config.roles, config.effective_quirks
     shared = np.zeros(N_SLOTS)
     shared[N_SAMPLES], shared[SAMPLE_DT], shared[N_MESH] = lib.n_samples, lib.sample_dt_s, lib.n_mesh

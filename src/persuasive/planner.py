@@ -28,6 +28,7 @@ import numpy as np
 from . import packing as slot
 from .config import Config, ConfigError
 from .game import build_buffers, predict_buffers
+from .kinematics import check_state
 from .library import lib_buffers
 from .mpc import D_EXPECTED, D_MIN_SAFE, D_P_LL, N_DIAG
 from .packing import discounts, pack
@@ -196,19 +197,4 @@ def _state(name: str, x, config: Config) -> tuple[float, float]:
     return check_state(name, x, config.vehicle_of(name))
 
 
-def check_state(name: str, x, vehicle) -> tuple[float, float]:
-    """``x`` as ``(s [m], v [m/s])``, or :class:`ConfigError`: it must be a pair of finite
-    numbers with the speed inside the vehicle's ``[v_min, v_max]``."""
-    try:
-        s, v = (float(x[0]), float(x[1]))
-        if len(x) != 2:
-            raise ValueError
-    except (TypeError, ValueError, IndexError):
-        raise ConfigError(f"{name} = {x!r} is not a state (s [m], v [m/s])") from None
-    if not (np.isfinite(s) and np.isfinite(v)) or not vehicle.v_min_mps <= v <= vehicle.v_max_mps:
-        raise ConfigError(f"{name} = ({s!r}, {v!r}) is out of range; allowed: finite s, "
-                          f"v in [{vehicle.v_min_mps:g}, {vehicle.v_max_mps:g}] m/s")
-    return s, v
-
-
-__all__ = ["Plan", "Planner", "check_state"]
+__all__ = ["Plan", "Planner"]

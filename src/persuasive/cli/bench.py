@@ -60,9 +60,9 @@ def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, as_jso
 
 
 def _bench_sweep(workers: int, repeats: int, as_json: bool) -> None:
-    """``bench --sweep``: the Dask sweep against the process pool (persuasive.sweep.bench),
+    """``bench --sweep``: the Dask sweep against the process pool (persuasive.bench_sweep),
     each timed ``repeats`` times, the best time kept."""
-    from ..sweep import bench_sweep
+    from ..bench_sweep import bench_sweep
 
     result = bench_sweep(workers=workers, repeats=repeats)
     if as_json:

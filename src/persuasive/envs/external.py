@@ -136,7 +136,7 @@ class ExternalPlanner:
         self._made = 0
         # the per-vehicle planners do not shield: the shield runs once, over all vehicles
         self._planner_config = config.with_overrides({"av.shield": "off"})
-        from ..simulation import static_setup
+        from ..record import static_setup
 
         self._clear_m = float(static_setup(config)[0].hv.clear_s)
 

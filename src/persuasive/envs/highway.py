@@ -29,7 +29,7 @@ vehicles would mix up) plans against that vehicle while neither has cleared the 
 against only the "most critical" vehicle (e.g. the earliest arrival) would switch targets
 between steps and lose the beliefs, and could accelerate into a second vehicle the planner
 does not see. Without a conflict the ego accelerates at ``u_max`` up to ``v_max`` (free flow,
-as ``persuasive.simulation.free_flow_time``). A vehicle ahead in the ego's own lane is no
+as ``persuasive.record.free_flow_time``). A vehicle ahead in the ego's own lane is no
 crossing: the ego keeps an IDM gap to it (``config.hv.idm`` parameters) by taking the lower of
 the two accelerations. The acceleration is finally limited so that the speed stays in
 ``[v_min, v_max]`` within the step (highway-env integrates with Euler steps).
@@ -444,7 +444,7 @@ class PlannerDriver:
 
 def clear_distance(config: Config) -> float:
     """Where a vehicle has cleared the conflict of the planner's scenario [m] (7.5)."""
-    from ..simulation import static_setup
+    from ..record import static_setup
 
     return float(static_setup(config)[0].hv.clear_s)
 

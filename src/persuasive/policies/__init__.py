@@ -201,7 +201,7 @@ class CompiledPolicy:
         return int(policy_role(self.spec.kind, self.state))
 
     def act(self, observation: Observation) -> float:
-        from ..planner import check_state
+        from ..kinematics import check_state
         from .step import policy_step_buffers
 
         ctx = self.context

@@ -37,7 +37,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from .._files import atomic_write
 from ..config import AV_KINDS, SIMULATED_HV_KINDS, Config, ConfigError
 

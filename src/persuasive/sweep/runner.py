@@ -118,7 +118,7 @@ def start_method() -> str:
 def _warm_up(grid: Grid) -> None:
     """Load the compiled kernels here (compiling them once if they are not cached) so that
     forked workers inherit them, and so that workers never compile at the same time."""
-    from ..experiments import warm_up
+    from .._compile import warm_up
     from ..simulation import simulate
 
     warm_up()

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
-from .. import __version__
+from .._version import __version__
 from .._files import OutputError, atomic_write, check_output_folder
 from ..config import ConfigError
 from .grid import Grid

@@ -116,7 +116,7 @@ class Study:
         """The same study with another base seed (``persuasive drive --seed``)."""
         from dataclasses import replace
 
-        from ..simulation import check_seed
+        from ..record import check_seed
 
         check_seed(seed)
         check_seed(seed + len(self.conditions))
@@ -191,7 +191,7 @@ def flatten(table: Any, where: str, prefix: str = "") -> dict[str, Any]:
 
 
 def _condition_config(base: dict[str, Any], overrides: dict[str, Any], where: str) -> Config:
-    from ..simulation import static_setup
+    from ..record import static_setup
 
     merged = {**base, **overrides}
     if merged.get("hv.kind", "lfg") == "replay":
