@@ -78,7 +78,7 @@ def test_reach_time_agrees_with_the_saturated_step(s, v, a, target):
         return
     s_t, _ = saturated_step(s, v, a, t, 0.0, 10.0)
     assert s_t == pytest.approx(target, abs=1e-7) or (t == 0.0 and s >= target)
-    if t > 1e-6:
+    if 1e-6 < t < 1e6:
         s_before, _ = saturated_step(s, v, a, t - 1e-6, 0.0, 10.0)
         assert s_before < target
 
@@ -94,17 +94,23 @@ def test_intersection_verdicts_by_hand():
     # far away, slow: braking stands before the path, whatever is proposed
     assert sh.shield_step(-20.0, 4.0, 1.0, 0.1, -20.0, 4.0, C) == (1.0, sh.ADMITTED)
     # the AV can just stop: v^2 / 4 = 9 m from -12.76 m ends at -3.76 m; one more step of
-    # full throttle loses that, and going is not certified: brake
-    a, verdict = sh.shield_step(-12.76, 6.0, 1.0, 0.1, -20.0, 4.0, C)
+    # full throttle (to -12.155 m, 6.1 m/s) loses that. Going clears 3.75 m after
+    # 0.1 + (-6.1 + sqrt(6.1^2 + 2 * 15.905)) = 2.31 s: before the human from -20 m
+    # (2.964 s), so full throttle is admitted; from -15 m the human arrives after
+    # -4 + sqrt(16 + 2 * 11.25) = 2.20 s, so the shield brakes
+    assert sh.shield_step(-12.76, 6.0, 1.0, 0.1, -20.0, 4.0, C) == (1.0, sh.ADMITTED)
+    a, verdict = sh.shield_step(-12.76, 6.0, 1.0, 0.1, -15.0, 4.0, C)
     assert (a, verdict) == (-2.0, sh.BRAKE)
     # far ahead of the human: the AV clears before any human can get there
     a, verdict = sh.shield_step(-5.0, 8.0, 1.0, 0.1, -30.0, 2.0, C)
     assert (a, verdict) == (1.0, sh.ADMITTED)
     assert sh.go_certified(-5.0, 8.0, 1.0, 0.1, -30.0, 2.0, C, *sh.human_window(-30.0, 2.0, C))
-    # the human is already inside its interval: only standing before the path is safe
+    # the human is already inside its interval: only standing before the path is safe; from
+    # -8 m at 4 m/s braking stands at -4 m, after a step of full throttle at -3.39 m
     t_in, _, _ = sh.human_window(-1.0, 0.0, C)
     assert t_in == 0.0
-    assert sh.shield_step(-8.0, 3.0, 1.0, 0.1, -1.0, 0.0, C)[1] == sh.BRAKE
+    assert sh.shield_step(-8.0, 4.0, 1.0, 0.1, -1.0, 0.0, C) == (-2.0, sh.BRAKE)
+    assert sh.shield_step(-8.0, 4.0, -1.0, 0.1, -1.0, 0.0, C) == (-1.0, sh.ADMITTED)
     # the human is past its interval: anything goes
     assert sh.human_window(4.0, 0.0, C)[2]
     assert sh.shield_step(-4.0, 8.0, 1.0, 0.1, 4.0, 0.0, C) == (1.0, sh.ADMITTED)
@@ -142,25 +148,27 @@ def test_merge_rules_by_hand():
 # -- brute force ---------------------------------------------------------------------------
 
 
-def human_sequences(segments: int = 5, hold_s: float = 0.6,
-                    levels: tuple[float, ...] = (-2.0, 0.0, 1.0)):
-    """Piecewise-constant human accelerations: ``segments`` holds of ``hold_s`` at each level,
-    then each level for ever."""
-    for seq in itertools.product(levels, repeat=segments):
-        for tail in levels:
-            yield seq, tail
+def human_accelerations(segments: int = 5, levels: tuple[float, ...] = (-2.0, 0.0, 1.0)
+                        ) -> np.ndarray:
+    """Piecewise-constant human accelerations: every sequence of ``segments`` holds at each
+    level, then each level for ever: ``(len(levels) ** (segments + 1), segments + 1)``."""
+    return np.array(list(itertools.product(levels, repeat=segments + 1)), dtype=float)
 
 
-def human_positions(s0, v0, seq, tail, hold_s, times, v_max=10.0):
-    s, v = np.empty(times.size), np.empty(times.size)
-    for i, t in enumerate(times):
-        k = min(int(t // hold_s), len(seq))
-        ss, vv = s0, v0
-        for j in range(k):
-            ss, vv = saturated_step(ss, vv, seq[j], hold_s, 0.0, v_max)
-        a = seq[k] if k < len(seq) else tail
-        s[i], v[i] = saturated_step(ss, vv, a, t - k * hold_s, 0.0, v_max)
-    return s
+def human_positions(s0, v0, accels, hold_s, times):
+    """Positions ``(n_sequences, n_times)`` of humans holding each row of ``accels`` for
+    ``hold_s`` (the last for ever), stepped exactly (constant acceleration between samples)."""
+    from persuasive.reference import saturated_step as step
+
+    n = accels.shape[0]
+    s, v = np.full(n, float(s0)), np.full(n, float(v0))
+    out = np.empty((n, times.size))
+    out[:, 0] = s
+    for i in range(1, times.size):
+        k = min(int(times[i - 1] / hold_s + 1e-9), accels.shape[1] - 1)
+        s, v = step(s, v, accels[:, k], times[i] - times[i - 1], 0.0, 10.0)
+        out[:, i] = s
+    return out
 
 
 def av_positions(s0, v0, a1, dt, a2, times):
@@ -172,18 +180,22 @@ def av_positions(s0, v0, a1, dt, a2, times):
     return out
 
 
-def brute_force_collides(scenario, x_R, a1, a2, x_H, horizon_s=8.0, step_s=0.01):
-    """Whether some human sequence of :func:`human_sequences` makes an AV-caused overlap
-    (footprints, rear-ends by the human excluded) with the AV trajectory "a1 for 0.1 s,
-    then a2", checked every ``step_s``."""
-    from persuasive.safety.measures import rear_end_mask
+_HUMANS = human_accelerations()
+
+
+def brute_force_collides(scenario, x_R, a1, a2, x_H, horizon_s=8.0, step_s=0.02):
+    """Whether some human of :func:`human_accelerations` (holds of 0.6 s) makes an AV-caused
+    overlap (footprints, rear-ends by the human excluded) with the AV trajectory "a1 for
+    0.1 s, then a2", checked every ``step_s``."""
+    from persuasive.safety.measures import caused_by_av, rear_end_mask
 
     times = np.arange(0.0, horizon_s, step_s)
-    s_R = av_positions(*x_R, a1, 0.1, a2, times)
-    for seq, tail in human_sequences():
-        s_H = human_positions(*x_H, seq, tail, 0.6, times)
-        hit = scenario.collides(s_R, s_H) & ~rear_end_mask(scenario, s_R, s_H)
-        if hit.any():
+    s_R = np.broadcast_to(av_positions(*x_R, a1, 0.1, a2, times), (_HUMANS.shape[0],
+                                                                     times.size))
+    s_H = human_positions(*x_H, _HUMANS, 0.6, times)
+    hit = scenario.collides(s_R, s_H)
+    for row in np.flatnonzero(hit.any(axis=1)):
+        if caused_by_av(hit[row], rear_end_mask(scenario, s_R[row], s_H[row])).any():
             return True
     return False
 
@@ -261,12 +273,11 @@ def run_with_human(config: Config, accels: np.ndarray, seed: int = 1):
 
 
 def av_caused_overlaps(scenario, states) -> int:
-    from persuasive.safety.measures import rear_end_mask
+    from persuasive.safety.measures import caused_by_av, rear_end_mask
 
     after = states[1:]
-    hit = scenario.collides(after[:, 0], after[:, 2]) & ~rear_end_mask(scenario, after[:, 0],
-                                                                       after[:, 2])
-    return int(hit.sum())
+    return int(caused_by_av(scenario.collides(after[:, 0], after[:, 2]),
+                            rear_end_mask(scenario, after[:, 0], after[:, 2])).sum())
 
 
 human_accels = st.lists(st.sampled_from([-2.0, -1.0, 0.0, 0.5, 1.0]) | st.floats(-2.0, 1.0),

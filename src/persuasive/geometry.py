@@ -181,8 +181,9 @@ class Path:
     def xy(self, s: Any) -> tuple[np.ndarray, np.ndarray]:
         """Positions ``(x, y)`` [m] at path positions ``s`` (any shape)."""
         s = np.asarray(s, dtype=np.float64)
-        x, y = np.empty_like(s), np.empty_like(s)
-        path_points(self._G, np.ascontiguousarray(s), x, y)
+        # C-contiguous arrays: the kernel writes through ravel(), which copies anything else
+        x, y = np.empty(s.shape), np.empty(s.shape)
+        path_points(self._G, np.ascontiguousarray(s).reshape(s.shape), x, y)
         return x, y
 
     def direction(self, s: Any) -> tuple[np.ndarray, np.ndarray]:

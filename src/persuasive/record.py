@@ -363,7 +363,8 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
         times[f"{who}_rms_accel_mps2"] = _rms(accel)
         times[f"{who}_rms_jerk_mps3"] = _rms(np.diff(accel) / dt)
     overlap = scenario.collides(after[:, 0], after[:, 2])
-    rear = measures.rear_end_mask(scenario, after[:, 0], after[:, 2])
+    caused = measures.caused_by_av(overlap, measures.rear_end_mask(scenario, after[:, 0],
+                                                                   after[:, 2]))
     occ_av, occ_hv = scenario.av.occupancy, scenario.hv.occupancy
     verdicts = log.get("shield_verdict")
     accel = log["av_accel_mps2"]
@@ -378,8 +379,8 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
         hv_role_changes=changes["hv"],
         av_role_changes=changes["av"],
         **times,
-        collision_caused_by_av=bool(np.any(overlap & ~rear)),
-        rear_end_by_human=bool(np.any(overlap & rear)),
+        collision_caused_by_av=bool(np.any(caused)),
+        rear_end_by_human=bool(np.any(overlap & ~caused)),
         min_gap_m=float(measures.min_gap(scenario, states[:, 0], states[:, 2]).min()),
         pet_s=float(measures.pet(states[:, 0], states[:, 2], occ_av, occ_hv, dt)),
         min_ttc_s=float(measures.min_ttc(states[:, 0], states[:, 1], states[:, 2], states[:, 3],

@@ -46,6 +46,10 @@ def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, as_jso
     click.echo(f"{av} AV decision ({scenario}): median "
                f"{result['mpc_decision_ms_median']:.3f} ms, "
                f"p99 {result['mpc_decision_ms_p99']:.3f} ms")
+    click.echo(f"the same decisions with the worst-case shield: median "
+               f"{result['shielded_decision_ms_median']:.3f} ms, p99 "
+               f"{result['shielded_decision_ms_p99']:.3f} ms; the shield alone: median "
+               f"{result['shield_us_median']:.2f} us, p99 {result['shield_us_p99']:.2f} us")
     click.echo(f"closed-loop run (61 steps): median {result['mpc_run_ms_median']:.2f} ms")
     work = ", ".join(f"{k} {v:.1f}" for k, v in result["work_per_decision"].items())
     click.echo(f"work per decision: {work}")

@@ -76,6 +76,8 @@ class Conflict:
     #: where the other's footprint can touch the ego's path [m] (a merge: its side zone)
     other_occupancy: tuple[float, float] = (-math.inf, math.inf)
     other: Limits | None = None  #: its limits (default: the configuration's human vehicle)
+    #: extra gap a follower keeps [m] (e.g. for a simulator's coarser integration)
+    gap_margin_m: float = 0.0
     extra: dict = field(default_factory=dict, compare=False)  #: the adapter's own data
 
 
@@ -100,7 +102,7 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
             row[sh.C_R_LO], row[sh.C_R_HI] = c.ego_occupancy
             row[sh.C_H_LO], row[sh.C_H_HI] = c.other_occupancy
         row[sh.C_SHARED] = 0.0 if c.kind == CROSSING else 1.0
-        row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m)
+        row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m) + c.gap_margin_m
         row[sh.C_KIND], row[sh.C_RHO] = kind, config.av.shield_response_s
         row[sh.C_R_UMIN], row[sh.C_R_UMAX] = ego.u_min_mps2, ego.u_max_mps2
         row[sh.C_R_VMIN], row[sh.C_R_VMAX] = ego.v_min_mps, ego.v_max_mps
@@ -167,11 +169,11 @@ class ExternalPlanner:
                 continue
             if not (c.other_s_m < clear and c.ego_s_m < clear):
                 continue
-            o = c.other if c.other is not None else human
             live.add(c.key)
+            # the planner's model of the human has the configuration's limits
             plan = self.planner_for(c.key).plan(
-                av=(c.ego_s_m, v), hv=(c.other_s_m, min(max(c.other_v_mps, o.v_min_mps),
-                                                        o.v_max_mps)))
+                av=(c.ego_s_m, v), hv=(c.other_s_m, min(max(c.other_v_mps, human.v_min_mps),
+                                                        human.v_max_mps)))
             accels.append(plan.accel_mps2)
         for key in list(self._planners):
             if key not in live:

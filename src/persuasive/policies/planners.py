@@ -17,8 +17,9 @@ feasible, so the planner does not persuade itself into a corner the shield then 
 of. The MPC planners also track their confidence in the human model
 (``persuasive.safety.confidence``); below ``mpc.confidence_threshold`` they stop trying to
 persuade: only candidates that stand before the conflict at their end (yield smoothly) or
-that the shield certifies to cross whatever the human does remain (when none does, the
-shield-admitted ones).
+that the worst-case shield certifies to cross whatever the human does remain (when none does,
+the shield-admitted ones). With the ``responsive`` shield, which trusts the human to brake in
+time, this is what protects the AV from a human the model does not explain.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from ..mpc import (D_BELIEF_L, D_EXPECTED, D_MAX_SAFE, D_MIN_SAFE, D_P_LL, D_PLA
                    decide, decide_cv)
 from ..roles import FOLLOWER, LEADER, bayes_update
 from ..safety.confidence import confidence_update, plausible_of, role_prediction
-from ..safety.shield import (N_CONFLICT, admissible, conflict_vector, go_certified,
+from ..safety.shield import (C_KIND, N_CONFLICT, admissible, conflict_vector, go_certified,
                              human_window, yields_before)
 
 #: Slots of the MPC's state: belief q = (P(HV = L), P(HV = F)), the stored prediction of the
@@ -75,26 +76,31 @@ def shield_allowed(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib,
                    allowed: np.ndarray) -> int:
     """Which candidates may count as feasible, into ``allowed`` (docs/method.md §12.3); returns
     how many. Without the shield (or with ``mpc.shield_aware`` off) all of them; otherwise those
-    whose first acceleration the shield admits; ``robust``: only those that stand before the
-    conflict at their end or that the shield certifies to cross now (if none, as before)."""
+    whose first acceleration the shield admits; ``robust`` (the model does not explain the
+    human): only those that stand before the conflict at their end or that the worst-case
+    shield certifies to cross now, whatever the shield's own kind (if none, as before)."""
     n_traj = allowed.shape[0]
     if P_av[slot.SHIELD] == slot.SHIELD_OFF or P_av[slot.SHIELD_AWARE] == 0.0:
         allowed[:] = True
         return n_traj
     C = np.empty(N_CONFLICT)
     conflict_vector(P_av, P_hv, C)
-    t_in, t_out, past = human_window(s_H, v_H, C)
     dt = P_av[slot.SAMPLE_DT]
     n = lib_r.S.shape[0]
     count = 0
-    if robust:
+    if robust:  # a human the model does not explain is planned for as the worst case
+        kind = C[C_KIND]
+        C[C_KIND] = slot.SHIELD_WORST_CASE
+        t_in, t_out, past = human_window(s_H, v_H, C)
         for c in range(n_traj):
             a = lib_r.A[0, c]
             allowed[c] = (yields_before(lib_r.S[n - 1, c], lib_r.V[n - 1, c], C)
                           or go_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in, t_out, past))
             count += allowed[c]
+        C[C_KIND] = kind
         if count > 0:
             return count
+    t_in, t_out, past = human_window(s_H, v_H, C)
     for c in range(n_traj):
         allowed[c] = admissible(s_R, v_R, lib_r.A[0, c], dt, s_H, v_H, C, t_in, t_out, past)
         count += allowed[c]

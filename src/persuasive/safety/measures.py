@@ -15,9 +15,9 @@ point, after which the lane is shared).
   two were never on a collision course.
 - **minimum footprint gap** [m]: the smallest distance between the two oriented rectangles
   over the run (0 when they overlap): physical, in every scenario.
-- **collisions by fault**: an overlap is a *rear-end by the human* when the lane is shared, the
-  AV is past the merge point and ahead of the human; every other overlap is *caused by the
-  AV* (the shield's target is none of those).
+- **collisions by fault**: a collision (a run of overlapping states) is a *rear-end by the
+  human* when it starts with the lane shared, the AV past the merge point and ahead of the
+  human; every other collision is *caused by the AV* (the shield's target is none of those).
 """
 
 from __future__ import annotations
@@ -178,6 +178,19 @@ def min_gap(scenario, s_av: np.ndarray, s_hv: np.ndarray) -> np.ndarray:
     return out
 
 
+def caused_by_av(overlap: np.ndarray, rear: np.ndarray) -> np.ndarray:
+    """Per state: the overlap there belongs to a collision the AV caused. A collision is a run of
+    consecutive overlapping states, and its cause is its first state: a rear-end by the human
+    stays one while the vehicles go on overlapping (the simulation has no contact forces: a
+    human that drives into the AV from behind passes through it, and its later overlaps ahead
+    of the AV are the same collision)."""
+    overlap, rear = np.asarray(overlap, bool), np.asarray(rear, bool)
+    start = overlap & ~np.r_[False, overlap[:-1]]
+    cause = np.cumsum(start)  # the collision each state belongs to (0: none yet)
+    first_rear = np.r_[False, rear[start]]  # per collision number: did it start as a rear-end
+    return overlap & ~first_rear[cause]
+
+
 def rear_end_mask(scenario, s_av: np.ndarray, s_hv: np.ndarray) -> np.ndarray:
     """Per state: an overlap there would be a rear-end by the human (the lane is shared, the AV
     is past the merge point and ahead of the human)."""
@@ -186,4 +199,4 @@ def rear_end_mask(scenario, s_av: np.ndarray, s_hv: np.ndarray) -> np.ndarray:
     return (np.asarray(s_av) >= scenario.av.occupancy[1]) & (np.asarray(s_av) > np.asarray(s_hv))
 
 
-__all__ = ["footprint_gaps", "min_gap", "min_ttc", "pet", "rear_end_mask"]
+__all__ = ["caused_by_av", "footprint_gaps", "min_gap", "min_ttc", "pet", "rear_end_mask"]

@@ -48,9 +48,9 @@ argument holds with ``a = F``. Certification covers the step itself (the windows
 continuous time from now), so no overlap happens within it either. By induction, from an
 initial state in ``S`` no AV-caused overlap ever happens. The closed loop's initial states
 let each vehicle stop before its conflict zone, which contains its occupancy interval, so
-they are in ``S``; the shield still answers (``UNCERTIFIED``: ``GO`` inside its crossing
-interval, else ``BRAKE``) from states outside it, e.g. with measurement noise on, where the
-guarantee does not hold.
+they are in ``S``. From states outside it the shield still answers (``UNCERTIFIED``: the
+fallback whose possible overlap starts latest, or is shortest), e.g. with measurement noise on, or when a vehicle appears out of nowhere in an outside simulator, where the guarantee does not
+hold.
 
 **Conservative, never optimistic.** Every time compared carries a margin of
 :data:`TIME_MARGIN_S` against the AV and every interval is widened by rounding margins when it
@@ -197,6 +197,14 @@ def human_window(s_H: float, v_H: float, C: np.ndarray) -> tuple[float, float, b
 
 
 @njit(cache=True, _nrt=False, inline="always")
+def _held(a: float, v: float, v_min: float, v_max: float) -> float:
+    """The acceleration a vehicle at speed ``v`` commanded ``a`` actually has from now on."""
+    if (a > 0.0 and v >= v_max) or (a < 0.0 and v <= v_min):
+        return 0.0
+    return a
+
+
+@njit(cache=True, _nrt=False, inline="always")
 def _next_after(t: float, b0: float, b1: float, b2: float, b3: float) -> float:
     """The smallest of the breakpoints ``b*`` after ``t`` (``inf`` if none)."""
     out = _INF
@@ -237,12 +245,9 @@ def _gap_holds(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: flo
         if not sh - sr > L:
             return False
         t_next = _next_after(t, b0, d1, b2, b3)
-        # constant accelerations until t_next: read them off a point inside the piece
-        tm = t + 1e-3 if t_next == _INF else 0.5 * (t + t_next)
-        _, vrm = _profile_state(s_R, v_R, a1, d1, a2, tm, rv_min, rv_max)
-        _, vhm = saturated_step(s_H, v_H, hu, tm, hv_min, hv_max)
-        ar = (vrm - vr) / (tm - t)
-        ah = (vhm - vh) / (tm - t)
+        # constant accelerations until t_next (0 once a speed limit is reached)
+        ar = _held(a1 if t < d1 else a2, vr, rv_min, rv_max)
+        ah = _held(hu, vh, hv_min, hv_max)
         if ah != ar:  # the gap's stationary point inside the piece
             t_star = t + (vr - vh) / (ah - ar)
             if t < t_star < t_next:
@@ -289,6 +294,30 @@ def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: floa
     return False
 
 
+@njit(cache=True, _nrt=False)
+def threat(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float, v_H: float,
+           C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> tuple[float, float]:
+    """How soon and for how long some human of the model could overlap the AV along "``a1``
+    for ``d1``, then ``a2``": ``(start, length)`` [s] of the first window in which both may be
+    inside their intervals (``(inf, 0)`` when certified; ``(0, inf)`` when the AV could not
+    follow a leader). Only used to pick the less bad fallback outside the invariant set."""
+    if certified(s_R, v_R, a1, d1, a2, s_H, v_H, C, t_in_H, t_out_H, past):
+        return _INF, 0.0
+    if C[C_SHARED] != 0.0 and (s_R >= C[C_R_HI] or past):
+        return 0.0, _INF
+    rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
+    t_in_R = profile_reach(s_R, v_R, a1, d1, a2, C[C_R_LO], rv_min, rv_max)
+    t_out_R = profile_reach(s_R, v_R, a1, d1, a2, C[C_R_HI], rv_min, rv_max)
+    start = max(t_in_R, t_in_H)
+    return start, max(min(t_out_R, t_out_H) - start, 0.0)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _worse(start_a: float, len_a: float, start_b: float, len_b: float) -> bool:
+    """Threat ``a`` is worse than ``b``: it starts sooner, or as soon and lasts longer."""
+    return start_a < start_b or (start_a == start_b and len_a > len_b)
+
+
 # -- the filter ---------------------------------------------------------------------------------
 
 
@@ -322,10 +351,11 @@ def _fallback(s_R: float, v_R: float, dt: float, s_H: float, v_H: float, C: np.n
         return u_min, BRAKE
     if certified(s_R, v_R, u_max, dt, u_max, s_H, v_H, C, t_in_H, t_out_H, past):
         return u_max, GO
-    # no certified fallback (a state outside the invariant set): leave a crossing the AV is
-    # already in, otherwise brake
-    inside = C[C_SHARED] == 0.0 and C[C_R_LO] <= s_R <= C[C_R_HI]
-    return (u_max if inside else u_min), UNCERTIFIED
+    # no certified fallback (a state outside the invariant set): the one whose possible
+    # overlap starts latest, or is shortest (ties: brake)
+    sb, lb = threat(s_R, v_R, u_min, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past)
+    sg, lg = threat(s_R, v_R, u_max, dt, u_max, s_H, v_H, C, t_in_H, t_out_H, past)
+    return (u_max if _worse(sb, lb, sg, lg) else u_min), UNCERTIFIED
 
 
 @njit(cache=True, _nrt=False)
@@ -339,7 +369,7 @@ def shield_step(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: fl
     return _fallback(s_R, v_R, dt, s_H, v_H, C, t_in_H, t_out_H, past)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True)
 def shield_step_many(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: np.ndarray,
                      v_H: np.ndarray, C: np.ndarray) -> tuple[float, int]:
     """The shield against several other vehicles at once (one conflict each: ``s_R[j]`` the
@@ -366,11 +396,17 @@ def shield_step_many(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: np.n
                 break
         if ok:
             return first, verdict
-    inside = False
+    # no fallback certified against all: the one whose first possible overlap, over all the
+    # vehicles, starts latest, or whose overlaps are shortest in all (ties: brake)
+    sb, lb, sg, lg = _INF, 0.0, _INF, 0.0
     for j in range(n):
-        if C[j, C_SHARED] == 0.0 and C[j, C_R_LO] <= s_R[j] <= C[j, C_R_HI]:
-            inside = True
-    return (u_max if inside else u_min), UNCERTIFIED
+        s, length = threat(s_R[j], v_R, u_min, dt, u_min, s_H[j], v_H[j], C[j], t_in[j],
+                           t_out[j], past[j])
+        sb, lb = min(sb, s), lb + length
+        s, length = threat(s_R[j], v_R, u_max, dt, u_max, s_H[j], v_H[j], C[j], t_in[j],
+                           t_out[j], past[j])
+        sg, lg = min(sg, s), lg + length
+    return (u_max if _worse(sb, lb, sg, lg) else u_min), UNCERTIFIED
 
 
 __all__ = ["ADMITTED", "BRAKE", "GO", "N_CONFLICT", "TIME_MARGIN_S", "UNCERTIFIED", "VERDICTS",
