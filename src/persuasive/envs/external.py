@@ -227,7 +227,9 @@ def shield_many(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: np.ndarra
 
     ``shield_step_many`` itself does not compile: it allocates its work arrays inside a
     kernel built without Numba's runtime (``_nrt=False``), so this function hands
-    :func:`_shield_many_kernel` the arrays instead."""
+    :func:`_shield_many_kernel` the arrays instead. The ``GO`` fallback in a shared lane is
+    checked by :func:`_go_shared` (the exact answer where ``certified``'s gap test can be
+    fooled by rounding)."""
     n = s_R.shape[0]
     return _shield_many_kernel(float(v_R), float(a), float(dt), s_R, s_H, v_H, C, np.empty(n),
                                np.empty(n), np.empty(n, np.bool_))
@@ -247,8 +249,13 @@ def _shield_many_kernel(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: n
                                (u_min, u_min, sh.BRAKE), (u_max, u_max, sh.GO)):
         ok = True
         for j in range(n):
-            if not sh.certified(s_R[j], v_R, first, dt, fb, s_H[j], v_H[j], C[j], t_in[j],
-                                t_out[j], past[j]):
+            if fb == u_max and C[j, sh.C_SHARED] != 0.0 and \
+                    C[j, sh.C_H_VMIN] < C[j, sh.C_R_VMAX]:
+                good = _go_shared(s_R[j], v_R, first, dt, fb, s_H[j], C[j], t_in[j], past[j])
+            else:
+                good = sh.certified(s_R[j], v_R, first, dt, fb, s_H[j], v_H[j], C[j],
+                                    t_in[j], t_out[j], past[j])
+            if not good:
                 ok = False
                 break
         if ok:
@@ -258,6 +265,27 @@ def _shield_many_kernel(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: n
         if C[j, sh.C_SHARED] == 0.0 and C[j, sh.C_R_LO] <= s_R[j] <= C[j, sh.C_R_HI]:
             inside = True
     return (u_max if inside else u_min), sh.UNCERTIFIED
+
+
+@njit(cache=True, _nrt=False)
+def _go_shared(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float,
+               C: np.ndarray, t_in_H: float, past: bool) -> bool:
+    """``certified`` for "``a1`` for ``d1``, then ``GO``" in a shared lane, without its
+    car-following branch: an AV that accelerates for ever behind a vehicle that may brake to a
+    speed below the AV's ``v_max`` always reaches it, so following is never certified with
+    ``GO``. (``certified``'s gap test can answer otherwise: in its last piece it compares the
+    AV's acceleration, read off two nearby states, with exactly 0, and an AV a rounding error
+    short of ``v_max`` at the last breakpoint passes.)"""
+    m = sh.TIME_MARGIN_S
+    r_lo, r_hi = C[sh.C_R_LO], C[sh.C_R_HI]
+    rv_min, rv_max = C[sh.C_R_VMIN], C[sh.C_R_VMAX]
+    if s_R >= r_hi:
+        return s_H < s_R  # a human behind: driving into the AV is its rear-end
+    t_in_R = sh.profile_reach(s_R, v_R, a1, d1, a2, r_lo, rv_min, rv_max)
+    if t_in_R == math.inf:
+        return True
+    t_0 = sh.profile_reach(s_R, v_R, a1, d1, a2, r_hi, rv_min, rv_max)
+    return (not past) and (t_in_H == math.inf or t_0 + m < t_in_H - m)
 
 
 # -- projecting a route onto the ego's: conflicts from centre lines ---------------------------
