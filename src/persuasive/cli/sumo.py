@@ -126,6 +126,9 @@ def _video(report, outputs, folder: Path, path: str) -> None:
 
     first = next(o for o in outputs if o.result.driver == report.drivers[0])
     frames = S.frames_of([first])["steps"]
+    ego_t = frames.loc[frames["vehicle"] == "ego", "t_s"]
+    if len(ego_t):  # from a second before the ego appears to a second after it leaves
+        frames = frames[(frames["t_s"] >= ego_t.min() - 1.0) & (frames["t_s"] <= ego_t.max() + 1.0)]
     lanes = S.lane_shapes(folder / "net.net.xml")
     ego = S.planner_config(scenario=report.scenario).vehicle_of("av")
     sizes = {"ego": (ego.length_m, ego.width_m),
