@@ -31,11 +31,13 @@ def _register() -> None:
     from .plots import animate, plot, plot_compare
     from .reproduce import reproduce
     from .simulate import simulate
+    from .sumo import sumo
     from .sweep import plot_sweep, sweep
 
     for command in (simulate, reproduce, compare, sweep, bench, plot, animate, drive):
         cli.add_command(command)
     cli.add_command(highway)
+    cli.add_command(sumo)
     plot.add_command(plot_sweep)
     plot.add_command(plot_compare)
 

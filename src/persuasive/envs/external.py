@@ -26,6 +26,12 @@ for every simulator (:class:`ExternalPlanner`):
 Coordinates of a conflict: the ego's ``s`` along its path and the other's along its own, both
 zero at the conflict point; for a shared lane (a merge, or a leader), past zero both measure
 the same lane, so their difference is the gap between the centres.
+
+For simulators that give each vehicle's route as a centre line (SUMO's lane shapes),
+:func:`route_conflict` builds the conflict of two routes once (kind, conflict point,
+conservative occupancy intervals; :class:`Polyline`, :class:`RouteConflict`), and
+:meth:`RouteConflict.conflict` turns the two vehicles' arc lengths into a :class:`Conflict`
+each step.
 """
 
 from __future__ import annotations
@@ -127,12 +133,17 @@ class ExternalPlanner:
 
     ``config``: the planner's configuration (its AV kind, shield and the vehicles' limits);
     ``seed``: the base seed of the per-vehicle planners (vehicle ``i`` met gets ``seed *
-    1000 + i``, as the lfg kind draws).
+    1000 + i``, as the lfg kind draws). ``plan_horizon_s`` (optional): a vehicle gets a game
+    only while it could reach its occupancy interval within this time at full throttle (the
+    planner's prediction horizon, ``library.n_samples * library.sample_dt_s``, is the natural
+    value: a vehicle further away cannot be told from no vehicle by the game); the shield
+    still checks every vehicle. ``None`` (the default): every conflicting vehicle gets one.
     """
 
-    def __init__(self, config: Config, seed: int = 0):
+    def __init__(self, config: Config, seed: int = 0, plan_horizon_s: float | None = None):
         self.config = config
         self.seed = seed
+        self.plan_horizon_s = plan_horizon_s
         self.ego = Limits.of(config, "av")
         self._planners: dict[Hashable, Any] = {}
         self._made = 0
@@ -169,6 +180,12 @@ class ExternalPlanner:
                 continue
             if not (c.other_s_m < clear and c.ego_s_m < clear):
                 continue
+            o = c.other if c.other is not None else human
+            if self.plan_horizon_s is not None and sh.reach_time(
+                    c.other_s_m, min(max(c.other_v_mps, o.v_min_mps), o.v_max_mps),
+                    o.u_max_mps2, c.other_occupancy[0], o.v_min_mps,
+                    o.v_max_mps) > self.plan_horizon_s:
+                continue
             live.add(c.key)
             # the planner's model of the human has the configuration's limits
             plan = self.planner_for(c.key).plan(
@@ -201,5 +218,129 @@ def idm_follow(config: Config, v: float, leader: tuple[float, float]) -> float:
     return p.max_accel_mps2 * (1.0 - (v / v0) ** p.delta - (s_star / max(gap, 0.1)) ** 2)
 
 
+# -- projecting a route onto the ego's: conflicts from centre lines ---------------------------
+
+
+@dataclass(frozen=True)
+class Polyline:
+    """A route's centre line: vertices ``xy`` (n, 2) [m] and their arc length ``arc`` (n,)
+    [m] from the first vertex."""
+
+    xy: np.ndarray
+    arc: np.ndarray
+
+    @classmethod
+    def of(cls, points) -> Polyline:
+        """From vertices; repeated consecutive vertices are dropped."""
+        pts = np.asarray(points, float).reshape(-1, 2)
+        keep = np.ones(len(pts), bool)
+        keep[1:] = np.any(np.diff(pts, axis=0) != 0.0, axis=1)
+        pts = pts[keep]
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+        return cls(pts, arc)
+
+    @property
+    def length_m(self) -> float:
+        return float(self.arc[-1])
+
+    def at(self, s) -> np.ndarray:
+        """Points (…, 2) at arc lengths ``s`` [m] (clamped to the line)."""
+        s = np.asarray(s, float)
+        return np.stack([np.interp(s, self.arc, self.xy[:, 0]),
+                         np.interp(s, self.arc, self.xy[:, 1])], axis=-1)
+
+    def samples(self, lo: float, hi: float, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Arc lengths in ``[lo, hi]`` (clamped to the line) at most ``step_m`` apart, ends
+        included, and their points."""
+        lo, hi = max(lo, 0.0), min(hi, self.length_m)
+        n = max(2, int(math.ceil((hi - lo) / step_m)) + 1)
+        s = np.linspace(lo, hi, n)
+        return s, self.at(s)
+
+
+@dataclass(frozen=True)
+class RouteConflict:
+    """The conflict of another route with the ego's, in each route's arc length: the kind,
+    the conflict point on each route (``ego_at_m``, ``other_at_m``) and the occupancy
+    intervals relative to it (what :class:`Conflict` takes)."""
+
+    kind: str
+    ego_at_m: float
+    other_at_m: float
+    ego_occupancy: tuple[float, float]
+    other_occupancy: tuple[float, float]
+
+    def conflict(self, key: Hashable, ego_arc_m: float, other_arc_m: float, other_v_mps: float,
+                 other: Limits | None = None, extra: dict | None = None) -> Conflict:
+        """The :class:`Conflict` of vehicles whose centres are at these arc lengths of their
+        routes. A merge the ego has passed (it is in the shared lane) with the other ahead
+        is a :data:`FOLLOW` conflict."""
+        s_R, s_H = ego_arc_m - self.ego_at_m, other_arc_m - self.other_at_m
+        kind = self.kind
+        if kind == MERGE and s_R >= self.ego_occupancy[1] and s_H > s_R:
+            kind = FOLLOW
+        return Conflict(key, kind, float(s_R), float(s_H), float(other_v_mps),
+                        self.ego_occupancy, self.other_occupancy, other,
+                        extra if extra is not None else {})
+
+
+def route_conflict(ego: Polyline, other: Polyline, ego_size: tuple[float, float],
+                   other_size: tuple[float, float], lateral_margin_m: float = 0.5,
+                   long_margin_m: float = 0.05, merge_at: tuple[float, float] | None = None,
+                   step_m: float = 0.1) -> RouteConflict | None:
+    """The conflict of a vehicle on ``other`` with the ego on ``ego`` (``None``: the routes
+    never come close enough for the footprints to touch).
+
+    ``ego_size``, ``other_size``: ``(length, width)`` [m]. A footprint whose centre is at arc
+    length ``s`` lies within ``w / 2 + lateral_margin_m`` of the centre line's piece
+    ``[s - l / 2, s + l / 2]`` (the margin covers the simulator's lateral tracking and the
+    chord of a rectangle on a curve), so two footprints can touch only where two such pieces
+    come within ``W = (w_ego + w_other) / 2 + lateral_margin_m``. Both lines are sampled every
+    ``step_m``; the pairs of samples within ``W + step_m`` contain every touching pair; the
+    occupancy intervals are the hulls of their arc lengths widened by ``l / 2 + step_m / 2 +
+    long_margin_m`` (conservative: every overlap lies inside the rectangle they span).
+
+    ``merge_at``: ``(ego arc, other arc)`` of the start of a lane both routes share after
+    arriving on different lanes (a merge, :data:`MERGE`: the conflict point is that start;
+    the ego's interval ends there, the other's is its side zone, where its footprint can
+    touch the ego's anywhere before the merge point). Otherwise a :data:`CROSSING` whose
+    conflict point is the closest approach of the two centre lines.
+    """
+    (l_e, w_e), (l_o, w_o) = ego_size, other_size
+    reach = 0.5 * (w_e + w_o) + lateral_margin_m + step_m
+    widen_e = 0.5 * l_e + 0.5 * step_m + long_margin_m
+    widen_o = 0.5 * l_o + 0.5 * step_m + long_margin_m
+    if merge_at is not None:
+        a0, b0 = merge_at
+        s_e, p_e = ego.samples(0.0, a0 + 0.5 * l_e + step_m, step_m)
+        s_o, p_o = other.samples(0.0, b0 + 0.5 * l_e + reach + step_m, step_m)
+    else:
+        s_e, p_e = ego.samples(0.0, ego.length_m, step_m)
+        s_o, p_o = other.samples(0.0, other.length_m, step_m)
+    from scipy.spatial import cKDTree
+
+    near = cKDTree(p_o).query_ball_point(p_e, reach)
+    counts = np.fromiter((len(n) for n in near), np.int64, len(near))
+    if counts.sum() == 0:
+        return None
+    i = np.repeat(np.arange(len(s_e)), counts)
+    j = np.concatenate([np.asarray(n, np.int64) for n in near if n])
+    a, b = s_e[i], s_o[j]
+    if merge_at is not None:
+        a0, b0 = merge_at
+        lo_e = float(a[a <= a0].min()) if np.any(a <= a0) else a0
+        ego_occ = (lo_e - widen_e - a0, 0.0)
+        side = a <= a0 + 0.5 * l_e + 0.5 * step_m
+        other_occ = (float(b[side].min()) - widen_o - b0, float(b[side].max()) + widen_o - b0)
+        return RouteConflict(MERGE, float(a0), float(b0), ego_occ, other_occ)
+    d = np.hypot(*(p_e[i] - p_o[j]).T)
+    k = int(np.argmin(d))
+    a0, b0 = float(a[k]), float(b[k])
+    return RouteConflict(CROSSING, a0, b0,
+                         (float(a.min()) - widen_e - a0, float(a.max()) + widen_e - a0),
+                         (float(b.min()) - widen_o - b0, float(b.max()) + widen_o - b0))
+
+
+
 __all__ = ["CROSSING", "FOLLOW", "MERGE", "Conflict", "Decision", "ExternalPlanner", "Limits",
-           "conflict_arrays", "idm_follow"]
+           "Polyline", "RouteConflict", "conflict_arrays", "idm_follow", "route_conflict"]

@@ -256,8 +256,11 @@ def _gap_holds(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: flo
                 if not shs - srs > L:
                     return False
         if t_next == _INF:
-            # both speeds constant for ever once no acceleration is left
-            return not (ar == 0.0 and ah == 0.0 and vh < vr)
+            # the speeds the two keep for ever: a speed a rounding error short of its limit
+            # may leave no breakpoint of its own, so the limit is read off the acceleration
+            vr_end = rv_max if ar > 0.0 else (rv_min if ar < 0.0 else vr)
+            vh_end = hv_max if ah > 0.0 else (hv_min if ah < 0.0 else vh)
+            return not vh_end < vr_end
         t = t_next
 
 
