@@ -82,9 +82,9 @@ class Conflict:
     #: where the other's footprint can touch the ego's path [m] (a merge: its side zone)
     other_occupancy: tuple[float, float] = (-math.inf, math.inf)
     other: Limits | None = None  #: its limits (default: the configuration's human vehicle)
+    extra: dict = field(default_factory=dict, compare=False)  #: the adapter's own data
     #: extra gap a follower keeps [m] (e.g. for a simulator's coarser integration)
     gap_margin_m: float = 0.0
-    extra: dict = field(default_factory=dict, compare=False)  #: the adapter's own data
 
 
 def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
