@@ -162,6 +162,37 @@ def test_malformed_and_missing_config_files(capsys, tmp_path):
     assert code == 2 and "unknown section 'rolez'" in err and "roles" in err
 
 
+#: A TOML file with a Latin-1 byte in a comment: not UTF-8, so not TOML.
+NOT_UTF8 = b'mode = "paper"\n# caf\xe9\n'
+
+
+@pytest.mark.parametrize("command, what", [
+    (["simulate", "--config", "{toml}"], "config file"),
+    (["reproduce", "table1", "--seeds", "1", "--config", "{toml}", "--out", "{out}"],
+     "config file"),
+    (["plot", "profile", "--single", "--config", "{toml}", "--out", "{out}.png"], "config file"),
+    (["sweep", "{toml}", "--out", "{out}"], "grid file"),
+    (["drive", "--study", "{toml}", "--out", "{out}", "--port", "0"], "study file"),
+], ids=["simulate", "reproduce", "plot", "sweep", "drive"])
+def test_toml_that_is_not_utf8_is_one_line_naming_the_file(capsys, tmp_path, command, what):
+    toml = tmp_path / "x.toml"
+    toml.write_bytes(NOT_UTF8)
+    args = [a.format(toml=toml, out=tmp_path / "out") for a in command]
+    code, out, err = run(capsys, *args)
+    assert code == 2 and out == ""
+    assert err == f"error: {what} {str(toml)!r} is not UTF-8 text (byte 0xe9 at offset 20); " \
+                  "TOML files must be UTF-8\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.toml"]  # nothing written
+
+
+def test_a_results_summary_that_is_not_utf8_is_one_line(capsys, tmp_path):
+    (tmp_path / "summary.json").write_bytes(b'{"table": "caf\xe9"}')
+    code, out, err = run(capsys, "plot", "table", "--from", str(tmp_path), "--out",
+                         str(tmp_path / "t.png"))
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "has no readable summary.json (UnicodeDecodeError)" in err
+
+
 def test_failed_run_leaves_existing_output_untouched(capsys, tmp_path):
     target = tmp_path / "log.parquet"
     target.write_bytes(b"previous results")

@@ -469,6 +469,10 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
     except OSError as exc:
         raise ConfigError(f"{what} {str(path)!r} cannot be read: "
                           f"{(exc.strerror or str(exc)).lower()}") from None
+    except UnicodeDecodeError as exc:  # TOML is UTF-8 text
+        raise ConfigError(f"{what} {str(path)!r} is not UTF-8 text (byte "
+                          f"0x{exc.object[exc.start]:02x} at offset {exc.start}); TOML files "
+                          "must be UTF-8") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

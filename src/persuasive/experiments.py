@@ -562,7 +562,7 @@ def load_summary(folder: str | Path) -> dict[str, Any]:
     path = Path(folder) / "summary.json"
     try:
         return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # JSONDecodeError and UnicodeDecodeError included
         raise ConfigError(f"results folder {str(folder)!r} has no readable summary.json "
                           f"({exc.__class__.__name__})") from None
 
