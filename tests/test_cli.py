@@ -193,6 +193,26 @@ def test_a_results_summary_that_is_not_utf8_is_one_line(capsys, tmp_path):
     assert "has no readable summary.json (UnicodeDecodeError)" in err
 
 
+@pytest.mark.parametrize("args, message", [
+    (["reproduce", "table1", "--seeds", "99999999999"],
+     "--seeds = 99999999999 is out of range; allowed: integer in [1, 4294967295]"),
+    (["reproduce", "all", "--seeds", "4294967295"],
+     "--seeds = 4294967295 is out of range; allowed: 1..62500 for 16 rows (at most 1000000 "
+     "runs, summarised in memory; 'persuasive sweep' streams more to disk)"),
+    (["compare", "--seeds", "4000000000"],
+     "--seeds = 4000000000 is out of range; allowed: 1..40000 for 25 pairs (at most 1000000 "
+     "runs, summarised in memory; 'persuasive sweep' streams more to disk)"),
+    (["compare", "--seeds", "4294967296", "--av", "cv", "--hv", "idm"],
+     "--seeds = 4294967296 is out of range; allowed: integer in [1, 4294967295]"),
+], ids=["reproduce-beyond-2^32", "reproduce-too-many-runs", "compare-too-many-runs",
+        "compare-beyond-2^32"])
+def test_huge_seed_counts_are_refused_up_front(capsys, tmp_path, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)  # the default results folder would go here
+    code, out, err = run(capsys, *args, "--quiet")
+    assert (code, out, err) == (2, "", f"error: {message}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_failed_run_leaves_existing_output_untouched(capsys, tmp_path):
     target = tmp_path / "log.parquet"
     target.write_bytes(b"previous results")

@@ -289,9 +289,25 @@ def _alive(pid: int) -> bool:
 @pytest.mark.parametrize("kwargs, name", [
     ({"seeds": 0}, "seeds"), ({"workers": 0}, "workers"), ({"seeds": 2.5}, "seeds"),
     ({"chunk": 0}, "chunk"), ({"chunk": -3}, "chunk"),
+    ({"seeds": 2**32}, r"seeds = 4294967296 is out of range; allowed: integer in \[1, "),
+    ({"seeds": 500_001}, r"seeds = 500001 is out of range; allowed: 1..500000 for 2 rows"),
 ])
 def test_bad_arguments(kwargs, name):
     with pytest.raises(ConfigError, match=name):
         ex.run_tables(["table1"], **{"seeds": 2, **kwargs})
     with pytest.raises(ConfigError, match="table"):
         ex.run_tables(["table3"], seeds=2)
+
+
+def test_the_library_refuses_studies_too_large_to_summarise(tmp_path):
+    with pytest.raises(ConfigError, match=r"seeds = 62501 is out of range; allowed: 1..62500 "
+                                          r"for 16 rows \(at most 1000000 runs"):
+        ex.reproduce("all", seeds=62501, out=tmp_path / "r")
+    with pytest.raises(ConfigError, match=r"seeds = 2 is out of range; allowed: 1..1 for "):
+        ex.check_seeds(2, ex.MAX_RUNS)
+    from persuasive.studies.compare import comparison_grid
+
+    with pytest.raises(ConfigError, match=r"seeds = 500001 is out of range; allowed: "
+                                          r"1..500000 for 2 pairs"):
+        comparison_grid(Config(), ["persuasive", "cv"], ["lfg"], 500_001)
+    assert list(tmp_path.iterdir()) == []

@@ -33,8 +33,13 @@ from ._compile import warm_up
 from ._files import OutputError, atomic_folder, atomic_write
 from .config import Config, ConfigError
 from .simulation import simulate
+from .sweep.grid import SEED_MAX
 
 TABLES = ("table1", "table2")
+#: Most runs one reproduction (or comparison) may have: its runs are summarised in memory
+#: (about 2.5 kB each at the peak, some 3 GB for the most); ``persuasive sweep`` streams any
+#: number of runs to disk.
+MAX_RUNS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -144,6 +149,20 @@ class RunFailure:
                 f"{self.error}")
 
 
+def check_seeds(seeds: Any, n_rows: int, name: str = "seeds", rows: str = "rows") -> int:
+    """``seeds`` (seeds ``1..seeds`` for each of ``n_rows`` rows), or :class:`ConfigError`:
+    an integer in ``[1, 2^32 - 1]`` giving at most :data:`MAX_RUNS` runs in all. ``name``
+    and ``rows`` name the parameter and the rows in the message."""
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= SEED_MAX:
+        raise ConfigError(f"{name} = {seeds!r} is out of range; allowed: integer in "
+                          f"[1, {SEED_MAX}]")
+    if seeds * n_rows > MAX_RUNS:
+        raise ConfigError(f"{name} = {seeds} is out of range; allowed: 1..{MAX_RUNS // n_rows} "
+                          f"for {n_rows} {rows} (at most {MAX_RUNS} runs, summarised in "
+                          "memory; 'persuasive sweep' streams more to disk)")
+    return seeds
+
+
 def _run_chunk(task: tuple[str, int, str, list[int]]) -> tuple[list[dict], list[RunFailure]]:
     """The runs of one chunk; a run that raises is recorded as failed, the others go on."""
     table, row, config_toml, seeds = task
@@ -207,8 +226,7 @@ def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = N
     for t in tables:
         if t not in PUBLISHED:
             raise ConfigError(f"table = {t!r} is out of range; allowed: {' | '.join(TABLES)}")
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    check_seeds(seeds, sum(len(PUBLISHED[t]) for t in tables))
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
         raise ConfigError(f"chunk = {chunk!r} is out of range; allowed: integer >= 1")
     workers = (os.cpu_count() or 1) if workers is None else workers
@@ -433,8 +451,7 @@ def table_grid(table: str, base: Config, seeds: int):
 
     if table not in PUBLISHED:
         raise ConfigError(f"table = {table!r} is out of range; allowed: {' | '.join(TABLES)}")
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    check_seeds(seeds, len(PUBLISHED[table]))
     return Grid(base, (), 1, seeds, cases=tuple(row.overrides() for row in PUBLISHED[table]))
 
 
@@ -481,6 +498,7 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
         raise ConfigError(f"table = {table!r} is out of range; allowed: "
                           f"{' | '.join((*TABLES, 'all'))}")
     tables = TABLES if table == "all" else (table,)
+    check_seeds(seeds, sum(len(PUBLISHED[t]) for t in tables))
     base = base or Config()
     if mode is not None:
         base = base.with_overrides({"mode": mode})

@@ -42,12 +42,14 @@ def compare(av_kinds, hv_kinds, hv_role, scenario, seeds, workers, mode, config_
     with 95 % bootstrap intervals, then each AV's paired differences against persuasive.
     """
     from ..config import AV_KINDS, SIMULATED_HV_KINDS
+    from ..experiments import check_seeds
     from ..studies import compare as cmp
 
     base = build_config(config_file, sets, {"mode": mode, "hv.role": hv_role,
                                            "scenario.kind": scenario})
     avs = cmp.parse_kinds(av_kinds, AV_KINDS, "--av", AV_KINDS)
     hvs = cmp.parse_kinds(hv_kinds, SIMULATED_HV_KINDS, "--hv", cmp.DEFAULT_HV_KINDS)
+    check_seeds(seeds, len(avs) * len(hvs), "--seeds", "pairs")
     if base.simulation.streams == "legacy" and "lfg" in avs:
         click.echo("warning: simulation.streams = legacy: the human's draws depend on whether "
                    "the AV draws (the lfg AV does), so those runs are not paired", err=True)

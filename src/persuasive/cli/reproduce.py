@@ -38,8 +38,9 @@ def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, for
     from .. import experiments as ex
     from .._files import check_output_folder
 
-    base = build_config(config_file, sets, {"mode": mode, "scenario.kind": scenario})
     tables = ex.TABLES if table == "all" else (table,)
+    ex.check_seeds(seeds, sum(len(ex.PUBLISHED[t]) for t in tables), "--seeds")
+    base = build_config(config_file, sets, {"mode": mode, "scenario.kind": scenario})
     grids = {t: ex.table_grid(t, base, seeds) for t in tables}
     folders = {}
     for t in tables:

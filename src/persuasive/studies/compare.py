@@ -72,11 +72,12 @@ def parse_kinds(text: str | Sequence[str] | None, allowed: Sequence[str], name: 
 
 def comparison_grid(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str],
                     seeds: int):
-    """The sweep grid of a comparison: ``av.kind`` x ``hv.kind`` x seeds ``1..seeds``."""
+    """The sweep grid of a comparison: ``av.kind`` x ``hv.kind`` x seeds ``1..seeds``, at
+    most ``persuasive.experiments.MAX_RUNS`` runs (they are summarised in memory)."""
+    from ..experiments import check_seeds
     from ..sweep import Grid
 
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    check_seeds(seeds, max(1, len(av_kinds) * len(hv_kinds)), rows="pairs")
     data = {"seeds": seeds, "base": base.to_dict(),
             "axes": {"av": {"kind": list(av_kinds)}, "hv": {"kind": list(hv_kinds)}}}
     return Grid.from_dict(data)

@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterator
 from ..config import ConfigError
 from .grid import Grid
 from .records import _error_line, failure_record, run_pickled_chunk
-from .store import Chunk, SweepStore, iter_failures
+from .store import Chunk, SweepStore, iter_failures, n_chunks
 
 #: Chunks in flight per worker thread: one running, one queued, so no worker waits on the
 #: client between chunks.
@@ -169,7 +169,7 @@ def _threads(client: Any) -> int:
     return sum(client.nthreads().values())
 
 
-def _execute(client: Any, grid: Grid, store: SweepStore, pending: list[Chunk],
+def _execute(client: Any, grid: Grid, store: SweepStore, pending: Iterator[Chunk],
              progress: Callable[[int, int], None] | None, done: int) -> None:
     """Run ``pending`` on ``client``, writing each chunk as it finishes."""
     import pickle
@@ -265,27 +265,26 @@ def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
         raise ConfigError(f"{' and '.join(given)} exclude each other: workers sizes the local "
                           "cluster, scheduler or client name another one")
     store = SweepStore.open(out, grid, chunk, force)
-    pending = store.pending()
-    todo = sum(c.size for c in pending)
+    todo, pending = store.pending()
     done = len(grid) - todo
     if progress is not None:
         progress(done, len(grid))
     threads = 0
-    if pending:
+    if todo:
         with _quiet_logs():
             if client is not None:
                 context = contextlib.nullcontext(client)
             elif scheduler is not None:
                 context = remote_client(scheduler)
             else:
-                n = min(workers or os.cpu_count() or 1, len(pending))
+                n = min(workers or os.cpu_count() or 1, n_chunks(todo, store.chunk))
                 _warm_up(grid)
                 context = local_client(n)
             with context as active:
                 threads = _threads(active)
                 _execute(active, grid, store, pending, progress, done)
     return SweepSummary(folder=store.folder, grid_digest=grid.digest, runs=len(grid),
-                        chunks=len(store.chunks), chunk=store.chunk, skipped=done, ran=todo,
+                        chunks=store.n_chunks, chunk=store.chunk, skipped=done, ran=todo,
                         failures=tuple(iter_failures(store.folder)), workers=threads,
                         wall_time_s=time.perf_counter() - t0)
 

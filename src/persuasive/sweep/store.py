@@ -7,9 +7,13 @@ Layout of ``DIR``::
     DIR/failed/failed-<k>-<hash>.json      the runs of chunk k that raised (if any)
 
 ``<k>`` is the chunk's index (zero-padded, so that names sort in run order) and ``<hash>`` a
-hash of the grid's digest and the chunk's run range: the chunk id. ``DIR/runs`` holds only the
-parts, so ``pandas.read_parquet(DIR / "runs")`` reads the dataset; :func:`load` does the same
-in run order and tolerates parts whose columns differ.
+hash of the grid's digest and the chunk's run range: the chunk id (:func:`chunk_id`). ``DIR/runs``
+holds only the parts, so ``pandas.read_parquet(DIR / "runs")`` reads the dataset; :func:`load`
+does the same in run order and tolerates parts whose columns differ.
+
+The chunks are planned lazily: chunk ``k`` is computed from its index when it is needed, and
+the manifest holds their size and number, not a list, so a sweep of billions of runs takes no
+more memory or manifest than a small one.
 
 Every file is written through a temporary sibling, fsynced and renamed
 (:func:`persuasive._files.atomic_write`), the manifest first. A chunk is finished when its
@@ -26,7 +30,7 @@ import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, NamedTuple
 
 from .._version import __version__
 from .._files import OutputError, atomic_write, check_output_folder
@@ -57,12 +61,33 @@ def default_chunk(n_runs: int) -> int:
     return max(1, min(250, -(-n_runs // 32)))
 
 
+def n_chunks(n_runs: int, chunk: int) -> int:
+    """The number of chunks of ``chunk`` consecutive runs (the last may be short)."""
+    return -(-n_runs // chunk)
+
+
+def _id_width(count: int) -> int:
+    return max(6, len(str(count - 1)))
+
+
+def chunk_id(digest: str, k: int, lo: int, hi: int, count: int) -> str:
+    """``<k>-<hash>`` of chunk ``k`` of ``count`` (runs ``lo .. hi - 1``): its index and a hash
+    of the grid and its run range."""
+    return (f"{k:0{_id_width(count)}d}-"
+            + hashlib.sha256(f"{digest}:{lo}:{hi}".encode()).hexdigest()[:10])
+
+
 def chunk_ids(digest: str, ranges: list[tuple[int, int]]) -> list[str]:
-    """``<k>-<hash>`` of each chunk: its index and a hash of the grid and its run range."""
-    width = max(6, len(str(len(ranges) - 1)))
-    return [f"{k:0{width}d}-"
-            + hashlib.sha256(f"{digest}:{lo}:{hi}".encode()).hexdigest()[:10]
-            for k, (lo, hi) in enumerate(ranges)]
+    """:func:`chunk_id` of each chunk of ``ranges``."""
+    return [chunk_id(digest, k, lo, hi, len(ranges)) for k, (lo, hi) in enumerate(ranges)]
+
+
+class Pending(NamedTuple):
+    """What is left of a sweep: the number of runs, and their chunks in order (an iterator,
+    planned as it is consumed)."""
+
+    runs: int
+    chunks: Iterator[Chunk]
 
 
 @dataclass(frozen=True)
@@ -128,9 +153,14 @@ class SweepStore:
         self.grid = grid
         self.chunk = chunk
         self.manifest = manifest
-        ranges = chunk_ranges(len(grid), chunk)
-        self.chunks = [Chunk(k, cid, lo, hi)
-                       for k, (cid, (lo, hi)) in enumerate(zip(manifest["chunk_ids"], ranges))]
+        self.n_runs = len(grid)
+        self.n_chunks = n_chunks(self.n_runs, chunk)
+
+    def chunk_at(self, k: int) -> Chunk:
+        """Chunk ``k`` of the sweep."""
+        lo = k * self.chunk
+        hi = min(lo + self.chunk, self.n_runs)
+        return Chunk(k, chunk_id(self.grid.digest, k, lo, hi, self.n_chunks), lo, hi)
 
     @property
     def runs_dir(self) -> Path:
@@ -142,7 +172,6 @@ class SweepStore:
 
     @staticmethod
     def manifest_for(grid: Grid, chunk: int) -> dict[str, Any]:
-        ranges = chunk_ranges(len(grid), chunk)
         return {
             "format": FORMAT,
             "version": __version__,
@@ -152,8 +181,7 @@ class SweepStore:
             "seeds": [grid.seed_start, grid.seed_stop],
             "runs": len(grid),
             "chunk": chunk,
-            "chunks": len(ranges),
-            "chunk_ids": chunk_ids(grid.digest, ranges),
+            "chunks": n_chunks(len(grid), chunk),
         }
 
     @classmethod
@@ -224,15 +252,35 @@ class SweepStore:
 
     # -- progress of the sweep -----------------------------------------------------------------
 
-    def pending(self) -> list[Chunk]:
-        """Chunks to run: no part yet, or a failure file (retried). Cleans temporaries."""
+    def _indices(self, folder: Path, prefix: str, suffix: str) -> set[int]:
+        """The chunks of this sweep that have a file ``<prefix><chunk id><suffix>`` in
+        ``folder`` (other names are not its chunks' and are ignored)."""
+        found: set[int] = set()
+        if not folder.is_dir():
+            return found
+        for path in folder.iterdir():
+            name = path.name
+            if not (name.startswith(prefix) and name.endswith(suffix)):
+                continue
+            cid = name[len(prefix):len(name) - len(suffix)]
+            head = cid.partition("-")[0]
+            if head.isdigit() and int(head) < self.n_chunks and \
+                    self.chunk_at(int(head)).id == cid:
+                found.add(int(head))
+        return found
+
+    def pending(self) -> Pending:
+        """What is left to run: chunks with no part yet, or with a failure file (retried).
+        Cleans temporaries. Memory and time grow with the files in the folder, not with the
+        chunks of the grid."""
         for d in (self.runs_dir, self.failed_dir):
             d.mkdir(exist_ok=True)
             _remove_temporaries(d)
-        parts = {p.name for p in self.runs_dir.iterdir()}
-        failed = {p.name for p in self.failed_dir.iterdir()}
-        return [c for c in self.chunks
-                if c.part_name not in parts or c.failed_name in failed]
+        finished = self._indices(self.runs_dir, "part-", ".parquet") - \
+            self._indices(self.failed_dir, "failed-", ".json")
+        done = sum(self.chunk_at(k).size for k in finished)
+        return Pending(self.n_runs - done, (self.chunk_at(k) for k in range(self.n_chunks)
+                                            if k not in finished))
 
     def record(self, chunk: Chunk, part: bytes | None, failures: list[dict[str, Any]]) -> None:
         """Write a finished chunk: failure file first, then the part; a clean retry removes
@@ -308,6 +356,6 @@ def summary_columns(folder: str | Path) -> list[str]:
     return out
 
 
-__all__ = ["Chunk", "FAILED", "FORMAT", "MANIFEST", "RUNS", "SweepStore", "chunk_ids",
-           "chunk_ranges", "default_chunk", "iter_failures", "load", "load_failures", "part_paths",
-           "read_manifest", "summary_columns"]
+__all__ = ["Chunk", "FAILED", "FORMAT", "MANIFEST", "Pending", "RUNS", "SweepStore", "chunk_id",
+           "chunk_ids", "chunk_ranges", "default_chunk", "iter_failures", "load", "load_failures",
+           "n_chunks", "part_paths", "read_manifest", "summary_columns"]
