@@ -215,6 +215,7 @@ grid = Grid.from_dict({"seeds": 4294967295, "axes": {"roles.p_a": [0.5, 1.0]}})
 t = time.perf_counter()
 store = SweepStore.open(sys.argv[1], grid)
 todo, chunks = store.pending()
+store.start()  # writes the manifest
 first = [(c.index, c.start, c.stop, c.id) for c in itertools.islice(chunks, 2)]
 last = store.chunk_at(store.n_chunks - 1)
 print(json.dumps({"runs": len(grid), "todo": todo, "chunks": store.n_chunks, "first": first,
@@ -422,10 +423,28 @@ def test_unreachable_scheduler_is_one_line(capsys, tmp_path, monkeypatch):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     grid_file = write(tmp_path / "grid.toml", SMALL_TOML)
-    code, _, err = cli(capsys, "sweep", grid_file, "--out", tmp_path / "x", "--scheduler",
+    code, _, err = cli(capsys, "sweep", grid_file, "--out", tmp_path / "x" / "y", "--scheduler",
                        f"tcp://127.0.0.1:{port}", "--quiet")
     assert code == 2 and err.count("\n") == 1
     assert err.startswith(f"error: scheduler 'tcp://127.0.0.1:{port}' cannot be reached")
+    assert not (tmp_path / "x").exists()  # no manifest, no runs/ or failed/: nothing started
+
+
+def test_a_sweep_that_cannot_start_leaves_the_folder_as_it_was(capsys, tmp_path, monkeypatch,
+                                                               reference):
+    from persuasive.sweep import runner
+
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT_S", 1.0)
+    other = write(tmp_path / "other.toml", 'seeds = 2\n[axes]\n"roles.p_a" = [0.5]\n')
+    before = sorted((p.relative_to(reference), p.read_bytes()) for p in reference.rglob("*")
+                    if p.is_file())
+    # --force would replace the sweep in the folder, but the scheduler is not there
+    code, _, err = cli(capsys, "sweep", other, "--out", reference, "--force", "--quiet",
+                       "--scheduler", "tcp://127.0.0.1:1")
+    assert code == 2 and "cannot be reached" in err
+    after = sorted((p.relative_to(reference), p.read_bytes()) for p in reference.rglob("*")
+                   if p.is_file())
+    assert after == before
 
 
 # -- killed and resumed -----------------------------------------------------------------------

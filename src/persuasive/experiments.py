@@ -526,7 +526,7 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
             else:
                 folder = Path(scratch) / t
             result = sweep.run(grids[t], folder, workers=workers, scheduler=scheduler,
-                               force=force, progress=tracker(t))
+                               force=force, progress=tracker(t), what="results folder")
             runs += runs_of(t, sweep.load(folder))
             for f in result.failures:
                 failures.append(RunFailure(t, int(f["axes"][CASE]), int(f["seed"]),
@@ -583,22 +583,3 @@ def load_summary(folder: str | Path) -> dict[str, Any]:
     except (OSError, ValueError) as exc:  # JSONDecodeError and UnicodeDecodeError included
         raise ConfigError(f"results folder {str(folder)!r} has no readable summary.json "
                           f"({exc.__class__.__name__})") from None
-
-
-def tqdm_progress(total_rows: int) -> Callable[[int, int, int], None]:
-    """A progress callback drawing a tqdm bar on stderr: runs done, runs/s, time left, rows."""
-    from tqdm import tqdm
-
-    bar: dict[str, Any] = {}
-
-    def update(done: int, total: int, rows_done: int) -> None:
-        if "bar" not in bar:
-            bar["bar"] = tqdm(total=total, unit="run", file=sys.stderr, dynamic_ncols=True,
-                              smoothing=0.1)
-        b = bar["bar"]
-        b.set_postfix_str(f"rows {rows_done}/{total_rows}", refresh=False)
-        b.update(done - b.n)
-        if done >= total:
-            b.close()
-
-    return update

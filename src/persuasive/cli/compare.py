@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import sys
 
 import click
 
-from ._common import build_config, check_workers, compile_notice, config_options
+from ._common import build_config, check_workers, compile_notice, config_options, progress_bar
 
 
 @click.command()
@@ -56,20 +55,13 @@ def compare(av_kinds, hv_kinds, hv_role, scenario, seeds, workers, mode, config_
     grid = cmp.comparison_grid(cmp.comparison_base(base), avs, hvs, seeds)  # checks it all
     workers = check_workers(workers, max(1, len(grid) // 25))
     compile_notice()
-    progress = None
-    if not quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(grid), unit="run", dynamic_ncols=True, smoothing=0.1,
-                   file=sys.stderr)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(done - bar.n)
-            if done >= total:
-                bar.close()
-
-    result = cmp.run_comparison(base, avs, hvs, seeds, out, workers, force, timing_seeds,
-                                progress)
+    progress = progress_bar(quiet)
+    try:
+        result = cmp.run_comparison(base, avs, hvs, seeds, out, workers, force, timing_seeds,
+                                    progress)
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
     if as_json:
         click.echo(json.dumps(cmp.json_rows(result.summary)))
     else:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ._common import build_config, check_workers, compile_notice, config_options
+from ._common import build_config, check_workers, compile_notice, config_options, progress_bar
 
 
 @click.command()
@@ -58,16 +58,20 @@ def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, for
     workers = check_workers(workers, max(-(-len(g) // default_chunk(len(g)))
                                          for g in grids.values()))
     compile_notice()
-    progress = None if quiet else ex.tqdm_progress(n_rows)
+    progress = progress_bar(quiet, n_rows)
     offset = 0
     results = []
-    for t in tables:
-        def shifted(done, _total, _rows, offset=offset):
-            if progress is not None:
-                progress(offset + done, total, (offset + done) // seeds)
-        results.append(ex.reproduce(t, seeds, workers, None, base, progress=shifted,
-                                    out=folders[t], force=force))
-        offset += len(grids[t])
+    try:
+        for t in tables:
+            def shifted(done, _total, _rows, offset=offset):
+                if progress is not None:
+                    progress(offset + done, total, (offset + done) // seeds)
+            results.append(ex.reproduce(t, seeds, workers, None, base, progress=shifted,
+                                        out=folders[t], force=force))
+            offset += len(grids[t])
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
     summaries = {t: r.summaries[t] for t, r in zip(tables, results)}
     failures = [f for r in results for f in r.failures]
     for t, r in zip(tables, results):

@@ -111,7 +111,8 @@ def run_comparison(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str
     base = comparison_base(base)
     grid = comparison_grid(base, av_kinds, hv_kinds, seeds)
     folder = Path(out) if out is not None else Path("results") / f"compare-{grid.digest[:10]}"
-    result = sweep.run(grid, folder, workers=workers, force=force, progress=progress)
+    result = sweep.run(grid, folder, workers=workers, force=force, progress=progress,
+                       what="comparison folder")
     runs = sweep.load(folder)
     timing = decision_times(base, av_kinds, hv_kinds, min(timing_seeds, seeds))
     summary = summarize(runs, base, av_kinds, hv_kinds, seeds, timing)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,12 @@ from .._version import __version__
 from .._files import OutputError, atomic_write, check_output_folder
 from ..config import ConfigError
 from .grid import Grid
+
+#: Names of the manifest's temporary files (:func:`persuasive._files.atomic_write`).
+_MANIFEST_TMP = re.compile(r"\.manifest\..*\.tmp\.json")
+#: What a study calls its sweep, by the name of its folder (for messages).
+_KINDS = {"sweep folder": "sweep", "comparison folder": "comparison",
+          "results folder": "reproduction"}
 
 #: Format tag of ``manifest.json``.
 FORMAT = "persuasive-sweep-1"
@@ -148,13 +155,17 @@ def read_manifest(folder: str | Path) -> dict[str, Any]:
 class SweepStore:
     """The files of one sweep in its folder (see the module docstring)."""
 
-    def __init__(self, folder: Path, grid: Grid, chunk: int, manifest: dict[str, Any]):
+    def __init__(self, folder: Path, grid: Grid, chunk: int, manifest: dict[str, Any],
+                 what: str = "sweep folder", new: bool = False, replace: bool = False):
         self.folder = folder
         self.grid = grid
         self.chunk = chunk
         self.manifest = manifest
+        self.what = what  #: how the command names the folder, for messages
         self.n_runs = len(grid)
         self.n_chunks = n_chunks(self.n_runs, chunk)
+        self._new = new  # the manifest is still to be written
+        self._replace = replace  # another sweep's files are still to be cleared
 
     def chunk_at(self, k: int) -> Chunk:
         """Chunk ``k`` of the sweep."""
@@ -186,25 +197,26 @@ class SweepStore:
 
     @classmethod
     def open(cls, folder: str | Path, grid: Grid, chunk: int | None = None,
-             force: bool = False) -> SweepStore:
-        """Start or resume the sweep of ``grid`` in ``folder``; nothing runs here.
+             force: bool = False, what: str = "sweep folder") -> SweepStore:
+        """The sweep of ``grid`` in ``folder``, new or resumed; checks only, nothing is
+        written here (:meth:`start` does, once the work can start).
 
         A folder holding the same sweep (same grid, package version and chunk size) is
         resumed; ``chunk=None`` then takes the folder's chunk size. A folder holding another
-        sweep, or other files, is refused with :class:`OutputError` unless ``force``, which
-        removes its manifest, parts and failure files first.
+        sweep, or other files, is refused with :class:`OutputError` unless ``force``: then
+        :meth:`start` removes its manifest, parts and failure files first. ``what`` names the
+        folder in messages (``"comparison folder"``, ...).
         """
-        folder = check_output_folder(Path(folder), "sweep folder")
+        folder = check_output_folder(Path(folder), what)
         old = None
-        if folder.is_dir():  # a manifest being written when a process was killed
-            for tmp in folder.glob(".manifest.*.tmp.json"):
-                tmp.unlink(missing_ok=True)
-        if folder.is_dir() and any(folder.iterdir()):
+        replace = False
+        # a manifest being written when a process was killed does not count
+        if folder.is_dir() and any(not _MANIFEST_TMP.fullmatch(p.name) for p in folder.iterdir()):
             try:
                 old = read_manifest(folder)
             except ConfigError:
                 if not force:
-                    raise OutputError(f"sweep folder {str(folder)!r} holds other files; choose "
+                    raise OutputError(f"{what} {str(folder)!r} holds other files; choose "
                                       "another --out or pass --force to write into it") \
                         from None
             if old is not None:
@@ -212,42 +224,62 @@ class SweepStore:
                         and old.get("version") == __version__
                         and (chunk is None or old.get("chunk") == chunk))
                 if same:
-                    return cls(folder, grid, old["chunk"], old)
+                    return cls(folder, grid, old["chunk"], old, what)
                 if not force:
-                    raise OutputError(cls._difference(folder, old, grid, chunk))
-            cls._clear(folder)
+                    raise OutputError(cls._difference(folder, old, grid, chunk, what))
+            replace = True
         chunk = default_chunk(len(grid)) if chunk is None else chunk
-        manifest = cls.manifest_for(grid, chunk)
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise OutputError(f"sweep folder {str(folder)!r} cannot be written: "
-                              f"{(exc.strerror or str(exc)).lower()}") from None
-        _write_bytes(folder / MANIFEST, _dump(manifest))
-        return cls(folder, grid, chunk, manifest)
+        return cls(folder, grid, chunk, cls.manifest_for(grid, chunk), what, new=True,
+                   replace=replace)
+
+    def start(self) -> None:
+        """Make the folder ready for the runs: clear what :meth:`open` found to replace,
+        write the manifest of a new sweep, make ``runs/`` and ``failed/``, remove the
+        temporary files a killed process left."""
+        folder = self.folder
+        if folder.is_dir():
+            for tmp in folder.iterdir():
+                if _MANIFEST_TMP.fullmatch(tmp.name):
+                    tmp.unlink(missing_ok=True)
+        if self._replace:
+            self._clear(folder, self.what)
+            self._replace = False
+        if self._new:
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise OutputError(f"{self.what} {str(folder)!r} cannot be written: "
+                                  f"{(exc.strerror or str(exc)).lower()}") from None
+            _write_bytes(folder / MANIFEST, _dump(self.manifest))
+            self._new = False
+        for d in (self.runs_dir, self.failed_dir):
+            d.mkdir(exist_ok=True)
+            _remove_temporaries(d)
 
     @staticmethod
-    def _difference(folder: Path, old: dict[str, Any], grid: Grid, chunk: int | None) -> str:
-        where = f"sweep folder {str(folder)!r} holds"
+    def _difference(folder: Path, old: dict[str, Any], grid: Grid, chunk: int | None,
+                    what: str) -> str:
+        where = f"{what} {str(folder)!r} holds"
+        kind = _KINDS.get(what, "sweep")
         tail = "; choose another --out or pass --force to replace it"
         if old.get("grid_digest") != grid.digest:
-            return (f"{where} another sweep (grid {old.get('grid_digest')}, {old.get('runs')} "
+            return (f"{where} another {kind} (grid {old.get('grid_digest')}, {old.get('runs')} "
                     f"runs; this grid is {grid.digest}, {len(grid)} runs){tail}")
         if old.get("version") != __version__:
-            return (f"{where} this sweep made with persuasive {old.get('version')} (this is "
+            return (f"{where} this {kind} made with persuasive {old.get('version')} (this is "
                     f"{__version__}){tail}")
-        return (f"{where} this sweep in chunks of {old.get('chunk')} runs (--chunk {chunk} "
+        return (f"{where} this {kind} in chunks of {old.get('chunk')} runs (--chunk {chunk} "
                 f"asked; leave --chunk out to resume){tail}")
 
     @staticmethod
-    def _clear(folder: Path) -> None:
+    def _clear(folder: Path, what: str = "sweep folder") -> None:
         try:
             (folder / MANIFEST).unlink(missing_ok=True)
             for name in (RUNS, FAILED):
                 if (folder / name).is_dir():
                     shutil.rmtree(folder / name)
         except OSError as exc:
-            raise OutputError(f"sweep folder {str(folder)!r} cannot be cleared: "
+            raise OutputError(f"{what} {str(folder)!r} cannot be cleared: "
                               f"{(exc.strerror or str(exc)).lower()}") from None
 
     # -- progress of the sweep -----------------------------------------------------------------
@@ -271,13 +303,12 @@ class SweepStore:
 
     def pending(self) -> Pending:
         """What is left to run: chunks with no part yet, or with a failure file (retried).
-        Cleans temporaries. Memory and time grow with the files in the folder, not with the
-        chunks of the grid."""
-        for d in (self.runs_dir, self.failed_dir):
-            d.mkdir(exist_ok=True)
-            _remove_temporaries(d)
-        finished = self._indices(self.runs_dir, "part-", ".parquet") - \
-            self._indices(self.failed_dir, "failed-", ".json")
+        Reads the folder, writes nothing. Memory and time grow with the files in the folder,
+        not with the chunks of the grid."""
+        finished: set[int] = set()
+        if not self._replace:
+            finished = self._indices(self.runs_dir, "part-", ".parquet") - \
+                self._indices(self.failed_dir, "failed-", ".json")
         done = sum(self.chunk_at(k).size for k in finished)
         return Pending(self.n_runs - done, (self.chunk_at(k) for k in range(self.n_chunks)
                                             if k not in finished))
