@@ -213,6 +213,30 @@ def test_huge_seed_counts_are_refused_up_front(capsys, tmp_path, monkeypatch, ar
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("command, what", [
+    (["compare", "--av", "cv", "--hv", "idm", "--seeds", "2"], "comparison folder"),
+    (["reproduce", "table1", "--seeds", "2"], "results folder"),
+    (["sweep", "{grid}"], "sweep folder"),
+], ids=["compare", "reproduce", "sweep"])
+@pytest.mark.parametrize("target", ["/proc/study", "{tmp}/afile/study"],
+                         ids=["proc", "under-a-file"])
+def test_errors_start_their_own_line_in_the_commands_words(capsys, tmp_path, command, what,
+                                                           target):
+    """With the progress bar on: /proc/study fails only when the folder is made (as root,
+    once the bar is drawn), afile/study when the folder is checked (before any bar)."""
+    (tmp_path / "afile").write_text("a file, not a folder")
+    (tmp_path / "g.toml").write_text('seeds = 2\n[axes]\n"av.kind" = ["cv"]\n')
+    out = target.format(tmp=tmp_path)
+    args = [a.format(grid=tmp_path / "g.toml") for a in command]
+    code, stdout, err = run(capsys, *args, "--workers", "1", "--out", out)
+    assert code == 2 and stdout == ""
+    last = err.rstrip("\n").split("\n")[-1]  # a line of its own, not the bar's
+    assert last.startswith(f"error: {what} {out!r} cannot be written"), repr(err)
+    assert err.count("error:") == 1 and "Traceback" not in err
+    if what != "sweep folder":
+        assert "sweep folder" not in err
+
+
 def test_failed_run_leaves_existing_output_untouched(capsys, tmp_path):
     target = tmp_path / "log.parquet"
     target.write_bytes(b"previous results")
