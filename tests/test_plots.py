@@ -621,6 +621,46 @@ def test_cli_table_and_animate(results_dir, tmp_path):
     assert iio3.imread(gif, index=None).shape[0] == 12
 
 
+@pytest.fixture(scope="module")
+def saved_run(tmp_path_factory, short_run):
+    path = tmp_path_factory.mktemp("saved") / "run.parquet"
+    short_run.save(path)
+    return path
+
+
+@pytest.mark.parametrize("command, out", [(["plot", "profile"], "f.png"),
+                                          (["plot", "topview"], "f.png"),
+                                          (["animate"], "f.gif")])
+@pytest.mark.parametrize("options, names", [
+    (["--seed", "5"], "--seed"),
+    (["--av", "lfg", "--hv", "idm"], "--av, --hv"),
+    (["--hv-role", "follower", "--pa", "0.5", "--pa-hat", "0.9"], "--hv-role, --pa, --pa-hat"),
+    (["--scenario", "merge", "--mode", "corrected"], "--scenario, --mode"),
+    (["--config", "{config}", "--set", "mpc.epsilon=0.05"], "--config, --set"),
+    (["--seed", "996"], "--seed"),  # even the default, given explicitly
+], ids=["seed", "kinds", "roles", "scenario-mode", "config-set", "default-seed"])
+def test_options_that_from_overrides_are_refused(tmp_path, capsys, saved_run, command, out,
+                                                  options, names):
+    (tmp_path / "c.toml").write_text('mode = "paper"\n')
+    argv = [*command, "--from", str(saved_run), "--out", str(tmp_path / out),
+            *[o.format(config=tmp_path / "c.toml") for o in options]]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {names} cannot be used with --from: the saved run has its own " \
+                  "seed and configuration\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.toml"]
+
+
+def test_single_is_refused_with_from_and_from_alone_plots(tmp_path, capsys, saved_run,
+                                                          short_run):
+    assert main(["plot", "profile", "--single", "--from", str(saved_run), "--out",
+                 str(tmp_path / "f.png")]) == 2
+    assert "--single cannot be used with --from" in capsys.readouterr().err
+    assert main(["plot", "profile", "--from", str(saved_run), "--out",
+                 str(tmp_path / "f.png")]) == 0
+    assert (tmp_path / "f.png").read_bytes()[:4] == b"\x89PNG"
+
+
 @pytest.mark.parametrize("args, message", [
     (["plot", "profile", "--out", "{out}.jpg"], "unsupported extension"),
     (["plot", "profile", "--pa", "2", "--out", "{out}.png"], "roles.p_a"),
