@@ -104,6 +104,24 @@ def test_summary_counts_and_markdown():
     assert "corrected mode" in md
 
 
+def test_seeds_other_than_the_published_are_not_compared():
+    runs = ex.run_tables(["table1"], seeds=3, workers=1)
+    short = ex.summarize(runs, "table1")  # seeds 1..3
+    assert short["seeds"] == 3
+    assert [(r["diff_av_first_pct"], r["diff_hv_first_pct"]) for r in short["rows"]] == \
+        [(None, None)] * 2
+    assert [r["published_av_first_pct"] for r in short["rows"]] == [0.0, 97.9]
+    md = ex.to_markdown(short)
+    assert "published" not in md and "diff" not in md
+    assert "| L | 1.00 | 0.0 | 100.0 | 0 | 0 |" in md
+    assert "so they are not compared" in ex.verdict(short, Config())
+    full = ex.summarize(runs, "table1", seeds=1000)  # as if they were seeds 1..1000
+    assert "| AV first % | HV first % | published AV/HV % | diff AV/HV |" in \
+        ex.to_markdown(full)
+    row = full["rows"][1]
+    assert row["diff_av_first_pct"] == pytest.approx(row["av_first_pct"] - 97.9, abs=1e-9)
+
+
 def test_violations_use_each_runs_own_safety_distance():
     runs = ex.run_tables(["table1"], seeds=2, workers=1)
     assert {r["min_dist_m"] for r in runs} == {7.5}
