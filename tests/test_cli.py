@@ -421,6 +421,25 @@ def test_reproduce_text_table(capsys, tmp_path):
     assert "published AV/HV" not in out and "diff AV/HV" not in out
 
 
+def test_a_resumed_reproduction_says_what_ran_now(capsys, tmp_path):
+    args = ["reproduce", "all", "--seeds", "2", "--workers", "1", "--quiet", "--out",
+            str(tmp_path)]
+    code, out, _ = run(capsys, *args)
+    assert code == 0 and out.rstrip().splitlines()[-1].startswith("32 runs in ")
+    assert "finished earlier" not in out
+    code, out, _ = run(capsys, *args)  # everything is there
+    assert code == 0
+    last = out.rstrip().splitlines()[-1]
+    assert last.startswith("32 runs: 32 finished earlier, none to run, ") and "worker" not in last
+    # table2 loses a part: its chunk runs again, the rest is read back
+    parts = sorted((tmp_path / "table2" / "runs").glob("part-*.parquet"))
+    parts[3].unlink()
+    code, out, _ = run(capsys, *args)
+    assert code == 0
+    assert out.rstrip().splitlines()[-1].startswith(
+        "32 runs: 31 finished earlier, 1 run now with 1 worker, ")  # chunks of 1 run
+
+
 def test_bench_json(capsys):
     code, out, _ = run(capsys, "bench", "--json", "--runs", "1", "--repeats", "1")
     assert code == 0

@@ -454,6 +454,8 @@ class Reproduction:
     failures: tuple[RunFailure, ...] = ()  #: runs that raised (left out of ``runs``)
     base: Config | None = None  #: the base configuration of every row
     folders: dict[str, Path] | None = None  #: per table, its results folder (when saved)
+    skipped: int = 0  #: runs finished by an earlier call into the same folders
+    ran: int = 0  #: runs computed by this call (failed ones included)
 
 
 def table_grid(table: str, base: Config, seeds: int):
@@ -530,6 +532,7 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
     runs: list[dict[str, Any]] = []
     failures: list[RunFailure] = []
     folders: dict[str, Path] = {}
+    skipped = ran = 0
     with tempfile.TemporaryDirectory(prefix="persuasive-reproduce-") as scratch:
         for t in tables:
             if out is not None:
@@ -539,6 +542,7 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
             result = sweep.run(grids[t], folder, workers=workers, scheduler=scheduler,
                                force=force, progress=tracker(t), what="results folder")
             runs += runs_of(t, sweep.load(folder))
+            skipped, ran = skipped + result.skipped, ran + result.ran
             for f in result.failures:
                 failures.append(RunFailure(t, int(f["axes"][CASE]), int(f["seed"]),
                                            f["config_hash"], f["error"]))
@@ -549,7 +553,8 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
     for t, folder in folders.items():  # a results folder is complete: runs and summary
         _write_summary(folder, summaries[t], atomic=True)
     frame = pd.DataFrame(runs, columns=list(RUN_COLUMNS))
-    return Reproduction(frame, summaries, wall, tuple(failures), base, folders or None)
+    return Reproduction(frame, summaries, wall, tuple(failures), base, folders or None,
+                        skipped, ran)
 
 
 def save(result: Reproduction, table: str, out: str | Path, force: bool = True) -> Path:

@@ -87,8 +87,13 @@ def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, for
             click.echo(f"{ex.verdict(summaries[t], base)}")
             click.echo(f"written to {folders[t]}/\n")
         wall = sum(r.wall_time_s for r in results)
-        click.echo(f"{total - len(failures)} runs in {wall:.1f} s with "
-                   f"{workers} worker{'s' if workers > 1 else ''}")
+        skipped, ran = sum(r.skipped for r in results), sum(r.ran for r in results)
+        with_workers = f"with {workers} worker{'s' if workers > 1 else ''}"
+        if not skipped:
+            click.echo(f"{total - len(failures)} runs in {wall:.1f} s {with_workers}")
+        else:  # resumed: as 'persuasive sweep' says it
+            now = f"{ran} run now {with_workers}" if ran else "none to run"
+            click.echo(f"{total} runs: {skipped} finished earlier, {now}, {wall:.1f} s")
     if failures:
         click.echo(f"error: {len(failures)} run(s) failed and are left out of the results "
                    "(listed above and in summary.json); run the same command again to retry "
