@@ -133,6 +133,11 @@ BAD = [
     (["simulate", "--set", "nosection.x=1"], "unknown section 'nosection'"),
     (["simulate", "--set", "mpc.x=1"], "mpc.x: unknown key; allowed: epsilon, p_a_hat"),
     (["simulate", "--set", "mpc.epsilon=1e-13"], "mpc.epsilon"),
+    (["simulate", "--scenario", "crossing", "--set", "scenario.angle_deg=0.001"],
+     "scenario.angle_deg = 0.001 is out of range; allowed: [15, 165] degrees for a crossing "
+     "(flatter roads run side by side instead of crossing)"),
+    (["simulate", "--scenario", "merge", "--set", "scenario.angle_deg=5"],
+     "scenario.angle_deg = 5.0 is out of range; allowed: [15, 90] degrees for a merge"),
 ]
 
 
