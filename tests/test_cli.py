@@ -15,7 +15,7 @@ from persuasive.config import Config
 REQUIRED = ("mode", "scenario", "av", "hv", "hv_role", "pa", "pa_hat", "seed", "streams",
             "hv_initial_state", "first_at_line", "first_at_conflict_point", "collision",
             "min_distance_to_line_m", "min_distance_m", "idx_end", "infeasible_steps",
-            "hv_role_changes")
+            "hv_role_changes", "safety_distance_m", "distance_measured")
 
 
 def run(capsys, *args):
@@ -40,6 +40,45 @@ def test_simulate_json_in_both_modes(capsys, mode):
     assert payload["pa_hat"] == payload["pa"] == 1.0
     expected = simulate(Config(mode=mode), 7).summary()
     assert payload == json.loads(json.dumps(expected))
+
+
+@pytest.mark.parametrize("scenario, measured", [
+    ("intersection", "along the paths"), ("left-turn", "along the paths"),
+    ("crossing", "between the centres"), ("merge", "between the centres")])
+def test_the_summary_names_the_threshold_and_how_distances_are_measured(capsys, scenario,
+                                                                        measured):
+    args = ["--scenario", scenario]
+    if scenario == "crossing":  # at 90 degrees the crossing is the intersection, bit for bit
+        args += ["--set", "scenario.angle_deg=60"]
+    code, out, _ = run(capsys, "simulate", "--json", *args)
+    payload = json.loads(out)
+    assert code == 0 and "min_dist_m" not in payload  # the threshold's old, confusable name
+    assert payload["safety_distance_m"] == 7.5 and payload["distance_measured"] == measured
+    code, out, _ = run(capsys, "simulate", *args)
+    assert f"over the run ({measured}; safe set 7.5 m)" in out
+
+
+def test_bare_groups_print_their_help_and_exit_0(capsys):
+    code, out, err = run(capsys)
+    assert code == 0 and err == "" and out.startswith("Usage: persuasive [OPTIONS] COMMAND")
+    assert "simulate" in out and "reproduce" in out
+    code, out, err = run(capsys, "plot")
+    assert code == 0 and err == "" and out.startswith("Usage: persuasive plot [OPTIONS]")
+    bare = subprocess.run([sys.executable, "-m", "persuasive"], capture_output=True, text=True)
+    assert bare.returncode == 0 and bare.stdout.startswith("Usage: persuasive")
+    assert bare.stderr == ""
+
+
+def test_plot_from_a_csv_log_says_only_parquet_is_read(capsys, tmp_path):
+    code, _, _ = run(capsys, "simulate", "--out", str(tmp_path / "run.csv"))
+    assert code == 0
+    code, out, err = run(capsys, "plot", "profile", "--from", str(tmp_path / "run.csv"),
+                         "--out", str(tmp_path / "f.png"))
+    assert code == 2 and out == ""
+    assert err == f"error: run file {str(tmp_path / 'run.csv')!r} is not a Parquet file: only " \
+                  "the .parquet logs of 'simulate --out' and the trials of 'drive' are read " \
+                  "back (a .csv log holds no configuration)\n"
+    assert not (tmp_path / "f.png").exists()
 
 
 def test_simulate_options_reach_the_configuration(capsys):
@@ -126,6 +165,8 @@ BAD = [
     (["simulate", "--set", "nonsense"], "--set"),
     (["simulate", "--set", "mpc.horizon=3"], "mpc.horizon"),
     (["simulate", "--seed", "-4"], "seed"),
+    (["simulate", "--hv", "replay", "--set", "hv.replay.file=no-such.parquet"],
+     "hv.replay.file = 'no-such.parquet' cannot be read: no such file"),
     (["reproduce", "table3"], "table3"),
     (["reproduce", "table1", "--seeds", "0"], "--seeds"),
     (["reproduce", "table1", "--workers", "0"], "--workers"),

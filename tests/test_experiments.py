@@ -124,10 +124,10 @@ def test_seeds_other_than_the_published_are_not_compared():
 
 def test_violations_use_each_runs_own_safety_distance():
     runs = ex.run_tables(["table1"], seeds=2, workers=1)
-    assert {r["min_dist_m"] for r in runs} == {7.5}
+    assert {r["safety_distance_m"] for r in runs} == {7.5}
     closest = min(r["min_distance_m"] for r in runs)
     for r in runs:  # a run whose own safe distance is larger than its closest approach
-        r["min_dist_m"] = closest + 1.0 if r is runs[0] else r["min_dist_m"]
+        r["safety_distance_m"] = closest + 1.0 if r is runs[0] else r["safety_distance_m"]
     summary = ex.summarize(runs, "table1")
     assert sum(row["violations_whole_run"] for row in summary["rows"]) == \
         int(runs[0]["min_distance_m"] < closest + 1.0) + \
@@ -139,7 +139,7 @@ def test_each_run_carries_the_safety_distance_it_was_run_with():
     config = ex.PUBLISHED["table2"][0].config(Config().with_overrides(
         {"hv.vehicle.length_m": 4.0}))
     assert simulate(config, 1).scenario.min_dist_m == 6.75
-    assert ex.run_record("table2", 0, config, 1)["min_dist_m"] == 6.75
+    assert ex.run_record("table2", 0, config, 1)["safety_distance_m"] == 6.75
 
 
 def test_save_writes_the_folder_as_a_set(tmp_path, monkeypatch):

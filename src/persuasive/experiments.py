@@ -106,11 +106,12 @@ RUN_COLUMNS = (
     "av_s0_m", "av_v0_mps", "hv_s0_m", "hv_v0_mps",
     "first_at_line", "first_at_conflict_point", "collision", "min_distance_to_line_m",
     "min_distance_m", "idx_end", "infeasible_steps", "hv_role_changes", "av_role_changes",
-    "min_dist_m", "config_hash", "version",
+    "safety_distance_m", "config_hash", "version",
 )
 
 
-_METRICS = RUN_COLUMNS[RUN_COLUMNS.index("first_at_line"):RUN_COLUMNS.index("min_dist_m")]
+_METRICS = RUN_COLUMNS[RUN_COLUMNS.index("first_at_line"):
+                       RUN_COLUMNS.index("safety_distance_m")]
 
 
 def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any]:
@@ -131,7 +132,7 @@ def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any
         "hv_s0_m": s["hv_initial_state"][0],
         "hv_v0_mps": s["hv_initial_state"][1],
         **{k: s[k] for k in _METRICS},
-        "min_dist_m": rec.scenario.min_dist_m,  # the pair's, as the kernels use it
+        "safety_distance_m": rec.scenario.min_dist_m,  # the pair's, as the kernels use it
         "config_hash": config.digest(),
         "version": __version__,
     }
@@ -279,7 +280,8 @@ def summarize(runs: list[dict[str, Any]], table: str, base: Config | None = None
               failures: Iterable[RunFailure] = ()) -> dict[str, Any]:
     """The printed table of docs/method.md §8 for ``table``'s rows in ``runs``.
 
-    Safety violations compare each run's distances with that run's own ``min_dist_m``.
+    Safety violations compare each run's distances with that run's own
+    ``safety_distance_m``.
     ``base`` and ``seeds`` (the configuration and seed count the runs were made with) are
     recorded with their TOML text and digest; ``failures`` are listed. The differences to
     the published shares are given for seeds 1..1000 only (those of the published tables);
@@ -316,9 +318,9 @@ def summarize(runs: list[dict[str, Any]], table: str, base: Config | None = None
             if comparable else None,
             "collisions": int(sum(r["collision"] for r in mine)),
             "runs_with_infeasible": int(sum(r["infeasible_steps"] > 0 for r in mine)),
-            "violations_to_line": int(sum(r["min_distance_to_line_m"] < r["min_dist_m"]
+            "violations_to_line": int(sum(r["min_distance_to_line_m"] < r["safety_distance_m"]
                                           for r in mine)),
-            "violations_whole_run": int(sum(r["min_distance_m"] < r["min_dist_m"]
+            "violations_whole_run": int(sum(r["min_distance_m"] < r["safety_distance_m"]
                                             for r in mine)),
             "config_hash": mine[0]["config_hash"],
         })
