@@ -388,6 +388,6 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
     )
 
 
-__all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA", "WORLD_LOG", "RunOutcome",
-           "RunRecord", "Setup", "check_seed", "load_record", "make_record", "outcome", "setup",
-           "static_setup"]
+__all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA",
+           "WORLD_LOG", "RunOutcome", "RunRecord", "Setup", "check_seed", "load_record",
+           "make_record", "outcome", "setup", "static_setup"]

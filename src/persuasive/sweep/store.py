@@ -7,9 +7,9 @@ Layout of ``DIR``::
     DIR/failed/failed-<k>-<hash>.json      the runs of chunk k that raised (if any)
 
 ``<k>`` is the chunk's index (zero-padded, so that names sort in run order) and ``<hash>`` a
-hash of the grid's digest and the chunk's run range: the chunk id (:func:`chunk_id`). ``DIR/runs``
-holds only the parts, so ``pandas.read_parquet(DIR / "runs")`` reads the dataset; :func:`load`
-does the same in run order and tolerates parts whose columns differ.
+hash of the grid's digest and the chunk's run range: the chunk id (:func:`chunk_id`).
+``DIR/runs`` holds only the parts, so ``pandas.read_parquet(DIR / "runs")`` reads the dataset;
+:func:`load` does the same in run order and tolerates parts whose columns differ.
 
 The chunks are planned lazily: chunk ``k`` is computed from its index when it is needed, and
 the manifest holds their size and number, not a list, so a sweep of billions of runs takes no
