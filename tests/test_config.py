@@ -424,3 +424,22 @@ def test_switching_mode_keeps_only_explicit_quirks():
     assert q.q1_branch_time_offset is False  # unset: follows the new mode
     assert Config().with_overrides({"mode": "corrected"}).effective_quirks == \
         Config(mode="corrected").effective_quirks
+
+
+@pytest.mark.parametrize("kind, good, bad", [
+    ("crossing", [15.0, 60.0, 90.0, 165.0], [0.001, 14.99, 165.01, 179.9]),
+    ("merge", [15.0, 30.0, 90.0], [0.001, 14.99, 90.01, 120.0]),
+])
+def test_crossing_and_merge_angles_are_bounded_to_meaningful_geometry(kind, good, bad):
+    for angle in good:
+        config = Config().with_overrides({"scenario.kind": kind, "scenario.angle_deg": angle})
+        scenario = build_scenario(config)
+        # the conflict starts within four safety distances of the conflict point, so the
+        # vehicles start (13.5 m before their yield line) about 40 m away at most
+        assert -scenario.hv.zone[0] <= 4.0 * scenario.min_dist_m
+    lo, hi = {"crossing": (15, 165), "merge": (15, 90)}[kind]
+    for angle in bad:
+        with pytest.raises(ConfigError, match=rf"^scenario.angle_deg = {angle!r} is out of "
+                                              rf"range; allowed: \[{lo}, {hi}\] degrees for "
+                                              rf"a {kind} \("):
+            Config().with_overrides({"scenario.kind": kind, "scenario.angle_deg": angle})

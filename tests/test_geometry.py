@@ -90,7 +90,7 @@ def test_distance_is_symmetric_in_the_vehicles_and_never_negative(s_a, s_b, kind
 
 
 @settings(max_examples=60)
-@given(st.floats(-40, 40), st.floats(-40, 40), st.floats(10.0, 170.0))
+@given(st.floats(-40, 40), st.floats(-40, 40), st.floats(15.0, 165.0))
 def test_a_crossing_is_at_distance_zero_only_at_its_conflict_point(s_a, s_b, angle):
     scene = build_scenario(Config().with_overrides({"scenario.kind": "crossing",
                                                     "scenario.angle_deg": angle}))

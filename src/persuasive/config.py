@@ -232,6 +232,17 @@ class MPCParams:
         _in_range("mpc.confidence_switch", self.confidence_switch, 0.0, 0.5)
 
 
+#: The angles [deg] at which the crossing and the merge mean what they say, and why: at a
+#: flatter angle the roads run side by side over several vehicle lengths (the conflict zone
+#: reaches ``min_dist / sin(angle)``, more than 29 m at 15 degrees, from the conflict point),
+#: the crossing lines recede as ``1 / sin(angle)`` and the vehicles start tens of metres
+#: back, never reaching the conflict in a run.
+ANGLE_RANGES_DEG = {
+    "crossing": (15.0, 165.0, "flatter roads run side by side instead of crossing"),
+    "merge": (15.0, 90.0, "a flatter ramp runs beside the lane instead of joining it"),
+}
+
+
 @dataclass(frozen=True)
 class ScenarioParams:
     """The scenario and its initial-state sampling (docs/method.md §8 and §10).
@@ -244,7 +255,9 @@ class ScenarioParams:
     """
 
     kind: ScenarioKind = "intersection"  #: intersection | crossing | left-turn | merge
-    angle_deg: float | None = None  #: crossing: angle between the paths [deg] (90); merge: ramp angle (30)
+    #: crossing: angle between the paths [deg] (90, in [15, 165]); merge: ramp angle (30, in
+    #: [15, 90])
+    angle_deg: float | None = None
     turn_radius_m: float | None = None  #: left-turn: radius of the AV's arc [m] (1.5 lane widths)
     av_s0_m: float | None = None  #: AV nominal initial position along its path [m]
     av_v0_mps: float = 4.0  #: AV nominal initial speed [m/s]
@@ -261,8 +274,11 @@ class ScenarioParams:
         _choice(p + "kind", self.kind, SCENARIO_KINDS)
         if self.angle_deg is not None:
             _in_range(p + "angle_deg", self.angle_deg, 0.0, 180.0, lo_open=True, hi_open=True)
-            if self.kind == "merge":
-                _in_range(p + "angle_deg", self.angle_deg, 0.0, 90.0, lo_open=True)
+            if self.kind in ANGLE_RANGES_DEG:
+                lo, hi, why = ANGLE_RANGES_DEG[self.kind]
+                if not lo <= self.angle_deg <= hi:
+                    _fail(p + "angle_deg", self.angle_deg,
+                          f"[{lo:g}, {hi:g}] degrees for a {self.kind} ({why})")
         if self.turn_radius_m is not None:
             _in_range(p + "turn_radius_m", self.turn_radius_m, 0.0, lo_open=True)
         for name in ("av_s0_m", "hv_s0_m"):
@@ -512,6 +528,10 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
     except OSError as exc:
         raise ConfigError(f"{what} {str(path)!r} cannot be read: "
                           f"{(exc.strerror or str(exc)).lower()}") from None
+    except UnicodeDecodeError as exc:  # TOML is UTF-8 text
+        raise ConfigError(f"{what} {str(path)!r} is not UTF-8 text (byte "
+                          f"0x{exc.object[exc.start]:02x} at offset {exc.start}); TOML files "
+                          "must be UTF-8") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

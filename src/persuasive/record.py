@@ -27,7 +27,7 @@ from numba import njit
 from ._version import __version__
 from .config import Config, ConfigError
 from .kinematics import saturated_step
-from .packing import WORK_NAMES, discounts, pack
+from .packing import CONFLICT_ALONG_PATHS, CONFLICT_EUCLIDEAN, WORK_NAMES, discounts, pack
 from .policies import kinds as kd
 from .policies import kind_of, load_replay
 from .roles import LEADER
@@ -37,6 +37,9 @@ from .streams import draw_streams
 
 #: Labels of ``first_at_line`` / ``first_at_conflict_point``.
 ARRIVAL_LABELS = {0: "neither", 1: "AV", 2: "HV", 3: "same step"}
+#: How a scenario's conflict measures the distance between the vehicles (docs/method.md §10.2).
+DISTANCE_MEASURED = {CONFLICT_ALONG_PATHS: "along the paths",
+                     CONFLICT_EUCLIDEAN: "between the centres"}
 
 
 # Columns of the world's own per-step log: the measurements, the applied accelerations, the
@@ -54,7 +57,9 @@ class RunOutcome:
     first_at_conflict_point: int  #: same labels, for ``s >= 0``
     collision: bool  #: footprints overlapped at some step
     min_distance_to_line_m: float  #: min distance over ``x_0 .. x_{idx_end + 1}`` [m]
-    min_distance_m: float  #: min distance over the whole run [m]
+    #: min distance over the whole run [m] (along the paths in the intersection and the left
+    #: turn: ``RunRecord.summary()["distance_measured"]``)
+    min_distance_m: float
     idx_end: int  #: first step after which a vehicle is at its line (last step if none)
     infeasible_steps: int  #: AV steps where no candidate met the chance constraint
     hv_role_changes: int  #: role changes of a role-holding human
@@ -108,7 +113,13 @@ class RunRecord:
         return self.config.mode
 
     def summary(self) -> dict[str, Any]:
-        """The run's identity and metrics as plain JSON values (deterministic: no timings)."""
+        """The run's identity and metrics as plain JSON values (deterministic: no timings).
+
+        Beside the outcome, ``safety_distance_m`` is the pair's safety threshold (7.5 m by
+        default) that ``min_distance_m`` and ``min_distance_to_line_m`` are compared with,
+        and ``distance_measured`` says how those distances are measured: ``"along the
+        paths"`` (the intersection, where it is the distance between the centres, and the
+        left turn, where it is not) or ``"between the centres"`` (crossing, merge)."""
         c, o = self.config, self.outcome
         out = {
             "mode": c.mode,
@@ -126,7 +137,9 @@ class RunRecord:
         for name in OUTCOME_FIELDS:
             value = getattr(o, name)
             out[name] = None if isinstance(value, float) and math.isnan(value) else value
-        out["min_dist_m"] = self.scenario.min_dist_m if self.scenario is not None else None
+        scene = self.scenario
+        out["safety_distance_m"] = scene.min_dist_m if scene is not None else None
+        out["distance_measured"] = None if scene is None else DISTANCE_MEASURED[scene.conflict]
         out["quirks"] = dict(vars(c.effective_quirks))
         out["config_hash"] = c.digest()
         out["version"] = self.version
@@ -180,6 +193,16 @@ def load_record(path) -> RunRecord:
     import pyarrow.parquet as pq
 
     path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as exc:
+        reason = (exc.strerror or "no such file or directory").lower()
+        raise ConfigError(f"run file {str(path)!r} cannot be read: {reason}") from None
+    if head != b"PAR1":  # Parquet's magic bytes
+        raise ConfigError(f"run file {str(path)!r} is not a Parquet file: only the .parquet "
+                          "logs of 'simulate --out' and the trials of 'drive' are read back "
+                          "(a .csv log holds no configuration)")
     try:
         table = pq.read_table(path)
     except OSError as exc:
@@ -392,6 +415,6 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
     )
 
 
-__all__ = ["ARRIVAL_LABELS", "OUTCOME_FIELDS", "RECORD_METADATA", "WORLD_LOG", "RunOutcome",
-           "RunRecord", "Setup", "check_seed", "load_record", "make_record", "outcome", "setup",
-           "static_setup"]
+__all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA",
+           "WORLD_LOG", "RunOutcome", "RunRecord", "Setup", "check_seed", "load_record",
+           "make_record", "outcome", "setup", "static_setup"]

@@ -4,8 +4,8 @@
 configuration, draws the run's random numbers (``persuasive.streams.draw_streams``), runs the
 compiled loop (``persuasive.world.run_loop``) with the two policies the configuration names,
 and returns a :class:`RunRecord`: the configuration, the seed, the states, the per-step log
-and the outcome (:class:`RunOutcome`); the setup and the record are ``persuasive.record``'s. :func:`persuasive.world.run_python` gives the same
-record for Python policies.
+and the outcome (:class:`RunOutcome`); the setup and the record are ``persuasive.record``'s.
+:func:`persuasive.world.run_python` gives the same record for Python policies.
 
 States are indexed ``x_0 .. x_N`` (``N = n_steps``): step ``k`` decides at ``x_k`` and advances
 to ``x_{k+1}``; collision and arrival are tested on ``x_{k+1}``. ``idx_end`` is the first step

@@ -45,10 +45,19 @@ def _register() -> None:
 _register()
 
 
+#: Raised by click 8.2 and later for a group called without a command (click 8.1 prints the
+#: help and exits 0 itself).
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: one-line errors, exit status 2 for bad input."""
+    """Entry point: one-line errors, exit status 2 for bad input; a group without a command
+    (``persuasive``, ``persuasive plot``) prints its help and exits 0."""
     try:
         rv = cli.main(args=argv, prog_name="persuasive", standalone_mode=False)
+    except _NO_ARGS_IS_HELP as exc:
+        click.echo(exc.ctx.get_help())
+        return 0
     except click.exceptions.Abort:
         click.echo("error: aborted", err=True)
         return 130

@@ -146,3 +146,38 @@ def compile_notice() -> None:
         click.echo("compiling the numerical kernels once (about 25 s; cached for later runs)",
                    err=True)
         sys.stderr.flush()
+
+
+def progress_bar(quiet: bool, rows: int | None = None) -> Callable[..., None] | None:
+    """A progress callback drawing a tqdm bar on stderr (``None`` when ``quiet``):
+    ``update(done_runs, total_runs[, rows_done])``, rows shown when ``rows`` is given.
+
+    The bar appears at the first update with runs left (a study resumed with nothing to run
+    shows none). ``update.close()`` ends its line: a command calls it when it stops, whether
+    it finished or failed, so that an error that follows is printed on a line of its own.
+    """
+    if quiet:
+        return None
+    from tqdm import tqdm
+
+    bar: dict[str, Any] = {}
+
+    def update(done: int, total: int, rows_done: int | None = None) -> None:
+        if "bar" not in bar:
+            if done >= total:
+                return  # nothing left to run: no bar
+            bar["bar"] = tqdm(total=total, initial=done, unit="run", file=sys.stderr,
+                              dynamic_ncols=True, smoothing=0.1)
+        b = bar["bar"]
+        if rows is not None and rows_done is not None:
+            b.set_postfix_str(f"rows {rows_done}/{rows}", refresh=False)
+        b.update(done - b.n)
+        if done >= total:
+            b.close()
+
+    def close() -> None:
+        if "bar" in bar:
+            bar["bar"].close()
+
+    update.close = close  # type: ignore[attr-defined]
+    return update

@@ -11,8 +11,8 @@ from ._common import compile_notice
 
 
 @click.command()
-@click.option("--runs", "n_runs", type=click.IntRange(min=1), default=10, show_default=True,
-              help="Closed-loop runs whose states are replayed.")
+@click.option("--runs", "n_runs", type=click.IntRange(1, 1000), default=10, show_default=True,
+              help="Closed-loop runs (seeds 1..N, at most 1000) whose states are replayed.")
 @click.option("--repeats", type=click.IntRange(min=1), default=3, show_default=True,
               help="Passes over those states.")
 @click.option("--full", is_flag=True, help="Also time 'reproduce all' (16,000 runs).")

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import sys
 
 import click
 
-from ._common import build_config, check_workers, compile_notice, config_options
+from ._common import build_config, check_workers, compile_notice, config_options, progress_bar
 
 
 @click.command()
@@ -46,6 +45,7 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
     with 95 % bootstrap intervals, then each AV's paired differences against persuasive.
     """
     from ..config import AV_KINDS, SHIELD_KINDS, SIMULATED_HV_KINDS
+    from ..experiments import check_seeds
     from ..studies import compare as cmp
 
     base = build_config(config_file, sets, {"mode": mode, "hv.role": hv_role,
@@ -54,6 +54,7 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
     hvs = cmp.parse_kinds(hv_kinds, SIMULATED_HV_KINDS, "--hv", cmp.DEFAULT_HV_KINDS)
     shield_list = cmp.parse_kinds(shields, SHIELD_KINDS, "--shield", SHIELD_KINDS) \
         if shields is not None else None
+    check_seeds(seeds, len(avs) * len(hvs) * len(shield_list or (None,)), "--seeds", "pairs")
     if base.simulation.streams == "legacy" and "lfg" in avs:
         click.echo("warning: simulation.streams = legacy: the human's draws depend on whether "
                    "the AV draws (the lfg AV does), so those runs are not paired", err=True)
@@ -61,20 +62,13 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
                                shield_list)  # checks it all
     workers = check_workers(workers, max(1, len(grid) // 25))
     compile_notice()
-    progress = None
-    if not quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(grid), unit="run", dynamic_ncols=True, smoothing=0.1,
-                   file=sys.stderr)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(done - bar.n)
-            if done >= total:
-                bar.close()
-
-    result = cmp.run_comparison(base, avs, hvs, seeds, out, workers, force, timing_seeds,
-                                progress, shield_list)
+    progress = progress_bar(quiet)
+    try:
+        result = cmp.run_comparison(base, avs, hvs, seeds, out, workers, force, timing_seeds,
+                                    progress, shield_list)
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
     if as_json:
         click.echo(json.dumps(cmp.json_rows(result.summary)))
     else:

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ._common import (build_config, check_workers, compile_notice, config_options,
-                      shield_option)
+                      progress_bar, shield_option)
 
 
 @click.command()
@@ -40,9 +40,10 @@ def reproduce(table, seeds, workers, scenario, shield, mode, config_file, sets, 
     from .. import experiments as ex
     from .._files import check_output_folder
 
+    tables = ex.TABLES if table == "all" else (table,)
+    ex.check_seeds(seeds, sum(len(ex.PUBLISHED[t]) for t in tables), "--seeds")
     base = build_config(config_file, sets, {"mode": mode, "scenario.kind": scenario,
                                            "av.shield": shield})
-    tables = ex.TABLES if table == "all" else (table,)
     grids = {t: ex.table_grid(t, base, seeds) for t in tables}
     folders = {}
     for t in tables:
@@ -60,16 +61,20 @@ def reproduce(table, seeds, workers, scenario, shield, mode, config_file, sets, 
     workers = check_workers(workers, max(-(-len(g) // default_chunk(len(g)))
                                          for g in grids.values()))
     compile_notice()
-    progress = None if quiet else ex.tqdm_progress(n_rows)
+    progress = progress_bar(quiet, n_rows)
     offset = 0
     results = []
-    for t in tables:
-        def shifted(done, _total, _rows, offset=offset):
-            if progress is not None:
-                progress(offset + done, total, (offset + done) // seeds)
-        results.append(ex.reproduce(t, seeds, workers, None, base, progress=shifted,
-                                    out=folders[t], force=force))
-        offset += len(grids[t])
+    try:
+        for t in tables:
+            def shifted(done, _total, _rows, offset=offset):
+                if progress is not None:
+                    progress(offset + done, total, (offset + done) // seeds)
+            results.append(ex.reproduce(t, seeds, workers, None, base, progress=shifted,
+                                        out=folders[t], force=force))
+            offset += len(grids[t])
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
     summaries = {t: r.summaries[t] for t, r in zip(tables, results)}
     failures = [f for r in results for f in r.failures]
     for t, r in zip(tables, results):
@@ -85,8 +90,13 @@ def reproduce(table, seeds, workers, scenario, shield, mode, config_file, sets, 
             click.echo(f"{ex.verdict(summaries[t], base)}")
             click.echo(f"written to {folders[t]}/\n")
         wall = sum(r.wall_time_s for r in results)
-        click.echo(f"{total - len(failures)} runs in {wall:.1f} s with "
-                   f"{workers} worker{'s' if workers > 1 else ''}")
+        skipped, ran = sum(r.skipped for r in results), sum(r.ran for r in results)
+        with_workers = f"with {workers} worker{'s' if workers > 1 else ''}"
+        if not skipped:
+            click.echo(f"{total - len(failures)} runs in {wall:.1f} s {with_workers}")
+        else:  # resumed: as 'persuasive sweep' says it
+            now = f"{ran} run now {with_workers}" if ran else "none to run"
+            click.echo(f"{total} runs: {skipped} finished earlier, {now}, {wall:.1f} s")
     if failures:
         click.echo(f"error: {len(failures)} run(s) failed and are left out of the results "
                    "(listed above and in summary.json); run the same command again to retry "

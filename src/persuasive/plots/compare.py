@@ -4,7 +4,9 @@
 AV planners by human models, each cell coloured by the share of runs in which the AV reached
 its line first and labelled with that share, its 95 % interval and the number of collisions;
 right, box plots of the AV's and the human's delays per pair (time to leave the conflict zone
-minus the free-flow time; runs where a vehicle never cleared are left out and counted).
+minus the free-flow time; runs where a vehicle never cleared are left out and counted). A pair
+whose delays are all zero, or undefined (the vehicle never cleared), says "0" or "n/a" beside
+its empty box.
 """
 
 from __future__ import annotations
@@ -58,15 +60,18 @@ def compare_figure(summary: dict[str, Any], runs) -> Figure:
     bar = fig.colorbar(image, ax=ax_m, fraction=0.05, pad=0.02)
     bar.ax.tick_params(labelsize=_FONT["tick"])
 
-    labels, data, colors = [], [], []
+    labels, data, colors, notes = [], [], [], []
     for av in avs:
         for hv in hvs:
             mine = runs[(runs["av.kind"] == av) & (runs["hv.kind"] == hv)]
+            note = []
             for who, color in (("av", AV_COLOR), ("hv", HV_COLOR)):
                 d = mine[f"{who}_delay_s"].to_numpy(dtype=float, na_value=np.nan)
                 data.append(d[np.isfinite(d)])
                 colors.append(color)
+                note.append(_degenerate(who, data[-1]))
             labels.append(f"{av} / {hv}")
+            notes.append(", ".join(n for n in note if n))
     positions = np.arange(len(labels) * 2, dtype=float)
     positions += np.repeat(np.arange(len(labels)), 2) * 0.6  # a gap between pairs
     box = ax_b.boxplot([d if d.size else [np.nan] for d in data], positions=positions,
@@ -79,12 +84,40 @@ def compare_figure(summary: dict[str, Any], runs) -> Figure:
         patch.set_gid("delay-box")
     ax_b.set_yticks(positions[::2] + 0.5, labels, fontsize=_FONT["note"])
     ax_b.invert_yaxis()
+    # A box of delays all zero is a bare tick, and no delay at all draws nothing: say so,
+    # beside the tick when the pair has no other box, else at the right, in room kept free.
+    finite = [d for d in data if d.size]
+    lo = min([0.0, *(float(d.min()) for d in finite)])
+    hi = max([0.0, *(float(d.max()) for d in finite)])
+    span = hi - lo if hi > lo else 1.0
+    alone = [not any(d.size and np.any(d != 0.0) for d in data[2 * i:2 * i + 2])
+             for i in range(len(labels))]
+    ax_b.set_xlim(lo - 0.03 * span, hi + (0.45 if not all(alone) else 0.05) * span)
+    for i, (y, label, note) in enumerate(zip(positions[::2] + 0.5, labels, notes)):
+        if not note:
+            continue
+        where = dict(xy=(0.0, y), xytext=(4.0, 0.0), ha="left") if alone[i] else \
+            dict(xy=(1.0, y), xytext=(-3.0, 0.0), ha="right",
+                 xycoords=("axes fraction", "data"))
+        ax_b.annotate(note, textcoords="offset points", va="center",
+                      fontsize=_FONT["note"] - 0.5, color="0.2",
+                      gid=f"delay-note-{label.replace(' / ', '-')}", **where)
     ax_b.set_xlabel("delay against free flow [s]", fontsize=_FONT["label"])
     ax_b.set_title("delays (AV red, human blue)", fontsize=_FONT["title"])
     _style(ax_b)
     fig.suptitle(f"compare: {summary['scenario']}, {summary['mode']} mode, seeds "
                  f"1..{summary['seeds']}", fontsize=_FONT["title"])
     return fig
+
+
+def _degenerate(who: str, delays: np.ndarray) -> str:
+    """What a pair's box of ``who``'s delays cannot show: ``"AV n/a"`` when that vehicle never
+    cleared the conflict, ``"AV 0"`` when every delay is zero; else ``""``."""
+    if delays.size == 0:
+        return f"{who.upper()} n/a"
+    if np.all(delays == 0.0):
+        return f"{who.upper()} 0"
+    return ""
 
 
 __all__ = ["compare_figure"]

@@ -106,6 +106,8 @@ def load_replay(config: Config) -> Recording:
 
     path = Path(config.hv.replay.file)
     who = config.hv.replay.vehicle
+    if not path.exists():
+        raise ConfigError(f"hv.replay.file = {str(path)!r} cannot be read: no such file")
     try:
         frame = pd.read_csv(path) if path.suffix.lower() == ".csv" else pd.read_parquet(path)
     except (OSError, ValueError) as exc:

@@ -83,11 +83,13 @@ def parse_kinds(text: str | Sequence[str] | None, allowed: Sequence[str], name: 
 def comparison_grid(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str],
                     seeds: int, shields: Sequence[str] | None = None):
     """The sweep grid of a comparison: ``av.kind`` x ``av.shield`` (when ``shields`` is given)
-    x ``hv.kind`` x seeds ``1..seeds``."""
+    x ``hv.kind`` x seeds ``1..seeds``, at most ``persuasive.experiments.MAX_RUNS`` runs (they
+    are summarised in memory)."""
+    from ..experiments import check_seeds
     from ..sweep import Grid
 
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    check_seeds(seeds, max(1, len(av_kinds) * len(hv_kinds) * len(shields or (None,))),
+                rows="pairs")
     av_axes: dict[str, Any] = {"kind": list(av_kinds)}
     if shields:
         av_axes["shield"] = list(shields)
@@ -138,7 +140,8 @@ def run_comparison(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str
     base = comparison_base(base)
     grid = comparison_grid(base, av_kinds, hv_kinds, seeds, shields)
     folder = Path(out) if out is not None else Path("results") / f"compare-{grid.digest[:10]}"
-    result = sweep.run(grid, folder, workers=workers, force=force, progress=progress)
+    result = sweep.run(grid, folder, workers=workers, force=force, progress=progress,
+                       what="comparison folder")
     runs = sweep.load(folder)
     timing = decision_times(base, av_kinds, hv_kinds, min(timing_seeds, seeds), shields)
     summary = summarize(runs, base, av_kinds, hv_kinds, seeds, timing, shields)
