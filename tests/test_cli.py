@@ -246,7 +246,7 @@ def test_a_results_summary_that_is_not_utf8_is_one_line(capsys, tmp_path):
      "--seeds = 4294967295 is out of range; allowed: 1..62500 for 16 rows (at most 1000000 "
      "runs, summarised in memory; 'persuasive sweep' streams more to disk)"),
     (["compare", "--seeds", "4000000000"],
-     "--seeds = 4000000000 is out of range; allowed: 1..40000 for 25 pairs (at most 1000000 "
+     "--seeds = 4000000000 is out of range; allowed: 1..25000 for 40 pairs (at most 1000000 "
      "runs, summarised in memory; 'persuasive sweep' streams more to disk)"),
     (["compare", "--seeds", "4294967296", "--av", "cv", "--hv", "idm"],
      "--seeds = 4294967296 is out of range; allowed: integer in [1, 4294967295]"),

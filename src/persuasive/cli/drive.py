@@ -14,7 +14,7 @@ import sys
 
 import click
 
-from ._common import compile_notice
+from ._common import compile_notice, shield_option
 
 #: Where trials go unless ``--out`` says otherwise.
 DEFAULT_OUT = "results/drive"
@@ -48,7 +48,9 @@ def _need_web_extra() -> None:
               help="Folder for the trials and study summaries (created if missing).")
 @click.option("--seed", type=int, default=None,
               help="Base seed (practice uses it, condition j seed + 1 + j) [the study's].")
-def drive(host: str, port: int, study_file: str | None, out: str, seed: int | None) -> None:
+@shield_option
+def drive(host: str, port: int, study_file: str | None, out: str, seed: int | None,
+          shield: str | None) -> None:
     """Drive the HV against the AV's planner in a browser (a user-study server)."""
     import asyncio
     import secrets
@@ -63,6 +65,8 @@ def drive(host: str, port: int, study_file: str | None, out: str, seed: int | No
     study = load_study(study_file) if study_file else default_study()
     if seed is not None:
         study = study.with_seed(seed)
+    if shield is not None:
+        study = study.with_shield(shield)
     out_dir = check_output_folder(out, "output folder")
     loopback = is_loopback(host)
     token = None if loopback else secrets.token_urlsafe(24)

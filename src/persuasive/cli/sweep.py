@@ -9,7 +9,7 @@ from typing import Any
 
 import click
 
-from ._common import check_workers, compile_notice, progress_bar
+from ._common import check_workers, compile_notice, progress_bar, shield_option
 
 _GRID_HELP = """Run every run of a grid of configurations times seeds, on Dask.
 
@@ -52,11 +52,13 @@ def _default_out(grid_path: str, digest: str) -> Path:
               help="Replace a folder holding another sweep (clears its parts).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def sweep(grid_file, out, workers, scheduler, chunk, force, as_json, quiet) -> None:
+@shield_option
+def sweep(grid_file, out, workers, scheduler, chunk, force, as_json, quiet, shield) -> None:
     from .. import sweep as sw
     from ..config import ConfigError
 
-    grid = sw.Grid.from_toml(grid_file)  # validated whole before anything runs
+    # validated whole before anything runs; --shield sets the base's av.shield
+    grid = sw.Grid.from_toml(grid_file, {"av.shield": shield} if shield else None)
     if workers is not None and scheduler is not None:
         raise ConfigError("--workers applies to the local cluster only; the workers of "
                           "--scheduler are those started with 'dask worker'")

@@ -164,9 +164,26 @@ class Grid:
     # -- building ------------------------------------------------------------------------------
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> Grid:
-        """Read a grid file; a file that cannot be read or parsed is a one-line error."""
+    def from_toml(cls, path: str | Path, base_overrides: Mapping[str, Any] | None = None
+                  ) -> Grid:
+        """Read a grid file; a file that cannot be read or parsed is a one-line error.
+
+        ``base_overrides``: dotted fields set in ``[base]`` on top of the file (a command's
+        explicit options, e.g. ``persuasive sweep --shield``), refused for a field the grid
+        varies."""
         data = read_toml(path, "grid file")
+        if base_overrides:
+            data = dict(data)
+            base = Config.from_dict(data.get("base", {})) if isinstance(
+                data.get("base", {}), Mapping) else None
+            if base is not None:
+                axes = dict(_flat_axes(data.get("axes", {}))) if isinstance(
+                    data.get("axes", {}), Mapping) else {}
+                for name in base_overrides:
+                    if name in axes:
+                        raise ConfigError(f"grid: {name} is an axis of {str(path)!r}; an option "
+                                          "cannot set it too")
+                data["base"] = base.with_overrides(dict(base_overrides)).to_dict()
         return cls.from_dict(data)
 
     @classmethod

@@ -124,6 +124,18 @@ class Study:
         conditions = tuple(replace(c, seed=seed + 1 + j) for j, c in enumerate(self.conditions))
         return replace(self, seed=seed, practice=practice, conditions=conditions)
 
+    def with_shield(self, shield: str) -> Study:
+        """The same study with the AV's safety shield set in every condition and in the
+        practice trial (``persuasive drive --shield``; docs/method.md §12)."""
+        from dataclasses import replace
+
+        def shielded(c: Condition) -> Condition:
+            return replace(c, overrides={**c.overrides, "av.shield": shield},
+                           config=c.config.with_overrides({"av.shield": shield}))
+
+        return replace(self, practice=shielded(self.practice) if self.practice else None,
+                       conditions=tuple(shielded(c) for c in self.conditions))
+
 
 # -- counterbalancing ----------------------------------------------------------------------------
 
