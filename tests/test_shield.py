@@ -285,7 +285,7 @@ human_accels = st.lists(st.sampled_from([-2.0, -1.0, 0.0, 0.5, 1.0]) | st.floats
 
 
 @pytest.mark.slow
-@settings(max_examples=60)
+@settings(max_examples=40)
 @given(scenario_name=st.sampled_from(list(SCENARIOS)),
        av_kind=st.sampled_from(["persuasive", "passive", "cv", "lfg", "yield"]),
        av_v0=st.floats(0.0, 8.0), hv_ds=st.floats(0.0, 20.0), hv_v0=st.floats(0.0, 8.0),

@@ -164,8 +164,14 @@ class ExternalPlanner:
             self._made += 1
         return planner
 
-    def act(self, ego_v_mps: float, conflicts: Sequence[Conflict], dt_s: float) -> Decision:
-        """The ego's acceleration at speed ``ego_v_mps`` among ``conflicts``."""
+    def act(self, ego_v_mps: float, conflicts: Sequence[Conflict], dt_s: float,
+            shield_lead_m: float = 0.0) -> Decision:
+        """The ego's acceleration at speed ``ego_v_mps`` among ``conflicts``.
+
+        ``shield_lead_m``: the shield takes the ego this much further along its path than the
+        conflicts say (a simulator whose integration lets a braking vehicle roll further than
+        the exact step: highway-env's Euler step rolls ``v dt / 2`` further, exactly).
+        """
         ego, clear = self.ego, self._clear_m
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
         human = Limits.of(self.config, "hv")
@@ -202,7 +208,7 @@ class ExternalPlanner:
         proposed, verdict = a, None
         if self.config.shield != "off":
             s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
-            a, code = sh.shield_step_many(v, proposed, dt_s, s_R, s_H, v_H, C)
+            a, code = sh.shield_step_many(v, proposed, dt_s, s_R + shield_lead_m, s_H, v_H, C)
             verdict = sh.VERDICTS[code]
         return Decision(float(a), float(proposed), verdict, len(accels), len(conflicts))
 

@@ -35,9 +35,14 @@ its half-diagonal``); a vehicle whose lanes stay in that band to their end joins
 ego's line), one in the ego's lane ahead of it is followed. Its limits are highway-env's own:
 ``IDMVehicle`` accelerates at most at its ``COMFORT_ACC_MAX``, brakes at most at its
 ``ACC_MAX`` and never drives faster than the larger of its speed and its target speed.
-highway-env integrates positions with the speed of the step's start (Euler), which lets a
-braking ego roll up to ``v dt / 2`` further than the planner's exact step: the ego's occupancy
-and its following gap are widened by ``v_max dt / 2``. The acceleration is finally limited so
+highway-env integrates positions with the speed of the step's start (Euler): a braking ego
+rolls further than the planner's exact step says, by ``v dt / 2`` from speed ``v`` plus at most
+``b dt^2 / 8`` for the last, partial step of deceleration ``b`` (the speed is clipped at 0), and
+an accelerating one lags behind it. The shield therefore takes the ego
+``v dt / 2 + |u_min| dt^2 / 8`` further along than it is, and the far end of the ego's
+occupancy is widened by ``v_max dt`` for the lag (at ``u_max = 1 m/s^2`` it stays below that
+for the 10 s it takes the ego to accelerate from rest to ``v_max``); the other vehicles' near
+ends by their ``v_max dt / 2`` (an Euler vehicle that stops, stops that much further). The acceleration is finally limited so
 that the speed stays in ``[v_min, v_max]`` within the step.
 
 The comparison driver (``default``) is highway-env's own: the ego becomes one of the env's
@@ -131,15 +136,25 @@ def highway_env_id() -> str:
     raise ConfigError(f"highway-env provides none of {', '.join(HIGHWAY_ENV_IDS)}")
 
 
+#: The ego's strongest braking [m/s^2]: highway-env's own drivers brake comfortably at
+#: 5 m/s^2 (``COMFORT_ACC_MIN``) and at most at 6; the paper's 2 m/s^2 cannot stop the ego
+#: from highway-env's initial 10 m/s in the room its traffic leaves it (the shield then has no
+#: fallback from the first step on).
+EGO_BRAKING_MPS2 = 5.0
+
+
 def planner_config(kind: str = "persuasive", shield: str | None = None) -> Config:
     """The planner's configuration: corrected mode (the :class:`~persuasive.Planner`'s
     default; paper mode's quirk Q3 reads a human role highway-env's drivers do not have) with
-    ``av.kind = kind`` and ``av.shield = shield`` (default: corrected mode's, worst-case)."""
+    ``av.kind = kind``, ``av.shield = shield`` (default: corrected mode's, worst-case) and the
+    ego braking at up to :data:`EGO_BRAKING_MPS2`."""
     if kind not in AV_KINDS and kind not in AV_KIND_ALIASES:
         raise ConfigError(f"--planner = {kind!r} is out of range; allowed: "
                           f"{' | '.join(AV_KINDS)}")
-    return Config(mode="corrected").with_overrides({"av.kind": kind, "av.shield": shield}
-                                                   if shield else {"av.kind": kind})
+    overrides = {"av.kind": kind, "av.vehicle.u_min_mps2": -EGO_BRAKING_MPS2}
+    if shield:
+        overrides["av.shield"] = shield
+    return Config(mode="corrected").with_overrides(overrides)
 
 
 def highway_config(config: Config) -> dict[str, Any]:
@@ -332,7 +347,7 @@ class Projector:
         self.network = network
         self.ego = EgoPath.from_lanes(network, ego_lanes)
         self.ego_size = ego_size  #: the ego's (length, width) [m]
-        self.euler_margin_m = euler_margin_m  #: widening of the ego's occupancy [m]
+        self.euler_margin_m = euler_margin_m  #: widening for Euler steps [m] (module docstring)
         self._tracks: dict[int, Track] = {}
 
     def track(self, vehicle) -> Track:
@@ -364,7 +379,7 @@ class Projector:
         ego_len, ego_wid = self.ego_size
         r_o = 0.5 * math.hypot(vehicle.LENGTH, vehicle.WIDTH)
         band = 0.5 * ego_wid + r_o + TRACK_MARGIN_M
-        reach = 0.5 * ego_len + r_o + self.euler_margin_m
+        reach = 0.5 * ego_len + r_o
         arcs, us, lats = [], [], []
         for lane_index, offset in zip(track.lanes, track.offsets):
             lane = self.network.get_lane(lane_index)
@@ -388,14 +403,16 @@ class Projector:
             return
         a, b = starts[ahead[0]], ends[ahead[0]]
         h = OCCUPANCY_SAMPLE_M
-        u_lo, u_hi = float(us[a:b + 1].min()) - reach, float(us[a:b + 1].max()) + reach
+        u_lo = float(us[a:b + 1].min()) - reach
+        u_hi = float(us[a:b + 1].max()) + reach + 2.0 * self.euler_margin_m  # the lag of GO
+        other_lead = 0.5 * highway_limits(vehicle).v_max_mps / FREQUENCY_HZ
         if b == arcs.size - 1:  # in the band to the end of its lanes: it joins the ego's lane
             on_line = np.flatnonzero(np.abs(lats[a:b + 1]) <= SAME_LANE_M)
             m = a + (int(on_line[0]) if on_line.size else int(np.argmin(np.abs(lats[a:b + 1]))))
             track.kind = "merge"
             track.origin_arc_m, track.origin_u_m = float(arcs[m]), float(us[m])
             track.ego_occupancy = (u_lo - track.origin_u_m, 0.0)
-            track.other_occupancy = (float(arcs[a]) - h - track.origin_arc_m,
+            track.other_occupancy = (float(arcs[a]) - h - other_lead - track.origin_arc_m,
                                      0.5 * (ego_len + vehicle.LENGTH) + ego_len + 1.0)
         else:
             track.kind = "crossing"
@@ -404,7 +421,7 @@ class Projector:
             else:
                 track.origin_arc_m, track.origin_u_m = float(arcs[a]), float(us[a])
             track.ego_occupancy = (u_lo - track.origin_u_m, u_hi - track.origin_u_m)
-            track.other_occupancy = (float(arcs[a]) - h - track.origin_arc_m,
+            track.other_occupancy = (float(arcs[a]) - h - other_lead - track.origin_arc_m,
                                      float(arcs[b]) + h - track.origin_arc_m)
 
     @staticmethod
@@ -456,8 +473,7 @@ class Projector:
             if self.in_ego_lane(v):
                 u = self.ego.coordinates(v.position)[0]
                 if u > u_ego:
-                    out.append(Conflict(id(v), FOLLOW, u_ego, u, float(v.speed), other=limits,
-                                        gap_margin_m=self.euler_margin_m))
+                    out.append(Conflict(id(v), FOLLOW, u_ego, u, float(v.speed), other=limits))
                 continue
             track = self.track(v)
             if track.kind is None:
@@ -467,12 +483,11 @@ class Projector:
             if track.kind == "merge" and s_other >= 0.0:  # it has joined the lane
                 if s_other > s_ego:
                     out.append(Conflict(id(v), FOLLOW, s_ego, s_other, float(v.speed),
-                                        other=limits, gap_margin_m=self.euler_margin_m))
+                                        other=limits))
                 continue
             out.append(Conflict(id(track), CROSSING if track.kind == "crossing" else MERGE,
                                 s_ego, s_other, float(v.speed), track.ego_occupancy,
-                                track.other_occupancy, limits,
-                                gap_margin_m=self.euler_margin_m))
+                                track.other_occupancy, limits))
         return out
 
     def leader(self, ego_vehicle, vehicles: Iterable) -> tuple[float, float] | None:
@@ -520,7 +535,9 @@ class PlannerDriver:
         ego = env.unwrapped.vehicle
         conflicts = projector.conflicts(ego, env.unwrapped.road.vehicles)
         dt = 1.0 / FREQUENCY_HZ
-        decision = self.planner.act(float(ego.speed), conflicts, dt)
+        # the Euler step's lead of a braking ego (module docstring)
+        lead = 0.5 * max(float(ego.speed), 0.0) * dt + abs(av.u_min_mps2) * dt * dt / 8.0
+        decision = self.planner.act(float(ego.speed), conflicts, dt, shield_lead_m=lead)
         self.last_targets = decision.targets
         if decision.verdict not in (None, "admitted"):
             self.interventions += 1
@@ -530,8 +547,8 @@ class PlannerDriver:
 
 
 def euler_margin(config: Config) -> float:
-    """How much further highway-env's Euler step lets the braking ego roll than the exact
-    step, at most: ``v_max dt / 2`` [m] (module docstring)."""
+    """``v_max dt / 2`` [m]: how much further highway-env's Euler step lets the ego roll
+    than the exact step, at most (module docstring)."""
     return 0.5 * config.vehicle_of("av").v_max_mps / FREQUENCY_HZ
 
 
