@@ -135,6 +135,7 @@ def main() -> None:
         rec = os.path.join(tmp, "steps.pkl")
         _python(args.new_src, RECORD, args.scenario, str(args.flow), str(args.ignore_foes),
                 args.seeds, rec)
+        _python(args.old_src, REPLAY, rec)  # compile and cache the old tree's kernels
         results: dict[str, list[dict]] = {"old": [], "new": []}
         for i in range(args.rounds):
             for name in (("old", "new") if i % 2 == 0 else ("new", "old")):

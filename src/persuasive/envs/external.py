@@ -206,10 +206,19 @@ class ExternalPlanner:
         a = min(max(a, ego.u_min_mps2), ego.u_max_mps2)
         proposed, verdict = a, None
         if self.config.shield != "off":
-            s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
-            a, code = sh.shield_step_many(v, proposed, dt_s, s_R, s_H, v_H, C)
-            verdict = sh.VERDICTS[code]
+            a, verdict = self.shield(v, proposed, conflicts, dt_s)
         return Decision(float(a), float(proposed), verdict, len(accels), len(conflicts))
+
+    def shield(self, ego_v_mps: float, proposed_mps2: float, conflicts: Sequence[Conflict],
+               dt_s: float) -> tuple[float, str]:
+        """The shield alone (no planning): ``(acceleration to apply [m/s^2], verdict)`` for
+        the proposal ``proposed_mps2`` at speed ``ego_v_mps`` among ``conflicts``, as
+        :meth:`act` applies it."""
+        ego = self.ego
+        v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
+        s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
+        a, code = sh.shield_step_many(v, float(proposed_mps2), dt_s, s_R, s_H, v_H, C)
+        return float(a), sh.VERDICTS[code]
 
 
 def idm_follow(config: Config, v: float, leader: tuple[float, float]) -> float:

@@ -73,7 +73,7 @@ import sys
 import tempfile
 import time
 import xml.etree.ElementTree as ET
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -116,6 +116,11 @@ HUMAN_TYPE = {"length": 5.0, "width": 1.8, "accel": 2.6, "decel": 4.5, "emergenc
 RECKLESS_PARAMS = {"jmIgnoreFoeProb": 1.0, "jmIgnoreFoeSpeed": 1000.0,
                    "jmIgnoreJunctionFoeProb": 1.0}
 NETCONVERT_TIMEOUT_S = 120.0
+#: The stand-ins for vehicles not inserted yet (:func:`entry_vehicles`): key prefix, and the
+#: front's position along the route's first lane [m] (SUMO inserts a 5 m car's front at
+#: 5.1 m; 0.9 m more for margin).
+ENTRY_PREFIX = "entry:"
+ENTRY_FRONT_M = 6.0
 
 
 # -- networks -------------------------------------------------------------------------------
@@ -518,6 +523,51 @@ def conflicts_of(projector: Projector, ego: VehicleState, others: Sequence[Vehic
     return out
 
 
+def entry_vehicles(network: Network, limits: Limits) -> list[VehicleState]:
+    """One stand-in per conflicting route for the vehicles SUMO may still insert there
+    (keys :data:`ENTRY_PREFIX` and the route's index): at the route's start, its front
+    :data:`ENTRY_FRONT_M` along the first lane, at the type's ``v_max``.
+
+    SUMO inserts every vehicle of the traffic at its route's start (its front 5.1 m along
+    the lane, at most at ``maxSpeed``), so whatever enters later can be nowhere that this
+    stand-in, which may do anything within the type's limits from now, could not be; a
+    trajectory certified against it is certified against every vehicle not yet inserted,
+    and the stand-in stays where it is, so the certification holds at every later step
+    (docs/method.md §14.4). Without it the ego may enter a conflict where no vehicle is in
+    view and then find one inserted, outside the shield's invariant set."""
+    return [VehicleState(f"{ENTRY_PREFIX}{r}", tuple(edges), f"{edges[0]}_0", ENTRY_FRONT_M,
+                         math.nan, math.nan, math.nan, limits.v_max_mps, limits.length_m,
+                         limits.width_m, limits)
+            for r, edges in enumerate(network.traffic_routes)]
+
+
+def decide(planner: ExternalPlanner, projector: Projector, ego: VehicleState,
+           others: Sequence[VehicleState], clear_m: float,
+           slack: tuple[float, float]) -> tuple[Any, list]:
+    """The planner's decision for the ego among ``others`` (``ExternalPlanner.act`` on
+    :func:`conflicts_of` with the ballistic ``slack``) and the conflicts it saw.
+
+    An ego at rest is re-anchored: the stop that brought it there may have taken it up to
+    ``slack[0]`` beyond the exact braking motion (the overshoot the shift was for), and
+    shifting its new position once more would count that overshoot twice, so that an ego
+    certified to stand before its interval could find itself inside it and no fallback
+    certified. Standing still, and starting from rest at ``u_max``, never stop within a step,
+    so SUMO moves the ego exactly as the shield assumes: when the shifted shield certifies no
+    fallback at rest, the shield is asked again without the shift (the intervals still end
+    ``slack[1]`` later, for the step that reaches ``v_max``) to stand for a step, and applies
+    its answer if that one is certified (verdict ``brake`` when the ego stands, ``go``)."""
+    conflicts = conflicts_of(projector, ego, others, clear_m, slack)
+    decision = planner.act(ego.speed_mps, conflicts, DT_S)
+    if decision.verdict == "uncertified" and ego.speed_mps <= 0.0:
+        exact = conflicts_of(projector, ego, others, clear_m, (0.0, slack[1]))
+        u_min = planner.ego.u_min_mps2
+        a, verdict = planner.shield(0.0, u_min, exact, DT_S)
+        if verdict != "uncertified":
+            decision = replace(decision, accel_mps2=a,
+                               verdict="brake" if a == u_min else "go")
+    return decision, conflicts
+
+
 # -- one episode ----------------------------------------------------------------------------
 
 
@@ -700,6 +750,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
             cross_arc = projector.ego.offsets[cross_lane][0] + 0.5 * ego_limits.length_m
             clear = planner._clear_m if planner is not None else 0.0
             slack = ballistic_slack(ego_limits)
+            entries = entry_vehicles(network, _type_limits(ls, "human"))
             steered = False
             while ls.simulation.getTime() < end_s - 1e-9:
                 ls.simulationStep()
@@ -738,10 +789,10 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                     ls.vehicle.setSpeedMode("ego", SPEED_MODE)
                     steered = True
                 t0 = time.perf_counter()
-                conflicts = conflicts_of(projector, ego, states, clear, slack)
-                decision = planner.act(ego.speed_mps, conflicts, DT_S)
+                decision, conflicts = decide(planner, projector, ego, states + entries, clear,
+                                             slack)
                 ms = 1e3 * (time.perf_counter() - t0)
-                in_view = len(conflicts)
+                in_view = sum(not str(c.key).startswith(ENTRY_PREFIX) for c in conflicts)
                 v_next = min(max(ego.speed_mps + decision.accel_mps2 * DT_S,
                                  ego_limits.v_min_mps), ego_limits.v_max_mps)
                 ls.vehicle.setSpeed("ego", v_next)
@@ -968,6 +1019,6 @@ def frames_of(outputs: Sequence[EpisodeOutput]) -> dict[str, Any]:
 __all__ = ["DT_S", "EGO_DEPART_S", "EPISODE_S", "NETWORKS", "NO_EGO", "SCENARIOS",
            "SPEED_MODE", "SUMO_DRIVER", "ballistic_slack", "EpisodeOutput", "EpisodeResult", "Network",
            "Projector", "SumoReport", "VehicleState", "build_network", "check_study",
-           "conflicts_of", "driver_name", "frames_of", "run_study",
+           "conflicts_of", "decide", "driver_name", "entry_vehicles", "frames_of", "run_study",
            "lane_shapes", "planner_config", "routes_xml",
            "run_episode", "run_seed", "spawn_tied", "sumo_binaries", "traffic"]
