@@ -28,12 +28,12 @@ import sys
 import tempfile
 
 RECORD = r"""
-import pickle, sys, tempfile
+import os, pickle, sys
 from dataclasses import astuple
 from persuasive.envs import sumo as S
 scenario, flow, ignore, seeds, out = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), \
     [int(s) for s in sys.argv[4].split(",")], sys.argv[5]
-net = S.build_network(S.NETWORKS[scenario], tempfile.mkdtemp(prefix="persuasive-sumo-ab-"))
+net = S.build_network(S.NETWORKS[scenario], os.path.dirname(out))
 # what the planner is handed once per step: decide(planner, projector, ego, others, ...)
 # in a tree that has it, else conflicts_of(projector, ego, others, ...)
 target = "decide" if hasattr(S, "decide") else "conflicts_of"
@@ -59,7 +59,7 @@ with open(out, "wb") as fh:
 """
 
 REPLAY = r"""
-import json, os, pickle, sys, tempfile, time
+import json, pickle, sys, time
 import xml.etree.ElementTree as ET
 import numpy as np
 from persuasive.envs import external as X
