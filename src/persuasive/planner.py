@@ -101,6 +101,8 @@ class Planner:
         self._conflict = np.empty(N_CONFLICT)
         conflict_vector(self._P_av, self._P_hv, self._conflict)
         self._shielded = self.config.shield != "off"
+        self._tie_given = self.config.effective_quirks.q3_tie_break_leak and \
+            self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE)
         self.reset()
 
     def reset(self) -> None:
@@ -128,15 +130,29 @@ class Planner:
         (paper mode), where a belief tie reads the human's true role.
         """
         x_R, x_H = _state("av", av, self.config), _state("hv", hv, self.config)
-        tie_given = self.config.effective_quirks.q3_tie_break_leak and \
-            self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE)
         if human_role is not None and human_role not in ("leader", "follower"):
             raise ConfigError(f"human_role = {human_role!r} is out of range; allowed: "
                               "leader | follower")
-        if tie_given and human_role is None:
+        if self._tie_given and human_role is None:
             raise ConfigError("human_role is required with quirk Q3 (paper mode); "
                               "allowed: leader | follower")
         role = -1 if human_role is None else (LEADER if human_role == "leader" else FOLLOWER)
+        accel, proposed, verdict = self._step(x_R, x_H, role)
+        return self._plan(accel, proposed, verdict)
+
+    def accel(self, av: State, hv: State) -> float:
+        """The acceleration [m/s^2] :meth:`plan` returns for the same states, with the same
+        update of the belief and the stored prediction, but without the :class:`Plan`
+        around it and without checking the states: for a caller that plans many times per
+        step and passes finite states with speeds inside the vehicles' limits (the adapter
+        for outside simulators, ``persuasive.envs.external``). Not with quirk Q3 on."""
+        if self._tie_given:
+            raise ConfigError("Planner.accel cannot take the human's role (quirk Q3, paper "
+                              "mode); use Planner.plan")
+        return self._step((float(av[0]), float(av[1])), (float(hv[0]), float(hv[1])), -1)[0]
+
+    def _step(self, x_R: State, x_H: State, role: int) -> tuple[float, float, str | None]:
+        """One decision: ``(applied, proposed, verdict)``; advances the kept state."""
         if self._spec.needs_game:
             predict_buffers(x_H[0], x_H[1], x_R[0], x_R[1], self._P_hv, self._P_av, self._disc,
                             *self._hv, *self._av, self._idx, self._q_values, self.work)
@@ -156,7 +172,7 @@ class Planner:
             accel, code = shield_step(x_R[0], x_R[1], proposed, self.config.simulation.dt_s,
                                       x_H[0], x_H[1], self._conflict)
             verdict = VERDICTS[code]
-        return self._plan(float(accel), proposed, verdict)
+        return float(accel), proposed, verdict
 
     def _plan(self, accel: float, proposed: float, verdict: str | None) -> Plan:
         n = self.config.library.n_samples

@@ -43,6 +43,7 @@ from typing import Any, Hashable, Sequence
 import numpy as np
 
 from ..config import Config
+from ..packing import SHIELD_KIND_IDS
 from ..safety import shield as sh
 
 #: Kinds of conflict: the paths cross once; the other joins the ego's lane (a merge); the
@@ -83,24 +84,26 @@ class Conflict:
     other_occupancy: tuple[float, float] = (-math.inf, math.inf)
     other: Limits | None = None  #: its limits (default: the configuration's human vehicle)
     extra: dict = field(default_factory=dict, compare=False)  #: the adapter's own data
-    #: extra gap a follower keeps [m] (e.g. for a simulator's coarser integration)
-    gap_margin_m: float = 0.0
 
 
 def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The shield's inputs for several conflicts: ``(s_R, s_H, v_H, C)`` with ``C`` of shape
     ``(n, N_CONFLICT)`` (``persuasive.safety.shield.conflict_vector``'s layout)."""
-    n = len(conflicts)
-    s_R, s_H, v_H = np.empty(n), np.empty(n), np.empty(n)
-    C = np.empty((n, sh.N_CONFLICT))
-    kind = {"off": 0.0, "worst-case": 1.0, "responsive": 2.0}[config.shield]
     human = Limits.of(config, "hv")
-    for j, c in enumerate(conflicts):
+    # the slots every conflict shares: the shield's kind and the ego's limits
+    base = [0.0] * sh.N_CONFLICT
+    base[sh.C_KIND] = SHIELD_KIND_IDS[config.shield]
+    base[sh.C_RHO] = config.av.shield_response_s
+    base[sh.C_R_UMIN], base[sh.C_R_UMAX] = ego.u_min_mps2, ego.u_max_mps2
+    base[sh.C_R_VMIN], base[sh.C_R_VMAX] = ego.v_min_mps, ego.v_max_mps
+    s_R, s_H, v_H, rows = [], [], [], []
+    for c in conflicts:
         o = c.other if c.other is not None else human
-        s_R[j], s_H[j] = c.ego_s_m, c.other_s_m
-        v_H[j] = min(max(c.other_v_mps, o.v_min_mps), o.v_max_mps)
-        row = C[j]
+        s_R.append(c.ego_s_m)
+        s_H.append(c.other_s_m)
+        v_H.append(min(max(c.other_v_mps, o.v_min_mps), o.v_max_mps))
+        row = base[:]
         if c.kind == FOLLOW:  # the ego is in the lane already: only a leader matters
             row[sh.C_R_LO] = row[sh.C_R_HI] = -math.inf
             row[sh.C_H_LO] = row[sh.C_H_HI] = -math.inf
@@ -108,13 +111,12 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
             row[sh.C_R_LO], row[sh.C_R_HI] = c.ego_occupancy
             row[sh.C_H_LO], row[sh.C_H_HI] = c.other_occupancy
         row[sh.C_SHARED] = 0.0 if c.kind == CROSSING else 1.0
-        row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m) + c.gap_margin_m
-        row[sh.C_KIND], row[sh.C_RHO] = kind, config.av.shield_response_s
-        row[sh.C_R_UMIN], row[sh.C_R_UMAX] = ego.u_min_mps2, ego.u_max_mps2
-        row[sh.C_R_VMIN], row[sh.C_R_VMAX] = ego.v_min_mps, ego.v_max_mps
+        row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m)
         row[sh.C_H_UMIN], row[sh.C_H_UMAX] = o.u_min_mps2, o.u_max_mps2
         row[sh.C_H_VMIN], row[sh.C_H_VMAX] = o.v_min_mps, o.v_max_mps
-    return s_R, s_H, v_H, C
+        rows.append(row)
+    C = np.array(rows, float).reshape(len(rows), sh.N_CONFLICT)
+    return (np.array(s_R, float), np.array(s_H, float), np.array(v_H, float), C)
 
 
 @dataclass(frozen=True)
@@ -145,6 +147,7 @@ class ExternalPlanner:
         self.seed = seed
         self.plan_horizon_s = plan_horizon_s
         self.ego = Limits.of(config, "av")
+        self._human = Limits.of(config, "hv")
         self._planners: dict[Hashable, Any] = {}
         self._made = 0
         # the per-vehicle planners do not shield: the shield runs once, over all vehicles
@@ -155,10 +158,10 @@ class ExternalPlanner:
 
     def planner_for(self, key: Hashable):
         """The planner kept for vehicle ``key`` (made when first needed)."""
-        from ..planner import Planner
-
         planner = self._planners.get(key)
         if planner is None:
+            from ..planner import Planner
+
             planner = self._planners[key] = Planner(self._planner_config,
                                                     seed=self.seed * 1000 + self._made)
             self._made += 1
@@ -170,11 +173,10 @@ class ExternalPlanner:
 
         ``shield_lead_m``: the shield takes the ego this much further along its path than the
         conflicts say (a simulator whose integration lets a braking vehicle roll further than
-        the exact step: highway-env's Euler step rolls ``v dt / 2`` further, exactly).
+        the exact step: highway-env's Euler step, :mod:`persuasive.envs.highway`).
         """
-        ego, clear = self.ego, self._clear_m
+        ego, clear, human, horizon = self.ego, self._clear_m, self._human, self.plan_horizon_s
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
-        human = Limits.of(self.config, "hv")
         accels, live = [], set()
         leader = None
         for c in conflicts:
@@ -187,19 +189,18 @@ class ExternalPlanner:
             if not (c.other_s_m < clear and c.ego_s_m < clear):
                 continue
             o = c.other if c.other is not None else human
-            if self.plan_horizon_s is not None and sh.reach_time(
+            if horizon is not None and sh.reach_time(
                     c.other_s_m, min(max(c.other_v_mps, o.v_min_mps), o.v_max_mps),
-                    o.u_max_mps2, c.other_occupancy[0], o.v_min_mps,
-                    o.v_max_mps) > self.plan_horizon_s:
+                    o.u_max_mps2, c.other_occupancy[0], o.v_min_mps, o.v_max_mps) > horizon:
                 continue
             live.add(c.key)
-            # the planner's model of the human has the configuration's limits
-            plan = self.planner_for(c.key).plan(
-                av=(c.ego_s_m, v), hv=(c.other_s_m, min(max(c.other_v_mps, human.v_min_mps),
-                                                        human.v_max_mps)))
-            accels.append(plan.accel_mps2)
-        for key in list(self._planners):
-            if key not in live:
+            # the planner's model of the human has the configuration's limits (the states
+            # are finite and the speeds clamped: Planner.accel, without the Plan)
+            accels.append(self.planner_for(c.key).accel(
+                (c.ego_s_m, v), (c.other_s_m, min(max(c.other_v_mps, human.v_min_mps),
+                                                  human.v_max_mps))))
+        if len(live) != len(self._planners):
+            for key in [k for k in self._planners if k not in live]:
                 del self._planners[key]
         a = min(accels) if accels else ego.u_max_mps2
         if leader is not None:
@@ -207,10 +208,20 @@ class ExternalPlanner:
         a = min(max(a, ego.u_min_mps2), ego.u_max_mps2)
         proposed, verdict = a, None
         if self.config.shield != "off":
-            s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
-            a, code = sh.shield_step_many(v, proposed, dt_s, s_R + shield_lead_m, s_H, v_H, C)
-            verdict = sh.VERDICTS[code]
+            a, verdict = self.shield(v, proposed, conflicts, dt_s, shield_lead_m)
         return Decision(float(a), float(proposed), verdict, len(accels), len(conflicts))
+
+    def shield(self, ego_v_mps: float, proposed_mps2: float, conflicts: Sequence[Conflict],
+               dt_s: float, shield_lead_m: float = 0.0) -> tuple[float, str]:
+        """The shield alone (no planning): ``(acceleration to apply [m/s^2], verdict)`` for
+        the proposal ``proposed_mps2`` at speed ``ego_v_mps`` among ``conflicts``, as
+        :meth:`act` applies it (``shield_lead_m``: as there)."""
+        ego = self.ego
+        v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
+        s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
+        a, code = sh.shield_step_many(v, float(proposed_mps2), dt_s, s_R + shield_lead_m, s_H,
+                                      v_H, C)
+        return float(a), sh.VERDICTS[code]
 
 
 def idm_follow(config: Config, v: float, leader: tuple[float, float]) -> float:
@@ -277,16 +288,20 @@ class RouteConflict:
     other_occupancy: tuple[float, float]
 
     def conflict(self, key: Hashable, ego_arc_m: float, other_arc_m: float, other_v_mps: float,
-                 other: Limits | None = None, extra: dict | None = None) -> Conflict:
+                 other: Limits | None = None, extra: dict | None = None,
+                 ego_occupancy: tuple[float, float] | None = None) -> Conflict:
         """The :class:`Conflict` of vehicles whose centres are at these arc lengths of their
         routes. A merge the ego has passed (it is in the shared lane) with the other ahead
-        is a :data:`FOLLOW` conflict."""
+        is a :data:`FOLLOW` conflict. ``ego_occupancy``: the ego's interval to hand on in
+        place of :attr:`ego_occupancy` (e.g. widened for a simulator's integration; a
+        follow conflict keeps its own)."""
         s_R, s_H = ego_arc_m - self.ego_at_m, other_arc_m - self.other_at_m
         kind = self.kind
+        occupancy = self.ego_occupancy if ego_occupancy is None else ego_occupancy
         if kind == MERGE and s_R >= self.ego_occupancy[1] and s_H > s_R:
-            kind = FOLLOW
+            kind, occupancy = FOLLOW, self.ego_occupancy
         return Conflict(key, kind, float(s_R), float(s_H), float(other_v_mps),
-                        self.ego_occupancy, self.other_occupancy, other,
+                        occupancy, self.other_occupancy, other,
                         extra if extra is not None else {})
 
 

@@ -116,6 +116,11 @@ HUMAN_TYPE = {"length": 5.0, "width": 1.8, "accel": 2.6, "decel": 4.5, "emergenc
 RECKLESS_PARAMS = {"jmIgnoreFoeProb": 1.0, "jmIgnoreFoeSpeed": 1000.0,
                    "jmIgnoreJunctionFoeProb": 1.0}
 NETCONVERT_TIMEOUT_S = 120.0
+#: The stand-ins for vehicles not inserted yet (:func:`entry_vehicles`): key prefix, and the
+#: front's position along the route's first lane [m] (SUMO inserts a 5 m car's front at
+#: 5.1 m; 0.9 m more for margin).
+ENTRY_PREFIX = "entry:"
+ENTRY_FRONT_M = 6.0
 
 
 # -- networks -------------------------------------------------------------------------------
@@ -374,6 +379,7 @@ class Projector:
         self._links, self._shape, self._length = links, shape, length
         self._routes: dict[tuple[str, ...], Route] = {}
         self._conflicts: dict[tuple, Any] = {}
+        self._seen: dict[tuple, Any] = {}
         self.ego_size = ego_size
         self.ego = self.route(tuple(ego_edges))
 
@@ -438,6 +444,25 @@ class Projector:
         self._conflicts[key] = geo
         return geo
 
+    def of(self, edges: tuple[str, ...], other_size: tuple[float, float],
+           slack: tuple[float, float] = (0.0, 0.0)):
+        """``(route, geometry, the ego's interval ended sum(slack) later)`` of a vehicle on
+        ``edges`` (``None``: no conflict with the ego's route), made once per route, size
+        and slack: what :func:`conflicts_of` needs of a vehicle besides its state."""
+        key = (edges, other_size, slack)
+        try:
+            return self._seen[key]
+        except KeyError:
+            pass
+        geo = self.geometry(edges, other_size)
+        entry = None
+        if geo is not None:
+            lo, hi = geo.ego_occupancy
+            widened = (lo, hi + slack[0] + slack[1]) if any(slack) else geo.ego_occupancy
+            entry = (self.route(edges), geo, widened)
+        self._seen[key] = entry
+        return entry
+
 
 @dataclass(frozen=True)
 class VehicleState:
@@ -479,22 +504,68 @@ def conflicts_of(projector: Projector, ego: VehicleState, others: Sequence[Vehic
     if ego_arc is None:
         return []
     ego_arc += slack[0] - 0.5 * ego.length_m
+    slack = (float(slack[0]), float(slack[1]))
     out = []
     for o in others:
-        geo = projector.geometry(o.edges, (o.length_m, o.width_m))
-        if geo is None:
+        found = projector.of(o.edges, (o.length_m, o.width_m), slack)
+        if found is None:
             continue
-        arc = projector.route(o.edges).arc(o.lane, o.lane_pos_m)
+        route, geo, widened = found
+        arc = route.arc(o.lane, o.lane_pos_m)
         if arc is None:
             continue
-        c = geo.conflict(o.vehicle, ego_arc, arc - 0.5 * o.length_m, o.speed_mps, o.limits)
-        if c.kind == CROSSING and c.other_s_m > max(c.other_occupancy[1], clear_m):
+        arc -= 0.5 * o.length_m
+        if geo.kind == CROSSING and arc - geo.other_at_m > max(geo.other_occupancy[1],
+                                                                clear_m):
             continue  # past the ego's path for good
-        if c.kind != FOLLOW and any(slack):
-            lo, hi = c.ego_occupancy
-            c = replace(c, ego_occupancy=(lo, hi + slack[0] + slack[1]))
-        out.append(c)
+        out.append(geo.conflict(o.vehicle, ego_arc, arc, o.speed_mps, o.limits,
+                                ego_occupancy=widened))
     return out
+
+
+def entry_vehicles(network: Network, limits: Limits) -> list[VehicleState]:
+    """One stand-in per conflicting route for the vehicles SUMO may still insert there
+    (keys :data:`ENTRY_PREFIX` and the route's index): at the route's start, its front
+    :data:`ENTRY_FRONT_M` along the first lane, at the type's ``v_max``.
+
+    SUMO inserts every vehicle of the traffic at its route's start (its front 5.1 m along
+    the lane, at most at ``maxSpeed``), so whatever enters later can be nowhere that this
+    stand-in, which may do anything within the type's limits from now, could not be; a
+    trajectory certified against it is certified against every vehicle not yet inserted,
+    and the stand-in stays where it is, so the certification holds at every later step
+    (docs/method.md §14.4). Without it the ego may enter a conflict where no vehicle is in
+    view and then find one inserted, outside the shield's invariant set."""
+    return [VehicleState(f"{ENTRY_PREFIX}{r}", tuple(edges), f"{edges[0]}_0", ENTRY_FRONT_M,
+                         math.nan, math.nan, math.nan, limits.v_max_mps, limits.length_m,
+                         limits.width_m, limits)
+            for r, edges in enumerate(network.traffic_routes)]
+
+
+def decide(planner: ExternalPlanner, projector: Projector, ego: VehicleState,
+           others: Sequence[VehicleState], clear_m: float,
+           slack: tuple[float, float]) -> tuple[Any, list]:
+    """The planner's decision for the ego among ``others`` (``ExternalPlanner.act`` on
+    :func:`conflicts_of` with the ballistic ``slack``) and the conflicts it saw.
+
+    An ego at rest is re-anchored: the stop that brought it there may have taken it up to
+    ``slack[0]`` beyond the exact braking motion (the overshoot the shift was for), and
+    shifting its new position once more would count that overshoot twice, so that an ego
+    certified to stand before its interval could find itself inside it and no fallback
+    certified. Standing still, and starting from rest at ``u_max``, never stop within a step,
+    so SUMO moves the ego exactly as the shield assumes: when the shifted shield certifies no
+    fallback at rest, the shield is asked again without the shift (the intervals still end
+    ``slack[1]`` later, for the step that reaches ``v_max``) to stand for a step, and applies
+    its answer if that one is certified (verdict ``brake`` when the ego stands, ``go``)."""
+    conflicts = conflicts_of(projector, ego, others, clear_m, slack)
+    decision = planner.act(ego.speed_mps, conflicts, DT_S)
+    if decision.verdict == "uncertified" and ego.speed_mps <= 0.0:
+        exact = conflicts_of(projector, ego, others, clear_m, (0.0, slack[1]))
+        u_min = planner.ego.u_min_mps2
+        a, verdict = planner.shield(0.0, u_min, exact, DT_S)
+        if verdict != "uncertified":
+            decision = replace(decision, accel_mps2=a,
+                               verdict="brake" if a == u_min else "go")
+    return decision, conflicts
 
 
 # -- one episode ----------------------------------------------------------------------------
@@ -580,15 +651,33 @@ def sumo_args(net_file: Path, routes: Path, folder: Path, seed: int, end_s: floa
     return args
 
 
+def _type_limits(ls, vtype: str) -> Limits:
+    """A SUMO vehicle type's size and limits: ``u_min = -emergencyDecel``, ``u_max =
+    accel``, ``v_max = maxSpeed``."""
+    t = ls.vehicletype
+    return Limits(t.getLength(vtype), t.getWidth(vtype), -t.getEmergencyDecel(vtype),
+                  t.getAccel(vtype), 0.0, t.getMaxSpeed(vtype))
+
+
 def _limits_of(ls, vid: str, cache: dict) -> tuple[Limits, str]:
     vtype = ls.vehicle.getTypeID(vid)
     entry = cache.get(vtype)
     if entry is None:
-        t = ls.vehicletype
-        entry = cache[vtype] = Limits(t.getLength(vtype), t.getWidth(vtype),
-                                      -t.getEmergencyDecel(vtype), t.getAccel(vtype), 0.0,
-                                      t.getMaxSpeed(vtype))
+        entry = cache[vtype] = _type_limits(ls, vtype)
     return entry, vtype
+
+
+def _state_of(ls, vid: str, known: dict, types: dict) -> VehicleState:
+    """A vehicle's :class:`VehicleState` now; its route and type, fixed for a vehicle's life
+    in these networks, are read once (``known``: vehicle -> (edges, limits))."""
+    entry = known.get(vid)
+    if entry is None:
+        entry = known[vid] = (tuple(ls.vehicle.getRoute(vid)), _limits_of(ls, vid, types)[0])
+    edges, limits = entry
+    x, y = ls.vehicle.getPosition(vid)
+    return VehicleState(vid, edges, ls.vehicle.getLaneID(vid), ls.vehicle.getLanePosition(vid),
+                        x, y, ls.vehicle.getAngle(vid), ls.vehicle.getSpeed(vid),
+                        limits.length_m, limits.width_m, limits)
 
 
 def _ssm(path: Path) -> tuple[float | None, float | None, float | None]:
@@ -651,6 +740,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
     overrides = uncertified = ego_steps = max_view = 0
     crossed_at = depart_at = None
     types: dict[str, Limits] = {}
+    known: dict[str, tuple] = {}
     try:
         ls.start(sumo_args(net_file, routes, folder, seed, end_s, with_ego))
         try:
@@ -660,6 +750,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
             cross_arc = projector.ego.offsets[cross_lane][0] + 0.5 * ego_limits.length_m
             clear = planner._clear_m if planner is not None else 0.0
             slack = ballistic_slack(ego_limits)
+            entries = entry_vehicles(network, _type_limits(ls, "human"))
             steered = False
             while ls.simulation.getTime() < end_s - 1e-9:
                 ls.simulationStep()
@@ -668,18 +759,17 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                     if "ego" in (c.collider, c.victim):
                         pairs.setdefault((c.collider, c.victim), c.type)
                 ids = ls.vehicle.getIDList()
+                if not logs:  # only what the judges and the planner read
+                    ids = (() if "ego" not in ids else ids if planner is not None
+                           else ("ego",))
                 states, ego = [], None
                 for vid in ids:
-                    limits, vtype = _limits_of(ls, vid, types)
-                    x, y = ls.vehicle.getPosition(vid)
-                    st = VehicleState(vid, tuple(ls.vehicle.getRoute(vid)),
-                                      ls.vehicle.getLaneID(vid), ls.vehicle.getLanePosition(vid),
-                                      x, y, ls.vehicle.getAngle(vid), ls.vehicle.getSpeed(vid),
-                                      limits.length_m, limits.width_m, limits)
+                    st = _state_of(ls, vid, known, types)
                     if logs:
-                        for k, v in (("t_s", t), ("vehicle", vid), ("x_m", x), ("y_m", y),
-                                     ("angle_deg", st.angle_deg), ("speed_mps", st.speed_mps),
-                                     ("lane", st.lane), ("reckless", vid in reckless)):
+                        for k, v in (("t_s", t), ("vehicle", vid), ("x_m", st.x_m),
+                                     ("y_m", st.y_m), ("angle_deg", st.angle_deg),
+                                     ("speed_mps", st.speed_mps), ("lane", st.lane),
+                                     ("reckless", vid in reckless)):
                             steps[k].append(v)
                     if vid == "ego":
                         ego = st
@@ -699,19 +789,20 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                     ls.vehicle.setSpeedMode("ego", SPEED_MODE)
                     steered = True
                 t0 = time.perf_counter()
-                conflicts = conflicts_of(projector, ego, states, clear, slack)
-                decision = planner.act(ego.speed_mps, conflicts, DT_S)
+                decision, conflicts = decide(planner, projector, ego, states + entries, clear,
+                                             slack)
                 ms = 1e3 * (time.perf_counter() - t0)
+                in_view = sum(not str(c.key).startswith(ENTRY_PREFIX) for c in conflicts)
                 v_next = min(max(ego.speed_mps + decision.accel_mps2 * DT_S,
                                  ego_limits.v_min_mps), ego_limits.v_max_mps)
                 ls.vehicle.setSpeed("ego", v_next)
                 ego_steps += 1
                 overrides += decision.verdict not in (None, "admitted")
                 uncertified += decision.verdict == "uncertified"
-                max_view = max(max_view, len(conflicts))
-                timings.append((len(conflicts), ms))
+                max_view = max(max_view, in_view)
+                timings.append((in_view, ms))
                 if logs:
-                    for k, v in (("t_s", t), ("in_view", len(conflicts)),
+                    for k, v in (("t_s", t), ("in_view", in_view),
                                  ("targets", decision.targets),
                                  ("proposed_mps2", decision.proposed_mps2),
                                  ("accel_mps2", decision.accel_mps2),
@@ -928,6 +1019,6 @@ def frames_of(outputs: Sequence[EpisodeOutput]) -> dict[str, Any]:
 __all__ = ["DT_S", "EGO_DEPART_S", "EPISODE_S", "NETWORKS", "NO_EGO", "SCENARIOS",
            "SPEED_MODE", "SUMO_DRIVER", "ballistic_slack", "EpisodeOutput", "EpisodeResult", "Network",
            "Projector", "SumoReport", "VehicleState", "build_network", "check_study",
-           "conflicts_of", "driver_name", "frames_of", "run_study",
+           "conflicts_of", "decide", "driver_name", "entry_vehicles", "frames_of", "run_study",
            "lane_shapes", "planner_config", "routes_xml",
            "run_episode", "run_seed", "spawn_tied", "sumo_binaries", "traffic"]
