@@ -475,6 +475,24 @@ def test_the_shield_sees_every_vehicle_that_can_touch_the_ego(crossing):
     assert lat_before > band - 0.15
 
 
+@pytest.mark.parametrize("v", [0.0, 1e-9, 0.25, 0.5, 0.73, 3.0, 4.999, 9.2])
+def test_euler_lead_is_the_surplus_of_an_euler_stop(v):
+    """highway-env's steps move with the speed of their start, clipped at 0: step such a
+    stop at 5 m/s^2 and compare with the exact stop; a stopped ego has no lead (an old
+    constant b dt^2 / 8 at rest put a parked ego inside its own occupancy)."""
+    from persuasive.envs.highway import euler_lead
+
+    b, dt = 5.0, 0.1
+    x, speed = 0.0, v
+    while speed > 0.0:
+        x += speed * dt
+        speed = max(speed - b * dt, 0.0)
+    assert euler_lead(v, b, dt) == pytest.approx(x - v * v / (2 * b), abs=1e-12)
+    assert 0.0 <= euler_lead(v, b, dt) <= v * dt / 2 + b * dt * dt / 8 + 1e-12
+    if v == 0.0:
+        assert euler_lead(v, b, dt) == 0.0
+
+
 @pytest.mark.slow
 def test_the_shielded_planner_does_not_collide_where_the_unshielded_one_did():
     """Seed 1 of highway-env's intersection: the unshielded persuasive planner collides

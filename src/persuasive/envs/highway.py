@@ -39,7 +39,8 @@ highway-env integrates positions with the speed of the step's start (Euler): a b
 rolls further than the planner's exact step says, by ``v dt / 2`` from speed ``v`` plus at most
 ``b dt^2 / 8`` for the last, partial step of deceleration ``b`` (the speed is clipped at 0), and
 an accelerating one lags behind it. The shield therefore takes the ego
-``v dt / 2 + |u_min| dt^2 / 8`` further along than it is, and the far end of the ego's
+that much further along than it is (:func:`euler_lead`: the exact Euler surplus of a stop at
+``u_min``, 0 at rest), and the far end of the ego's
 occupancy is widened by ``v_max dt`` for the lag (at ``u_max = 1 m/s^2`` it stays below that
 for the 10 s it takes the ego to accelerate from rest to ``v_max``); the other vehicles' near
 ends by their ``v_max dt / 2`` (an Euler vehicle that stops, stops that much further). The acceleration is finally limited so
@@ -535,8 +536,7 @@ class PlannerDriver:
         ego = env.unwrapped.vehicle
         conflicts = projector.conflicts(ego, env.unwrapped.road.vehicles)
         dt = 1.0 / FREQUENCY_HZ
-        # the Euler step's lead of a braking ego (module docstring)
-        lead = 0.5 * max(float(ego.speed), 0.0) * dt + abs(av.u_min_mps2) * dt * dt / 8.0
+        lead = euler_lead(float(ego.speed), abs(av.u_min_mps2), dt)
         decision = self.planner.act(float(ego.speed), conflicts, dt, shield_lead_m=lead)
         self.last_targets = decision.targets
         if decision.verdict not in (None, "admitted"):
@@ -544,6 +544,23 @@ class PlannerDriver:
         a = min(max(decision.accel_mps2, av.u_min_mps2, (av.v_min_mps - float(ego.speed)) / dt),
                 av.u_max_mps2, (av.v_max_mps - float(ego.speed)) / dt)
         return float(a)
+
+
+def euler_lead(v_mps: float, brake_mps2: float, dt_s: float) -> float:
+    """How much further highway-env's Euler steps take a vehicle braking at ``brake_mps2``
+    from ``v_mps`` to rest than the exact stop ``v^2 / (2 b)`` [m] (module docstring).
+
+    Each step moves ``v_k dt`` with the speed ``v_k = v - k b dt`` of its start, the last one
+    with the speed clipped at 0 (the driver never asks for more braking than stops the
+    vehicle within the step), so the Euler stop is ``dt * sum_k v_k`` over the steps whose
+    start speed is positive: exactly ``v dt / 2`` more than the exact stop when ``v`` is a
+    multiple of ``b dt``, at most ``v dt / 2 + b dt^2 / 8``, and 0 at rest (a stopped ego
+    does not roll)."""
+    if v_mps <= 0.0:
+        return 0.0
+    m = math.ceil(v_mps / (brake_mps2 * dt_s)) - 1  # the last step with a positive start speed
+    euler = dt_s * ((m + 1) * v_mps - brake_mps2 * dt_s * m * (m + 1) / 2.0)
+    return max(euler - v_mps * v_mps / (2.0 * brake_mps2), 0.0)
 
 
 def euler_margin(config: Config) -> float:
