@@ -10,6 +10,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from persuasive.packing import discounts, pack
+from persuasive.scenarios import build_scenario
 from persuasive.config import Config
 
 settings.register_profile(
@@ -28,7 +29,7 @@ class Packed:
 
     def __init__(self, config: Config):
         self.config = config
-        self.P, self.P_hv = pack(config)
+        self.P, self.P_hv = pack(config, build_scenario(config))
         self.P_av = self.P
         self.disc = discounts(config)
 

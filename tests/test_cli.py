@@ -15,7 +15,7 @@ from persuasive.config import Config
 REQUIRED = ("mode", "scenario", "av", "hv", "hv_role", "pa", "pa_hat", "seed", "streams",
             "hv_initial_state", "first_at_line", "first_at_conflict_point", "collision",
             "min_distance_to_line_m", "min_distance_m", "idx_end", "infeasible_steps",
-            "hv_role_changes")
+            "hv_role_changes", "safety_distance_m", "distance_measured")
 
 
 def run(capsys, *args):
@@ -40,6 +40,45 @@ def test_simulate_json_in_both_modes(capsys, mode):
     assert payload["pa_hat"] == payload["pa"] == 1.0
     expected = simulate(Config(mode=mode), 7).summary()
     assert payload == json.loads(json.dumps(expected))
+
+
+@pytest.mark.parametrize("scenario, measured", [
+    ("intersection", "along the paths"), ("left-turn", "along the paths"),
+    ("crossing", "between the centres"), ("merge", "between the centres")])
+def test_the_summary_names_the_threshold_and_how_distances_are_measured(capsys, scenario,
+                                                                        measured):
+    args = ["--scenario", scenario]
+    if scenario == "crossing":  # at 90 degrees the crossing is the intersection, bit for bit
+        args += ["--set", "scenario.angle_deg=60"]
+    code, out, _ = run(capsys, "simulate", "--json", *args)
+    payload = json.loads(out)
+    assert code == 0 and "min_dist_m" not in payload  # the threshold's old, confusable name
+    assert payload["safety_distance_m"] == 7.5 and payload["distance_measured"] == measured
+    code, out, _ = run(capsys, "simulate", *args)
+    assert f"over the run ({measured}; safe set 7.5 m)" in out
+
+
+def test_bare_groups_print_their_help_and_exit_0(capsys):
+    code, out, err = run(capsys)
+    assert code == 0 and err == "" and out.startswith("Usage: persuasive [OPTIONS] COMMAND")
+    assert "simulate" in out and "reproduce" in out
+    code, out, err = run(capsys, "plot")
+    assert code == 0 and err == "" and out.startswith("Usage: persuasive plot [OPTIONS]")
+    bare = subprocess.run([sys.executable, "-m", "persuasive"], capture_output=True, text=True)
+    assert bare.returncode == 0 and bare.stdout.startswith("Usage: persuasive")
+    assert bare.stderr == ""
+
+
+def test_plot_from_a_csv_log_says_only_parquet_is_read(capsys, tmp_path):
+    code, _, _ = run(capsys, "simulate", "--out", str(tmp_path / "run.csv"))
+    assert code == 0
+    code, out, err = run(capsys, "plot", "profile", "--from", str(tmp_path / "run.csv"),
+                         "--out", str(tmp_path / "f.png"))
+    assert code == 2 and out == ""
+    assert err == f"error: run file {str(tmp_path / 'run.csv')!r} is not a Parquet file: only " \
+                  "the .parquet logs of 'simulate --out' and the trials of 'drive' are read " \
+                  "back (a .csv log holds no configuration)\n"
+    assert not (tmp_path / "f.png").exists()
 
 
 def test_simulate_options_reach_the_configuration(capsys):
@@ -126,6 +165,8 @@ BAD = [
     (["simulate", "--set", "nonsense"], "--set"),
     (["simulate", "--set", "mpc.horizon=3"], "mpc.horizon"),
     (["simulate", "--seed", "-4"], "seed"),
+    (["simulate", "--hv", "replay", "--set", "hv.replay.file=no-such.parquet"],
+     "hv.replay.file = 'no-such.parquet' cannot be read: no such file"),
     (["reproduce", "table3"], "table3"),
     (["reproduce", "table1", "--seeds", "0"], "--seeds"),
     (["reproduce", "table1", "--workers", "0"], "--workers"),
@@ -133,6 +174,11 @@ BAD = [
     (["simulate", "--set", "nosection.x=1"], "unknown section 'nosection'"),
     (["simulate", "--set", "mpc.x=1"], "mpc.x: unknown key; allowed: epsilon, p_a_hat"),
     (["simulate", "--set", "mpc.epsilon=1e-13"], "mpc.epsilon"),
+    (["simulate", "--scenario", "crossing", "--set", "scenario.angle_deg=0.001"],
+     "scenario.angle_deg = 0.001 is out of range; allowed: [15, 165] degrees for a crossing "
+     "(flatter roads run side by side instead of crossing)"),
+    (["simulate", "--scenario", "merge", "--set", "scenario.angle_deg=5"],
+     "scenario.angle_deg = 5.0 is out of range; allowed: [15, 90] degrees for a merge"),
 ]
 
 
@@ -160,6 +206,81 @@ def test_malformed_and_missing_config_files(capsys, tmp_path):
     unknown.write_text("[rolez]\np_a = 1\n")
     code, _, err = run(capsys, "simulate", "--config", str(unknown))
     assert code == 2 and "unknown section 'rolez'" in err and "roles" in err
+
+
+#: A TOML file with a Latin-1 byte in a comment: not UTF-8, so not TOML.
+NOT_UTF8 = b'mode = "paper"\n# caf\xe9\n'
+
+
+@pytest.mark.parametrize("command, what", [
+    (["simulate", "--config", "{toml}"], "config file"),
+    (["reproduce", "table1", "--seeds", "1", "--config", "{toml}", "--out", "{out}"],
+     "config file"),
+    (["plot", "profile", "--single", "--config", "{toml}", "--out", "{out}.png"], "config file"),
+    (["sweep", "{toml}", "--out", "{out}"], "grid file"),
+    (["drive", "--study", "{toml}", "--out", "{out}", "--port", "0"], "study file"),
+], ids=["simulate", "reproduce", "plot", "sweep", "drive"])
+def test_toml_that_is_not_utf8_is_one_line_naming_the_file(capsys, tmp_path, command, what):
+    toml = tmp_path / "x.toml"
+    toml.write_bytes(NOT_UTF8)
+    args = [a.format(toml=toml, out=tmp_path / "out") for a in command]
+    code, out, err = run(capsys, *args)
+    assert code == 2 and out == ""
+    assert err == f"error: {what} {str(toml)!r} is not UTF-8 text (byte 0xe9 at offset 20); " \
+                  "TOML files must be UTF-8\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.toml"]  # nothing written
+
+
+def test_a_results_summary_that_is_not_utf8_is_one_line(capsys, tmp_path):
+    (tmp_path / "summary.json").write_bytes(b'{"table": "caf\xe9"}')
+    code, out, err = run(capsys, "plot", "table", "--from", str(tmp_path), "--out",
+                         str(tmp_path / "t.png"))
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "has no readable summary.json (UnicodeDecodeError)" in err
+
+
+@pytest.mark.parametrize("args, message", [
+    (["reproduce", "table1", "--seeds", "99999999999"],
+     "--seeds = 99999999999 is out of range; allowed: integer in [1, 4294967295]"),
+    (["reproduce", "all", "--seeds", "4294967295"],
+     "--seeds = 4294967295 is out of range; allowed: 1..62500 for 16 rows (at most 1000000 "
+     "runs, summarised in memory; 'persuasive sweep' streams more to disk)"),
+    (["compare", "--seeds", "4000000000"],
+     "--seeds = 4000000000 is out of range; allowed: 1..25000 for 40 pairs (at most 1000000 "
+     "runs, summarised in memory; 'persuasive sweep' streams more to disk)"),
+    (["compare", "--seeds", "4294967296", "--av", "cv", "--hv", "idm"],
+     "--seeds = 4294967296 is out of range; allowed: integer in [1, 4294967295]"),
+], ids=["reproduce-beyond-2^32", "reproduce-too-many-runs", "compare-too-many-runs",
+        "compare-beyond-2^32"])
+def test_huge_seed_counts_are_refused_up_front(capsys, tmp_path, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)  # the default results folder would go here
+    code, out, err = run(capsys, *args, "--quiet")
+    assert (code, out, err) == (2, "", f"error: {message}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command, what", [
+    (["compare", "--av", "cv", "--hv", "idm", "--seeds", "2"], "comparison folder"),
+    (["reproduce", "table1", "--seeds", "2"], "results folder"),
+    (["sweep", "{grid}"], "sweep folder"),
+], ids=["compare", "reproduce", "sweep"])
+@pytest.mark.parametrize("target", ["/proc/study", "{tmp}/afile/study"],
+                         ids=["proc", "under-a-file"])
+def test_errors_start_their_own_line_in_the_commands_words(capsys, tmp_path, command, what,
+                                                           target):
+    """With the progress bar on: /proc/study fails only when the folder is made (as root,
+    once the bar is drawn), afile/study when the folder is checked (before any bar)."""
+    (tmp_path / "afile").write_text("a file, not a folder")
+    (tmp_path / "g.toml").write_text('seeds = 2\n[axes]\n"av.kind" = ["cv"]\n')
+    out = target.format(tmp=tmp_path)
+    args = [a.format(grid=tmp_path / "g.toml") for a in command]
+    code, stdout, err = run(capsys, *args, "--workers", "1", "--out", out)
+    assert code == 2 and stdout == ""
+    last = err.rstrip("\n").split("\n")[-1]  # a line of its own, not the bar's
+    assert last.startswith(f"error: {what} {out!r} cannot be written"), repr(err)
+    assert err.count("error:") == 1 and "Traceback" not in err
+    if what != "sweep folder":
+        assert "sweep folder" not in err
 
 
 def test_failed_run_leaves_existing_output_untouched(capsys, tmp_path):
@@ -338,10 +459,31 @@ def test_reproduce_text_table(capsys, tmp_path):
     code, out, _ = run(capsys, "reproduce", "table1", "--seeds", "2", "--workers", "1",
                        "--quiet", "--out", str(tmp_path))
     assert code == 0
-    assert "| L | 1.00 | 0.0 | 100.0 | 0.0 / 100.0 |" in out
+    assert "| L | 1.00 | 0.0 | 100.0 | 0 | 0 |" in out
     assert "4 runs in" in out
-    # a short run is not a failure to reproduce: the published values are for 1000 seeds
+    # a short run is not a failure to reproduce: the published values are for 1000 seeds,
+    # so the table leaves them out and says so
     assert "NOT" not in out and "published values are for seeds 1..1000" in out
+    assert "published AV/HV" not in out and "diff AV/HV" not in out
+
+
+def test_a_resumed_reproduction_says_what_ran_now(capsys, tmp_path):
+    args = ["reproduce", "all", "--seeds", "2", "--workers", "1", "--quiet", "--out",
+            str(tmp_path)]
+    code, out, _ = run(capsys, *args)
+    assert code == 0 and out.rstrip().splitlines()[-1].startswith("32 runs in ")
+    assert "finished earlier" not in out
+    code, out, _ = run(capsys, *args)  # everything is there
+    assert code == 0
+    last = out.rstrip().splitlines()[-1]
+    assert last.startswith("32 runs: 32 finished earlier, none to run, ") and "worker" not in last
+    # table2 loses a part: its chunk runs again, the rest is read back
+    parts = sorted((tmp_path / "table2" / "runs").glob("part-*.parquet"))
+    parts[3].unlink()
+    code, out, _ = run(capsys, *args)
+    assert code == 0
+    assert out.rstrip().splitlines()[-1].startswith(
+        "32 runs: 31 finished earlier, 1 run now with 1 worker, ")  # chunks of 1 run
 
 
 def test_bench_json(capsys):

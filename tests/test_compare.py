@@ -87,7 +87,7 @@ def test_yield_never_goes_first_and_paired_differences_are_by_seed(comparison):
 def test_summary_is_a_function_of_the_runs(comparison):
     again = cmp.summarize(comparison.runs, cmp.comparison_base(Config()),
                           ("persuasive", "yield", "cv"), ("lfg", "aggressive"), 6,
-                          {(r["av"], r["hv"]): r["av_decision_ms_median"]
+                          {(r["av"], r["shield"], r["hv"]): r["av_decision_ms_median"]
                            for r in comparison.summary["rows"]})
     saved = json.loads((comparison.folder / "summary.json").read_text())
     again["failures"] = saved["failures"]

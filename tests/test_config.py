@@ -68,7 +68,7 @@ def test_old_av_name_mpc_is_the_persuasive_planner():
 
 
 def test_packed_vectors_hold_the_defaults():
-    P_av, P_hv = pack(Config())
+    P_av, P_hv = pack(Config(), build_scenario(Config()))
     assert P_av.shape == P_hv.shape == (slot.N_SLOTS,)
     scene = build_scenario(Config())
     assert scene.av.zone == scene.hv.zone == (-7.5, 7.5) and scene.min_dist_m == 7.5
@@ -104,7 +104,7 @@ def test_per_vehicle_slots_follow_each_vehicles_overrides():
     # (shared); the AV keeps [vehicle]'s values.
     c = Config(hv=HVParams(vehicle=VehicleOverrides(length_m=4.0, v_max_mps=8.0,
                                                     u_min_mps2=-3.0)))
-    P_av, P_hv = pack(c)
+    P_av, P_hv = pack(c, build_scenario(c))
     assert (P_hv[slot.V_MAX], P_hv[slot.U_MIN], P_hv[slot.LENGTH]) == (8.0, -3.0, 4.0)
     assert (P_av[slot.V_MAX], P_av[slot.U_MIN], P_av[slot.LENGTH]) == (10.0, -2.0, 5.0)
     assert (P_hv[slot.YIELD_S], P_av[slot.YIELD_S]) == (-6.0, -6.5)
@@ -399,7 +399,7 @@ def test_quirks_resolve_per_mode(mode, expected):
     for name in KEPT_IN_BOTH:
         assert getattr(q, name) is True, name
     assert q.q7_arrival_tolerance_m == 0.2  # [m]
-    for P in pack(Config(mode=mode)):
+    for P in pack(Config(mode=mode), build_scenario(Config(mode=mode))):
         assert (P[slot.QUIRK_BRANCH_OFFSET], P[slot.QUIRK_BELIEF_OFFSET],
                 P[slot.QUIRK_LEADER_AGG_MAX]) == (float(expected),) * 3
         assert (P[slot.QUIRK_UNDISCOUNTED_COLLISION], P[slot.QUIRK_TIME_LIKE_STOP_TEST]) == (
@@ -424,3 +424,22 @@ def test_switching_mode_keeps_only_explicit_quirks():
     assert q.q1_branch_time_offset is False  # unset: follows the new mode
     assert Config().with_overrides({"mode": "corrected"}).effective_quirks == \
         Config(mode="corrected").effective_quirks
+
+
+@pytest.mark.parametrize("kind, good, bad", [
+    ("crossing", [15.0, 60.0, 90.0, 165.0], [0.001, 14.99, 165.01, 179.9]),
+    ("merge", [15.0, 30.0, 90.0], [0.001, 14.99, 90.01, 120.0]),
+])
+def test_crossing_and_merge_angles_are_bounded_to_meaningful_geometry(kind, good, bad):
+    for angle in good:
+        config = Config().with_overrides({"scenario.kind": kind, "scenario.angle_deg": angle})
+        scenario = build_scenario(config)
+        # the conflict starts within four safety distances of the conflict point, so the
+        # vehicles start (13.5 m before their yield line) about 40 m away at most
+        assert -scenario.hv.zone[0] <= 4.0 * scenario.min_dist_m
+    lo, hi = {"crossing": (15, 165), "merge": (15, 90)}[kind]
+    for angle in bad:
+        with pytest.raises(ConfigError, match=rf"^scenario.angle_deg = {angle!r} is out of "
+                                              rf"range; allowed: \[{lo}, {hi}\] degrees for "
+                                              rf"a {kind} \("):
+            Config().with_overrides({"scenario.kind": kind, "scenario.angle_deg": angle})

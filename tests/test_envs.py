@@ -435,3 +435,71 @@ def test_highway_command_text_and_bad_input(capsys, tmp_path):
     assert "--episodes" in capsys.readouterr().err
     assert main(["highway", "--video", str(tmp_path / "x.avi")]) == 2
     assert "unsupported extension" in capsys.readouterr().err
+
+
+# -- highway-env: the shield over every vehicle ---------------------------------------------
+
+
+def test_the_shield_sees_every_vehicle_that_can_touch_the_ego(crossing):
+    """A vehicle crossing from the west: its occupancy covers where its footprint can reach the
+    ego's lane; one ahead in the ego's lane is followed; one behind it is left out."""
+    from persuasive.envs.external import CROSSING, FOLLOW
+
+    u, projector = crossing
+    ego = u.vehicle
+    v = _vehicle(u, ("o1", "ir1", 0), 50.0, "o3")
+    ahead = _vehicle(u, ("o0", "ir0", 0), ego.lane.local_coordinates(ego.position)[0] + 20.0,
+                     "o2", speed=5.0)
+    behind = _vehicle(u, ("o0", "ir0", 0), ego.lane.local_coordinates(ego.position)[0] - 20.0,
+                      "o2", speed=5.0)
+    conflicts = {c.key: c for c in projector.conflicts(ego, [ego, v, ahead, behind])}
+    cross = conflicts[id(projector.track(v))]
+    assert cross.kind == CROSSING
+    follow = conflicts[id(ahead)]
+    assert follow.kind == FOLLOW and follow.other_s_m - follow.ego_s_m == pytest.approx(20.0)
+    assert id(behind) not in conflicts
+    # the crossing vehicle's centre line reaches the band ego width / 2 + its half-diagonal
+    # + 0.25 m of the ego's line where its occupancy starts (less the Euler lead): check a
+    # point just inside and just outside
+    o, d = _ego_line(u)
+    track = projector.track(v)
+    lane = u.road.network.get_lane(track.lanes[1])
+    band = 0.5 * ego.WIDTH + 0.5 * math.hypot(v.LENGTH, v.WIDTH) + 0.25
+    from persuasive.envs.highway import highway_limits
+
+    lead = 0.5 * highway_limits(v).v_max_mps * 0.1  # an Euler vehicle stops that much further
+    lo = track.origin_arc_m + cross.other_occupancy[0] - track.offsets[1] + lead
+    lat = abs(_cross(lane.position(lo + 0.2, 0.0) - o, d))
+    assert lat <= band + 1e-6  # inside the band just after the interval starts
+    lat_before = abs(_cross(lane.position(max(lo - 0.3, 0.0), 0.0) - o, d))
+    assert lat_before > band - 0.15
+
+
+@pytest.mark.parametrize("v", [0.0, 1e-9, 0.25, 0.5, 0.73, 3.0, 4.999, 9.2])
+def test_euler_lead_is_the_surplus_of_an_euler_stop(v):
+    """highway-env's steps move with the speed of their start, clipped at 0: step such a
+    stop at 5 m/s^2 and compare with the exact stop; a stopped ego has no lead (an old
+    constant b dt^2 / 8 at rest put a parked ego inside its own occupancy)."""
+    from persuasive.envs.highway import euler_lead
+
+    b, dt = 5.0, 0.1
+    x, speed = 0.0, v
+    while speed > 0.0:
+        x += speed * dt
+        speed = max(speed - b * dt, 0.0)
+    assert euler_lead(v, b, dt) == pytest.approx(x - v * v / (2 * b), abs=1e-12)
+    assert 0.0 <= euler_lead(v, b, dt) <= v * dt / 2 + b * dt * dt / 8 + 1e-12
+    if v == 0.0:
+        assert euler_lead(v, b, dt) == 0.0
+
+
+@pytest.mark.slow
+def test_the_shielded_planner_does_not_collide_where_the_unshielded_one_did():
+    """Seed 1 of highway-env's intersection: the unshielded persuasive planner collides
+    with traffic it never modelled; the shield over every vehicle keeps it clear."""
+    from persuasive.envs.highway import planner_config, run_episode
+
+    unshielded = run_episode(1, "persuasive", planner_config("persuasive", "off"))
+    shielded = run_episode(1, "persuasive", planner_config("persuasive", "worst-case"))
+    assert unshielded.collision and not shielded.collision
+    assert shielded.shield_interventions > 0 and unshielded.shield_interventions == 0

@@ -104,12 +104,30 @@ def test_summary_counts_and_markdown():
     assert "corrected mode" in md
 
 
+def test_seeds_other_than_the_published_are_not_compared():
+    runs = ex.run_tables(["table1"], seeds=3, workers=1)
+    short = ex.summarize(runs, "table1")  # seeds 1..3
+    assert short["seeds"] == 3
+    assert [(r["diff_av_first_pct"], r["diff_hv_first_pct"]) for r in short["rows"]] == \
+        [(None, None)] * 2
+    assert [r["published_av_first_pct"] for r in short["rows"]] == [0.0, 97.9]
+    md = ex.to_markdown(short)
+    assert "published" not in md and "diff" not in md
+    assert "| L | 1.00 | 0.0 | 100.0 | 0 | 0 |" in md
+    assert "so they are not compared" in ex.verdict(short, Config())
+    full = ex.summarize(runs, "table1", seeds=1000)  # as if they were seeds 1..1000
+    assert "| AV first % | HV first % | published AV/HV % | diff AV/HV |" in \
+        ex.to_markdown(full)
+    row = full["rows"][1]
+    assert row["diff_av_first_pct"] == pytest.approx(row["av_first_pct"] - 97.9, abs=1e-9)
+
+
 def test_violations_use_each_runs_own_safety_distance():
     runs = ex.run_tables(["table1"], seeds=2, workers=1)
-    assert {r["min_dist_m"] for r in runs} == {7.5}
+    assert {r["safety_distance_m"] for r in runs} == {7.5}
     closest = min(r["min_distance_m"] for r in runs)
     for r in runs:  # a run whose own safe distance is larger than its closest approach
-        r["min_dist_m"] = closest + 1.0 if r is runs[0] else r["min_dist_m"]
+        r["safety_distance_m"] = closest + 1.0 if r is runs[0] else r["safety_distance_m"]
     summary = ex.summarize(runs, "table1")
     assert sum(row["violations_whole_run"] for row in summary["rows"]) == \
         int(runs[0]["min_distance_m"] < closest + 1.0) + \
@@ -121,7 +139,7 @@ def test_each_run_carries_the_safety_distance_it_was_run_with():
     config = ex.PUBLISHED["table2"][0].config(Config().with_overrides(
         {"hv.vehicle.length_m": 4.0}))
     assert simulate(config, 1).scenario.min_dist_m == 6.75
-    assert ex.run_record("table2", 0, config, 1)["min_dist_m"] == 6.75
+    assert ex.run_record("table2", 0, config, 1)["safety_distance_m"] == 6.75
 
 
 def test_save_writes_the_folder_as_a_set(tmp_path, monkeypatch):
@@ -289,9 +307,25 @@ def _alive(pid: int) -> bool:
 @pytest.mark.parametrize("kwargs, name", [
     ({"seeds": 0}, "seeds"), ({"workers": 0}, "workers"), ({"seeds": 2.5}, "seeds"),
     ({"chunk": 0}, "chunk"), ({"chunk": -3}, "chunk"),
+    ({"seeds": 2**32}, r"seeds = 4294967296 is out of range; allowed: integer in \[1, "),
+    ({"seeds": 500_001}, r"seeds = 500001 is out of range; allowed: 1..500000 for 2 rows"),
 ])
 def test_bad_arguments(kwargs, name):
     with pytest.raises(ConfigError, match=name):
         ex.run_tables(["table1"], **{"seeds": 2, **kwargs})
     with pytest.raises(ConfigError, match="table"):
         ex.run_tables(["table3"], seeds=2)
+
+
+def test_the_library_refuses_studies_too_large_to_summarise(tmp_path):
+    with pytest.raises(ConfigError, match=r"seeds = 62501 is out of range; allowed: 1..62500 "
+                                          r"for 16 rows \(at most 1000000 runs"):
+        ex.reproduce("all", seeds=62501, out=tmp_path / "r")
+    with pytest.raises(ConfigError, match=r"seeds = 2 is out of range; allowed: 1..1 for "):
+        ex.check_seeds(2, ex.MAX_RUNS)
+    from persuasive.studies.compare import comparison_grid
+
+    with pytest.raises(ConfigError, match=r"seeds = 500001 is out of range; allowed: "
+                                          r"1..500000 for 2 pairs"):
+        comparison_grid(Config(), ["persuasive", "cv"], ["lfg"], 500_001)
+    assert list(tmp_path.iterdir()) == []

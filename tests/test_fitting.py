@@ -30,7 +30,7 @@ from persuasive.fitting.models import (EMIT_LFG, EMIT_NOISY, best_initial_role, 
 from persuasive.fitting.optimize import maximise_rows
 from persuasive.game import full_prediction
 from persuasive.roles import gaussian_density, transition_matrix
-from persuasive.simulation import static_setup
+from persuasive.record import static_setup
 
 
 @functools.lru_cache(maxsize=None)

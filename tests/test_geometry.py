@@ -90,7 +90,7 @@ def test_distance_is_symmetric_in_the_vehicles_and_never_negative(s_a, s_b, kind
 
 
 @settings(max_examples=60)
-@given(st.floats(-40, 40), st.floats(-40, 40), st.floats(10.0, 170.0))
+@given(st.floats(-40, 40), st.floats(-40, 40), st.floats(15.0, 165.0))
 def test_a_crossing_is_at_distance_zero_only_at_its_conflict_point(s_a, s_b, angle):
     scene = build_scenario(Config().with_overrides({"scenario.kind": "crossing",
                                                     "scenario.angle_deg": angle}))
@@ -151,7 +151,7 @@ def test_crossing_at_90_is_the_intersection_bit_for_bit(mode, monkeypatch):
     # and through the euclidean kernels (distances between centres on the paths)
     monkeypatch.setitem(SCENARIOS, "crossing",
                         lambda c: crossing.build(c, perpendicular_at_90=False))
-    import persuasive.simulation as sim
+    import persuasive.record as sim
 
     sim.static_setup.cache_clear()
     try:
@@ -231,7 +231,7 @@ def test_impossible_starts_are_a_clear_error():
 
 def _merge_game(x_av, x_hv, **overrides):
     config = SCENARIO_CONFIGS["merge"].with_overrides(overrides)
-    P_av, P_hv = pack(config)
+    P_av, P_hv = pack(config, build_scenario(config))
     return full_prediction(x_hv, x_av, P_hv, P_av, discounts(config)), P_av
 
 

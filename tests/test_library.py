@@ -15,6 +15,7 @@ from persuasive import packing as slot
 from persuasive import reference
 from persuasive.config import Config, VehicleParams
 from persuasive.packing import pack
+from persuasive.scenarios import build_scenario
 from persuasive.library import mesh_speed, offers_stop, trajectory_library
 
 STOP_LINE = -6.5  # [m]: -(lane width + length / 2)
@@ -33,7 +34,8 @@ def mesh(v0, v_max=10.0, v_min=0.0, u_min=-2.0, u_max=1.0, T=5.0):
 
 
 def q6(on: bool) -> np.ndarray:
-    return pack(Config().with_overrides({"quirks.q6_time_like_stop_test": on}))[0]
+    config = Config().with_overrides({"quirks.q6_time_like_stop_test": on})
+    return pack(config, build_scenario(config))[0]
 
 
 # -- count, order, targets ----------------------------------------------------------------------
@@ -132,7 +134,8 @@ def test_stop_trajectory_can_pass_the_line_from_the_far_corner(paper):
 def test_stop_trajectory_settles_at_the_line_over_a_long_horizon():
     # T = 40 s. Under-damped as above, it settles within a few centimetres of the line (past
     # it by ~2 cm); the spec's law, not a defect of the library.
-    P = pack(Config().with_overrides({"library.n_samples": 400}))[0]
+    config = Config().with_overrides({"library.n_samples": 400})
+    P = pack(config, build_scenario(config))[0]
     L = lib(-20.0, 4.0, P)
     assert L.has_stop
     assert L.v[1, -1] < 1e-9
@@ -178,7 +181,8 @@ def test_q6_is_on_in_both_modes(paper, corrected):
 
 def test_no_stop_when_v_lo_is_positive():
     # With u_min = -0.5 m/s^2, v_lo = max(0, v0 - 2.5): positive for v0 > 2.5.
-    P = pack(Config(vehicle=VehicleParams(u_min_mps2=-0.5)))[0]
+    config = Config(vehicle=VehicleParams(u_min_mps2=-0.5))
+    P = pack(config, build_scenario(config))[0]
     # -50 + 4 / 0.5 = -42 < -6.5, yet v_lo = 1.5 > 0: no stop.
     assert not offers_stop(-50.0, 4.0, P)
     assert not lib(-50.0, 4.0, P).has_stop
@@ -288,7 +292,8 @@ def test_compiled_library_equals_reference_bit_for_bit(state, q6_on):
                              "simulation.dt_s": 0.25}],
 )
 def test_compiled_library_equals_reference_for_other_sizes(overrides):
-    P = pack(Config().with_overrides(overrides))[0]
+    config = Config().with_overrides(overrides)
+    P = pack(config, build_scenario(config))[0]
     for state in [(-20.0, 4.0), (-9.0, 4.0), (-3.0, 9.0)]:
         L = lib(*state, P)
         S, V, A, stop = reference.library(*state, P)

@@ -69,7 +69,8 @@ class Decision:
         c, feasible = decide(float(x_R[0]), float(x_R[1]), float(x_H[0]), float(x_H[1]),
                              self.LH, self.LR, self.idx, float(q_l), 1.0 - float(q_l),
                              bool(tie_leader), float(p_a_hat), persuade, pk.P_av, pk.P_hv,
-                             pk.disc, self.diag, self.LH1a, self.LH1b, self.ahead, self.work)
+                             pk.disc, self.diag, self.LH1a, self.LH1b, self.ahead, self.work,
+                             np.ones(11, np.bool_))
         self.c, self.feasible = int(c), bool(feasible)
 
 

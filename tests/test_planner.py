@@ -6,6 +6,7 @@ import pytest
 from persuasive import Config, ConfigError, Planner, simulate
 from persuasive.library import trajectory_library
 from persuasive.packing import pack
+from persuasive.scenarios import build_scenario
 
 
 def test_defaults_to_corrected_mode_and_returns_a_full_plan():
@@ -13,7 +14,8 @@ def test_defaults_to_corrected_mode_and_returns_a_full_plan():
     assert planner.config.mode == "corrected"
     plan = planner.plan((-20.0, 4.0), (-22.0, 4.3))
     assert planner.kind == "persuasive"
-    lib = trajectory_library(-20.0, 4.0, pack(planner.config)[0])  # the AV's library
+    P_av = pack(planner.config, build_scenario(planner.config))[0]
+    lib = trajectory_library(-20.0, 4.0, P_av)  # the AV's library
     k = plan.candidate
     np.testing.assert_array_equal(plan.s_m, lib.s[k])
     np.testing.assert_array_equal(plan.a_mps2, lib.a[k])
@@ -89,3 +91,18 @@ def test_the_hvs_own_speed_limit_is_checked():
     planner.plan((-20.0, 9.0), (-22.0, 8.0))  # the AV may drive 9 m/s, the HV 8 m/s
     with pytest.raises(ConfigError, match=r"hv = \(-22.0, 8.5\).*\[0, 8\]"):
         planner.plan((-20.0, 4.0), (-22.0, 8.5))
+
+
+@pytest.mark.parametrize("kind", ["persuasive", "passive", "lfg"])
+def test_accel_is_plan_without_the_plan(kind):
+    # the many-vehicle adapter's entry point: the same accelerations, belief and draws as
+    # plan() on the same states, call after call
+    config = Config(mode="corrected").with_overrides({"av.kind": kind})
+    record = simulate(config, 21)
+    full, lean = Planner(config, seed=3), Planner(config, seed=3)
+    for s_av, v_av, s_hv, v_hv in record.states[:-1]:
+        a = lean.accel((s_av, v_av), (s_hv, v_hv))
+        assert a == full.plan((s_av, v_av), (s_hv, v_hv)).accel_mps2
+        np.testing.assert_equal(lean.belief_hv_leader, full.belief_hv_leader)  # NaN: lfg
+    with pytest.raises(ConfigError, match="Q3"):
+        Planner(Config(mode="paper")).accel((-20.0, 4.0), (-22.0, 4.3))

@@ -432,6 +432,173 @@ def test_time_labels_sit_on_the_far_side_of_their_road(topview, lfg_run):
             assert across[0] > half or across[1] < -half, (who, text)
 
 
+class _Pedal:
+    """A person at the HV's pedals, scripted: full throttle for 2 s, braking for 1.5 s, then
+    throttle again (what a trial of 'persuasive drive' records, without a browser)."""
+
+    log_columns = ()
+    draws_per_step = 0
+
+    def reset(self, context, rng=None):
+        pass
+
+    def act(self, observation):
+        t = observation.t_s
+        return 1.0 if t < 2.0 else (-2.0 if t < 3.5 else 1.0)
+
+
+def person_trial(seed, overrides=None):
+    """A run with a person as the HV (``hv.kind = "person"``), as a drive trial records it."""
+    from persuasive.world import PythonWorld
+
+    config = Config(mode="corrected").with_overrides({"hv.kind": "person", **(overrides or {})})
+    world = PythonWorld(config, seed, hv=_Pedal())
+    while not world.done:
+        world.step()
+    return world.record()
+
+
+#: Lines of the top view that no time label may touch.
+DRAWN_LINES = ("av-path", "hv-path", "av-crossing-line", "hv-crossing-line", "av-yield-line",
+               "hv-yield-line", "conflict-point")
+
+
+def assert_labels_readable(fig):
+    """Every time label, as the renderer lays it out: no two overlap, none touches a drawn line
+    (the paths, the crossing and yield lines, the conflict point) or a footprint, and each
+    vehicle's labels sit on one side of its path, in time order along it."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:
+        texts = [t for t in ax.texts if str(t.get_gid()).endswith("-time-label")]
+        boxes = [t.get_window_extent(renderer) for t in texts]
+        for i, (a, ta) in enumerate(zip(boxes, texts)):
+            for b, tb in zip(boxes[i + 1:], texts[i + 1:]):
+                assert not a.overlaps(b), (ta.get_gid(), ta.get_text(), tb.get_gid(),
+                                           tb.get_text())
+        for line in ax.get_lines():
+            if line.get_gid() not in DRAWN_LINES:
+                continue
+            path = line.get_path().transformed(line.get_transform())
+            marker = line.get_marker() not in (None, "None", "")
+            for box, text in zip(boxes, texts):
+                grown = box.expanded(1.0, 1.0).padded(line.get_linewidth() / 2 * fig.dpi / 72)
+                hit = grown.count_contains(path.vertices) if marker else \
+                    path.intersects_bbox(grown, filled=False)
+                assert not hit, (text.get_gid(), text.get_text(), line.get_gid())
+        for patch in by_gid(ax, "hv-snapshot") + by_gid(ax, "av-snapshot"):
+            outline = patch.get_path().transformed(patch.get_transform())
+            for box, text in zip(boxes, texts):
+                assert not outline.intersects_bbox(box, filled=True), (text.get_gid(),
+                                                                      text.get_text())
+        for who in ("hv", "av"):
+            mine = [(float(t.get_text()[:-2]), t.get_position()) for t in texts
+                    if t.get_gid() == f"{who}-time-label"]
+            (path,) = [ln for ln in ax.get_lines() if ln.get_gid() == f"{who}-path"]
+            xy = np.asarray(path.get_xydata(), float)
+            sides, along = [], []
+            for _, (x, y) in sorted(mine):
+                j = int(np.argmin(np.hypot(xy[:, 0] - x, xy[:, 1] - y)))
+                a, b = xy[max(j - 1, 0)], xy[min(j + 1, len(xy) - 1)]
+                if np.allclose(a, b):  # a vehicle that did not move
+                    continue
+                tangent = b - a
+                sides.append(np.sign(tangent[0] * (y - xy[j, 1]) - tangent[1] * (x - xy[j, 0])))
+                along.append(j)
+            assert len(set(sides)) <= 1, (who, "labels on both sides of the road")
+            assert along == sorted(along), (who, "labels out of time order")
+
+
+def _pair(config, seed=996):
+    return [simulate(config.with_overrides({"av.kind": av}), seed) for av in ("lfg",
+                                                                             "persuasive")]
+
+
+@pytest.mark.parametrize("overrides", [
+    {"scenario.kind": "crossing", "scenario.angle_deg": 60.0},
+    {"scenario.kind": "merge"},
+    {"scenario.kind": "left-turn"},
+    {},
+], ids=["crossing-60", "merge", "left-turn", "intersection"])
+def test_time_labels_touch_nothing_and_read_in_order(overrides):
+    runs = _pair(Config().with_overrides(overrides))
+    assert_labels_readable(plots.topview_figure(*runs))
+    assert_labels_readable(plots.topview_single(runs[1]))
+
+
+@pytest.mark.parametrize("seed, overrides", [
+    (3, {}), (5, {"scenario.kind": "crossing", "scenario.angle_deg": 60.0}),
+    (7, {"scenario.kind": "merge", "simulation.n_steps": 80}),
+], ids=["intersection", "crossing-60", "merge-8-s"])
+def test_time_labels_of_a_drive_trial_touch_nothing(seed, overrides):
+    trial = person_trial(seed, overrides)
+    assert trial.config.hv.kind == "person"
+    assert_labels_readable(plots.topview_single(trial))
+    assert_labels_readable(plots.topview_single(trial, every_s=0.5))
+
+
+def test_legends_name_who_drives_the_hv():
+    from persuasive.plots.animation import _AnimationScene
+
+    def legend_texts(fig):
+        return {t.get_text() for lg in fig.findobj(Legend) for t in lg.get_texts()}
+
+    idm = simulate(Config().with_overrides({"hv.kind": "idm", "simulation.n_steps": 12}), 3)
+    trial = person_trial(3, {"simulation.n_steps": 12})
+    for run, name in ((idm, "HV (human-driven, IDM)"), (trial, "HV (driven by a person)")):
+        for fig in (plots.profile_single(run), plots.topview_single(run),
+                    _AnimationScene(run, 8.0, 4.0, 120.0).fig):
+            texts = legend_texts(fig)
+            assert name in texts and not any("LFG" in t for t in texts), texts
+    lfg = simulate(Config().with_overrides({"simulation.n_steps": 12}), 3)
+    assert "HV (human-driven, LFG / IDM)" in legend_texts(plots.topview_figure(lfg, idm))
+
+
+def test_a_profile_says_why_its_role_row_is_empty():
+    trial = person_trial(3, {"simulation.n_steps": 20})
+    ax_role = plots.profile_single(trial).axes[0]
+    assert by_gid(ax_role, "hv-role") == [] and by_gid(ax_role, "av-role") == []
+    assert one(ax_role, "hv-no-role").get_text() == "HV (a person): no role"
+    assert one(ax_role, "av-no-role").get_text() == "AV (branch MPC): no role"
+    idm = simulate(Config().with_overrides({"hv.kind": "idm", "av.kind": "lfg",
+                                            "simulation.n_steps": 20}), 3)
+    ax_role = plots.profile_single(idm).axes[0]
+    assert one(ax_role, "hv-no-role").get_text() == "HV (IDM): no role"
+    assert by_gid(ax_role, "av-no-role") == [] and by_gid(ax_role, "av-role")
+
+
+def test_compare_figure_says_0_or_n_a_for_delays_it_cannot_draw():
+    import pandas as pd
+
+    nan = float("nan")
+    rows = [  # (av, hv, AV delays, HV delays) of three seeds
+        ("persuasive", "lfg", [0.1, 0.3, 0.2], [0.0, 0.0, 0.0]),
+        ("persuasive", "idm", [0.0, 0.0, 0.0], [nan, nan, nan]),
+        ("yield", "lfg", [nan, nan, nan], [0.4, 0.5, 0.45]),
+        ("yield", "idm", [nan, nan, nan], [0.0, 0.0, 0.0]),
+    ]
+    runs = pd.DataFrame([{"av.kind": av, "hv.kind": hv, "av_delay_s": a, "hv_delay_s": h,
+                          "seed": k + 1}
+                         for av, hv, ad, hd in rows for k, (a, h) in enumerate(zip(ad, hd))])
+    summary = {"av_kinds": ["persuasive", "yield"], "hv_kinds": ["lfg", "idm"],
+               "scenario": "intersection", "mode": "corrected", "seeds": 3,
+               "rows": [{"av": av, "hv": hv, "av_first_pct": 50.0, "av_first_pct_ci": [0, 100],
+                         "collisions": 0} for av, hv, _, _ in rows]}
+    fig = plots.compare_figure(summary, runs)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ax = fig.axes[-1] if len(fig.axes) == 2 else fig.axes[1]
+    notes = {t.get_gid(): t for t in fig.findobj() if str(t.get_gid()).startswith("delay-note")}
+    assert {g: t.get_text() for g, t in notes.items()} == {
+        "delay-note-persuasive-lfg": "HV 0", "delay-note-persuasive-idm": "AV 0, HV n/a",
+        "delay-note-yield-lfg": "AV n/a", "delay-note-yield-idm": "AV n/a, HV 0"}
+    boxes = [b for b in fig.findobj() if b.get_gid() == "delay-box"]
+    for note in notes.values():  # never over a box
+        extent = note.get_window_extent(renderer)
+        assert not any(b.get_window_extent(renderer).overlaps(extent) for b in boxes)
+        assert ax.get_window_extent(renderer).contains(extent.x1 - 1, extent.y0 + 1)
+
+
 # -- table figure -------------------------------------------------------------------------------
 
 
@@ -619,6 +786,46 @@ def test_cli_table_and_animate(results_dir, tmp_path):
     assert main(["animate", "--set", "simulation.n_steps=12", "--fps", "5",
                  "--out", str(gif)]) == 0
     assert iio3.imread(gif, index=None).shape[0] == 12
+
+
+@pytest.fixture(scope="module")
+def saved_run(tmp_path_factory, short_run):
+    path = tmp_path_factory.mktemp("saved") / "run.parquet"
+    short_run.save(path)
+    return path
+
+
+@pytest.mark.parametrize("command, out", [(["plot", "profile"], "f.png"),
+                                          (["plot", "topview"], "f.png"),
+                                          (["animate"], "f.gif")])
+@pytest.mark.parametrize("options, names", [
+    (["--seed", "5"], "--seed"),
+    (["--av", "lfg", "--hv", "idm"], "--av, --hv"),
+    (["--hv-role", "follower", "--pa", "0.5", "--pa-hat", "0.9"], "--hv-role, --pa, --pa-hat"),
+    (["--scenario", "merge", "--mode", "corrected"], "--scenario, --mode"),
+    (["--config", "{config}", "--set", "mpc.epsilon=0.05"], "--config, --set"),
+    (["--seed", "996"], "--seed"),  # even the default, given explicitly
+], ids=["seed", "kinds", "roles", "scenario-mode", "config-set", "default-seed"])
+def test_options_that_from_overrides_are_refused(tmp_path, capsys, saved_run, command, out,
+                                                  options, names):
+    (tmp_path / "c.toml").write_text('mode = "paper"\n')
+    argv = [*command, "--from", str(saved_run), "--out", str(tmp_path / out),
+            *[o.format(config=tmp_path / "c.toml") for o in options]]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {names} cannot be used with --from: the saved run has its own " \
+                  "seed and configuration\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.toml"]
+
+
+def test_single_is_refused_with_from_and_from_alone_plots(tmp_path, capsys, saved_run,
+                                                          short_run):
+    assert main(["plot", "profile", "--single", "--from", str(saved_run), "--out",
+                 str(tmp_path / "f.png")]) == 2
+    assert "--single cannot be used with --from" in capsys.readouterr().err
+    assert main(["plot", "profile", "--from", str(saved_run), "--out",
+                 str(tmp_path / "f.png")]) == 0
+    assert (tmp_path / "f.png").read_bytes()[:4] == b"\x89PNG"
 
 
 @pytest.mark.parametrize("args, message", [

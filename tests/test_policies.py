@@ -182,8 +182,9 @@ def test_boltzmann_choice_by_hand():
 def _idm(config: Config, s, v, s_o, v_o, waiting=0.0):
     from persuasive.packing import pack
     from persuasive.policies import policy_params
+    from persuasive.scenarios import build_scenario
 
-    P_av, P_hv = pack(config)
+    P_av, P_hv = pack(config, build_scenario(config))
     prm = policy_params(config.with_overrides({"hv.kind": "idm"}), kd.HV)
     st = np.array([waiting, 0.0])
     log = np.full(kd.LOG_SIZE, np.nan)
@@ -322,7 +323,7 @@ def test_policies_reject_bad_observations_and_sides():
     from persuasive.scenarios import build_scenario
     from persuasive.world import GameCache
 
-    P_av, P_hv = pack(config)
+    P_av, P_hv = pack(config, build_scenario(config))
     policy.reset(Context(config, build_scenario(config), P_av, P_hv, discounts(config), kd.AV,
                          61, np.zeros((61, 0)), GameCache(P_av, P_hv, discounts(config))), None)
     for bad in ((math.nan, 4.0), (-20.0, math.inf), (-20.0, 11.0), (-20.0, -0.1), (1.0,)):

@@ -31,7 +31,8 @@ def test_readme_opens_with_the_two_commands_and_ci_runs_the_test_one():
 @pytest.mark.slow
 def test_command_line_examples_run(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    commands = [line.split("  #")[0].strip() for line in _block("## Use it", "sh").splitlines()]
+    block = _block("## Use it", "sh").replace("\\\n", " ")  # join continued lines
+    commands = [line.split("  #")[0].strip() for line in block.splitlines()]
     commands = [c for c in commands if c.startswith(".venv/bin/persuasive ")]
     assert len(commands) >= 6
     for command in commands:

@@ -19,7 +19,8 @@ from persuasive.policies import CompiledPolicy
 from persuasive.policies import kinds as kd
 from persuasive.scenarios import build_scenario
 from persuasive.simulation import simulate
-from persuasive.world import draw_streams, run_python
+from persuasive.streams import draw_streams
+from persuasive.world import run_python
 
 SHORT = {"simulation.n_steps": 22}  # long enough for the vehicles to meet the MPC's branches
 

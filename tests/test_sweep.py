@@ -26,7 +26,7 @@ from persuasive.config import Config, ConfigError
 from persuasive.simulation import simulate
 from persuasive.sweep.metrics import metric_grid, wilson
 from persuasive.sweep.records import flatten, unflatten
-from persuasive.sweep.store import default_chunk, part_paths
+from persuasive.sweep.store import chunk_id, chunk_ids, default_chunk, part_paths
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -154,6 +154,14 @@ BAD_GRIDS = [
     ({"seeds": 2, "axes": {"mode": ["paper", "papers"]}}, 'axes.mode = "papers": mode'),
     ({"seeds": 2, "axes": {"seed": [1, 2]}}, "axes.seed: 'seed' cannot be an axis"),
     ({"seeds": 2, "axes": {"roles": {}}}, "axes.roles is an empty table"),
+    ({"seeds": 2**32}, "seeds = 4294967296 is out of range; allowed: integer in [1, 4294967295]"),
+    ({"seeds": {"start": 0, "stop": 2**32}}, "seeds.stop = 4294967296 is out of range"),
+    # six axes of ten values: refused before a million configurations are built
+    ({"seeds": 1, "axes": {name: [0.1 * i for i in range(1, 11)]
+                           for name in ("roles.p_a", "mpc.p_a_hat", "roles.w_s_m2",
+                                        "roles.w_v_m2ps2", "reward.w_c", "reward.w_u")}},
+     "the axes give 1000000 combinations (10 x 10 x 10 x 10 x 10 x 10); allowed: at most "
+     "100000"),
     # each value is valid on its own, one combination is not
     ({"seeds": 2, "base": {"scenario": {"hv_v0_halfwidth_mps": 0.0}},
       "axes": {"scenario.hv_v0_mps": [4.0, 9.5], "scenario.hv_v0_halfwidth_mps": [0.0, 1.0]}},
@@ -186,6 +194,50 @@ def test_bad_grid_file_exits_2_before_any_work(capsys, tmp_path):
                        "--workers", "2", "--scheduler", "tcp://127.0.0.1:1")
     assert code == 2 and "--workers applies to the local cluster only" in err
     assert not out.exists()
+
+
+def test_a_grid_checks_its_seeds_however_it_is_built():
+    with pytest.raises(ConfigError, match=r"grid: seeds.stop = 4294967296 is out of range; "
+                                          r"allowed: integer in \[0, 4294967295\]"):
+        sweep.Grid(Config(), (), 1, 2**32)
+    with pytest.raises(ConfigError, match="grid: seeds.stop = 1 is out of range"):
+        sweep.Grid(Config(), (), 2, 1)
+
+
+#: Plans a sweep of 2 x (2^32 - 1) runs in a process allowed 1.5 GB of data: the chunks must
+#: be planned lazily (listing their 34 million ranges and ids would take several GB).
+_HUGE_SWEEP = """\
+import itertools, json, os, resource, sys, time
+resource.setrlimit(resource.RLIMIT_DATA, (1536 * 2**20, resource.RLIM_INFINITY))
+from persuasive.sweep import Grid
+from persuasive.sweep.store import MANIFEST, SweepStore
+grid = Grid.from_dict({"seeds": 4294967295, "axes": {"roles.p_a": [0.5, 1.0]}})
+t = time.perf_counter()
+store = SweepStore.open(sys.argv[1], grid)
+todo, chunks = store.pending()
+store.start()  # writes the manifest
+first = [(c.index, c.start, c.stop, c.id) for c in itertools.islice(chunks, 2)]
+last = store.chunk_at(store.n_chunks - 1)
+print(json.dumps({"runs": len(grid), "todo": todo, "chunks": store.n_chunks, "first": first,
+                  "last": [last.index, last.start, last.stop], "s": time.perf_counter() - t,
+                  "manifest": os.path.getsize(os.path.join(sys.argv[1], MANIFEST))}))
+"""
+
+
+def test_a_sweep_of_billions_of_runs_is_planned_lazily(tmp_path):
+    done = subprocess.run([sys.executable, "-c", _HUGE_SWEEP, str(tmp_path / "huge")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    runs = 2 * (2**32 - 1)
+    assert result["runs"] == result["todo"] == runs
+    assert result["chunks"] == -(-runs // 250) == 34359739
+    assert [f[:3] for f in result["first"]] == [[0, 0, 250], [1, 250, 500]]
+    digest = sweep.Grid.from_dict({"seeds": 4294967295, "axes": {"roles.p_a": [0.5, 1.0]}}).digest
+    assert result["first"][0][3] == chunk_id(digest, 0, 0, 250, result["chunks"])
+    assert result["first"][0][3].startswith("00000000-")  # as wide as the last index
+    assert result["last"] == [34359738, 8589934500, runs]
+    assert result["manifest"] < 4096 and result["s"] < 10.0
 
 
 # -- flattening -----------------------------------------------------------------------------------
@@ -295,8 +347,10 @@ def test_manifest(reference, small_grid):
     import tomllib
 
     assert sweep.Grid.from_dict(tomllib.loads(manifest["grid_toml"])) == small_grid
+    assert "chunk_ids" not in manifest  # planned from the chunk size, never listed
     assert [p.name for p in part_paths(reference)] == \
-        [f"part-{cid}.parquet" for cid in manifest["chunk_ids"]]
+        [f"part-{cid}.parquet" for cid in chunk_ids(small_grid.digest, [(0, 7), (7, 14),
+                                                                        (14, 20)])]
     assert sorted(os.listdir(reference)) == ["failed", "manifest.json", "runs"]
     assert os.listdir(reference / "failed") == []
     assert default_chunk(20) == 1 and default_chunk(6400) == 200 and default_chunk(10**6) == 250
@@ -369,10 +423,28 @@ def test_unreachable_scheduler_is_one_line(capsys, tmp_path, monkeypatch):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     grid_file = write(tmp_path / "grid.toml", SMALL_TOML)
-    code, _, err = cli(capsys, "sweep", grid_file, "--out", tmp_path / "x", "--scheduler",
+    code, _, err = cli(capsys, "sweep", grid_file, "--out", tmp_path / "x" / "y", "--scheduler",
                        f"tcp://127.0.0.1:{port}", "--quiet")
     assert code == 2 and err.count("\n") == 1
     assert err.startswith(f"error: scheduler 'tcp://127.0.0.1:{port}' cannot be reached")
+    assert not (tmp_path / "x").exists()  # no manifest, no runs/ or failed/: nothing started
+
+
+def test_a_sweep_that_cannot_start_leaves_the_folder_as_it_was(capsys, tmp_path, monkeypatch,
+                                                               reference):
+    from persuasive.sweep import runner
+
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT_S", 1.0)
+    other = write(tmp_path / "other.toml", 'seeds = 2\n[axes]\n"roles.p_a" = [0.5]\n')
+    before = sorted((p.relative_to(reference), p.read_bytes()) for p in reference.rglob("*")
+                    if p.is_file())
+    # --force would replace the sweep in the folder, but the scheduler is not there
+    code, _, err = cli(capsys, "sweep", other, "--out", reference, "--force", "--quiet",
+                       "--scheduler", "tcp://127.0.0.1:1")
+    assert code == 2 and "cannot be reached" in err
+    after = sorted((p.relative_to(reference), p.read_bytes()) for p in reference.rglob("*")
+                   if p.is_file())
+    assert after == before
 
 
 # -- killed and resumed -----------------------------------------------------------------------
@@ -568,7 +640,9 @@ def test_plot_sweep_needs_a_sweep_folder(capsys, tmp_path):
 
 
 def test_bench_sweep_tiny():
-    result = sweep.bench_sweep(sizes=(8,), workers=2, repeats=1)
+    from persuasive.bench_sweep import bench_sweep
+
+    result = bench_sweep(sizes=(8,), workers=2, repeats=1)
     (size,) = result["sizes"]
     assert size["runs"] == 8 and size["same_results"] is True
     assert size["pool_runs_per_s"] > 0 and size["sweep_runs_per_s"] > 0

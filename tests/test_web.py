@@ -489,6 +489,34 @@ def test_drive_command_bad_input_is_one_line_and_exit_2(capsys, tmp_path, study_
                      "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err == f"error: cannot listen on 127.0.0.1:{port}: address already in use\n"
+    assert not (tmp_path / "out").exists()  # nothing made before the server could start
+
+
+def test_drive_that_cannot_start_creates_nothing(capsys, tmp_path, study_file):
+    import os
+    import socket
+
+    from persuasive.cli import main
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        cases = [(["--port", str(port)], "address already in use"),
+                 (["--host", "no-such-host.invalid"], "--host 'no-such-host.invalid' cannot "
+                                                      "be resolved"),
+                 # an address that is not this machine's (TEST-NET-1)
+                 (["--host", "192.0.2.1"], "cannot listen on 192.0.2.1:8765: cannot assign "
+                                           "requested address")]
+        if os.geteuid() != 0:  # a port below 1024 needs privileges
+            cases.append((["--port", "1"], "cannot listen on 127.0.0.1:1: permission denied"))
+        for args, message in cases:
+            out = tmp_path / "trials" / "here"
+            code = main(["drive", "--study", str(study_file), "--out", str(out), *args])
+            err = capsys.readouterr().err
+            assert code == 2 and err.startswith("error: ") and message in err, err
+            assert err.count("\n") == 1
+            assert not (tmp_path / "trials").exists()
 
 
 def test_commands_from_the_controls():

@@ -14,8 +14,7 @@ The main entry points:
 The method as implemented is described in ``docs/method.md``.
 """
 
-__version__ = "0.1.0"
-
+from ._version import __version__
 from ._compile import ensure_fresh_cache  # noqa: E402
 
 ensure_fresh_cache()  # before any compiled kernel is loaded (see persuasive._compile)

@@ -9,7 +9,8 @@ the code of every function it calls, so after an edit in a *called* function in 
 it would load stale code (wrong results, not an error). :func:`ensure_fresh_cache` closes
 that gap: it keeps a stamp of the package's sources and clears the package's cached kernels
 when any source changed, before anything is loaded. A user who extends the method by editing
-a kernel therefore always runs what they wrote.
+a kernel therefore always runs what they wrote. :func:`warm_up` loads them (compiling them
+once when they are not cached) in this process, e.g. before worker processes start.
 """
 
 from __future__ import annotations
@@ -97,3 +98,12 @@ def kernels_cached() -> bool:
         return os.path.getmtime(index) >= os.path.getmtime(source)
     except (AttributeError, OSError):
         return False
+
+
+def warm_up() -> None:
+    """Load (or compile, on first use) the kernels in this process before workers start."""
+    from .config import Config
+    from .simulation import simulate
+
+    simulate(Config().with_overrides({"simulation.n_steps": 1}), 1)
+    simulate(Config().with_overrides({"simulation.n_steps": 1, "av.kind": "lfg"}), 1)

@@ -11,6 +11,11 @@ code, as a user pays it):
   (:meth:`Planner.plan`: for the persuasive MPC, the human-view prediction, the branch MPC with
   its re-solves, the belief update), replayed along the runs' states, milliseconds;
 - ``mpc_run_ms_median``: one whole closed-loop run (61 steps) with :func:`simulate`;
+- ``shield_us_median`` / ``_p99``: the safety shield alone (``persuasive.safety.shield``, the
+  worst-case kind) around the decision each state's run took, microseconds; and
+  ``shielded_decision_ms_median`` / ``_p99``: the planner's decision with the shield on (the
+  MPC then also checks its candidates against the shield and tracks its confidence in the
+  human model, docs/method.md §12.3), replayed along the same states;
 - ``work_per_decision``: the kernels' work counters per decision (pair tests of the games and
   of the MPC, re-solves done and skipped by the pruning, libraries built), so that a change
   that loses the pruning shows even when the machine's timings are noisy;
@@ -36,6 +41,7 @@ from .game import predict_buffers
 from .library import lib_buffers
 from .packing import N_WORK, WORK_NAMES, discounts, pack
 from .planner import Planner
+from .scenarios import build_scenario
 from .simulation import simulate
 
 
@@ -46,7 +52,7 @@ def bench_config(av: str = "persuasive", scenario: str = "intersection") -> Conf
 
 
 def _game_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
-    P_av, P_hv = pack(config)
+    P_av, P_hv = pack(config, build_scenario(config))
     disc = discounts(config)
     n, n_traj = config.library.n_samples, config.library.n_traj
     (be, we), (bo, wo) = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
@@ -89,6 +95,30 @@ def _decision_times_ns(config: Config, runs: list, repeats: int) -> tuple[np.nda
     return np.array(times), planner
 
 
+def _shield_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
+    """The worst-case shield around each state's logged AV acceleration."""
+    from .record import static_setup
+    from .safety.shield import N_CONFLICT, conflict_vector, shield_step
+
+    shielded = config.with_overrides({"av.shield": "worst-case"})
+    _, P_av, P_hv, _ = static_setup(shielded)
+    C = np.empty(N_CONFLICT)
+    conflict_vector(P_av, P_hv, C)
+    dt = config.simulation.dt_s
+    cases = [(float(r[0]), float(r[1]), float(a), float(r[2]), float(r[3]))
+             for run in runs for r, a in zip(run.states[:-1], run.log["av_accel_mps2"])]
+    for s_av, v_av, a, s_hv, v_hv in cases[:20]:  # warm-up
+        shield_step(s_av, v_av, a, dt, s_hv, v_hv, C)
+    times = []
+    clock = time.perf_counter_ns
+    for _ in range(repeats):
+        for s_av, v_av, a, s_hv, v_hv in cases:
+            t = clock()
+            shield_step(s_av, v_av, a, dt, s_hv, v_hv, C)
+            times.append(clock() - t)
+    return np.array(times)
+
+
 def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: bool = False,
           workers: int | None = None, av: str = "persuasive",
           scenario: str = "intersection") -> dict[str, Any]:
@@ -98,6 +128,9 @@ def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: boo
     runs = [simulate(config, seed) for seed in range(1, n_runs + 1)]
     game = _game_times_ns(config, runs, repeats)
     decision, planner = _decision_times_ns(config, runs, repeats)
+    shield = _shield_times_ns(config, runs, repeats)
+    shielded, _ = _decision_times_ns(config.with_overrides({"av.shield": "worst-case"}), runs,
+                                     repeats)
     run_times = []
     for seed in range(1, n_runs + 1):
         t = time.perf_counter()
@@ -111,6 +144,10 @@ def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: boo
         "mpc_decision_ms_median": float(np.median(decision) / 1e6),
         "mpc_decision_ms_p99": float(np.percentile(decision, 99) / 1e6),
         "mpc_run_ms_median": float(np.median(run_times) * 1e3),
+        "shield_us_median": float(np.median(shield) / 1e3),
+        "shield_us_p99": float(np.percentile(shield, 99) / 1e3),
+        "shielded_decision_ms_median": float(np.median(shielded) / 1e6),
+        "shielded_decision_ms_p99": float(np.percentile(shielded, 99) / 1e6),
         "work_per_decision": {name: float(w) / decision.size
                               for name, w in zip(WORK_NAMES, planner.work)},
         "samples": {"game_solves": int(game.size), "mpc_decisions": int(decision.size),
@@ -140,7 +177,7 @@ def _reference_times(config: Config, run, n: int = 5) -> dict[str, float]:
     """The straightforward NumPy path on ``n`` states of one run (it is slow)."""
     from . import reference
 
-    P_av, P_hv = pack(config)
+    P_av, P_hv = pack(config, build_scenario(config))
     disc = discounts(config)
     states = run.states
     picks = states[np.linspace(0, len(states) - 2, n).astype(int)]

@@ -23,7 +23,9 @@ from typing import Any, Literal, get_args
 Role = Literal["leader", "follower"]
 Mode = Literal["paper", "corrected"]
 AVKind = Literal["persuasive", "passive", "cv", "lfg", "yield"]
-HVKind = Literal["lfg", "stubborn", "noisy", "idm", "aggressive", "replay", "person"]
+HVKind = Literal["lfg", "stubborn", "noisy", "idm", "aggressive", "replay", "adversary",
+                 "deceptive", "random", "person"]
+ShieldKind = Literal["off", "worst-case", "responsive"]
 ScenarioKind = Literal["intersection", "crossing", "left-turn", "merge"]
 NoiseKind = Literal["none", "uniform", "gaussian"]
 StreamLayout = Literal["legacy", "per-agent"]
@@ -37,6 +39,7 @@ SIMULATED_HV_KINDS: tuple[str, ...] = tuple(k for k in HV_KINDS if k != "person"
 SCENARIO_KINDS: tuple[str, ...] = get_args(ScenarioKind)
 NOISE_KINDS: tuple[str, ...] = get_args(NoiseKind)
 STREAM_LAYOUTS: tuple[str, ...] = get_args(StreamLayout)
+SHIELD_KINDS: tuple[str, ...] = get_args(ShieldKind)
 #: Other names accepted for AV kinds (``mpc`` was the persuasive planner's first name).
 AV_KIND_ALIASES = {"mpc": "persuasive"}
 
@@ -205,6 +208,16 @@ class MPCParams:
 
     epsilon: float = 0.02  #: chance-constraint level: P(safe) > 1 - epsilon at every sample [-]
     p_a_hat: float | None = None  #: the AV's estimate of p_a [-]; None means equal to roles.p_a
+    # With the shield on (``av.shield``; docs/method.md §12.3), the planner knows about it:
+    #: candidates whose first step the shield would reject count as infeasible
+    shield_aware: bool = True
+    #: below this model confidence P(model) the planner stops persuading and only takes
+    #: candidates that yield before the conflict or cross it whatever the human does [-]; 0: never
+    confidence_threshold: float = 0.2
+    #: width of the model's acceleration prediction in the confidence filter [m/s^2]
+    confidence_accel_std_mps2: float = 0.3
+    #: probability per step that the human switches between following the model and not [-]
+    confidence_switch: float = 0.05
 
     def __post_init__(self) -> None:
         # below 1e-12 the threshold 1 - epsilon rounds to (nearly) 1.0 and no candidate is ever
@@ -212,6 +225,22 @@ class MPCParams:
         _in_range("mpc.epsilon", self.epsilon, EPSILON_MIN, 1.0, hi_open=True)
         if self.p_a_hat is not None:
             _in_range("mpc.p_a_hat", self.p_a_hat, 0.0, 1.0)
+        _flag("mpc.shield_aware", self.shield_aware)
+        _in_range("mpc.confidence_threshold", self.confidence_threshold, 0.0, 1.0)
+        _in_range("mpc.confidence_accel_std_mps2", self.confidence_accel_std_mps2, 0.0,
+                  lo_open=True)
+        _in_range("mpc.confidence_switch", self.confidence_switch, 0.0, 0.5)
+
+
+#: The angles [deg] at which the crossing and the merge mean what they say, and why: at a
+#: flatter angle the roads run side by side over several vehicle lengths (the conflict zone
+#: reaches ``min_dist / sin(angle)``, more than 29 m at 15 degrees, from the conflict point),
+#: the crossing lines recede as ``1 / sin(angle)`` and the vehicles start tens of metres
+#: back, never reaching the conflict in a run.
+ANGLE_RANGES_DEG = {
+    "crossing": (15.0, 165.0, "flatter roads run side by side instead of crossing"),
+    "merge": (15.0, 90.0, "a flatter ramp runs beside the lane instead of joining it"),
+}
 
 
 @dataclass(frozen=True)
@@ -226,7 +255,9 @@ class ScenarioParams:
     """
 
     kind: ScenarioKind = "intersection"  #: intersection | crossing | left-turn | merge
-    angle_deg: float | None = None  #: crossing: angle between the paths [deg] (90); merge: ramp angle (30)
+    #: crossing: angle between the paths [deg] (90, in [15, 165]); merge: ramp angle (30, in
+    #: [15, 90])
+    angle_deg: float | None = None
     turn_radius_m: float | None = None  #: left-turn: radius of the AV's arc [m] (1.5 lane widths)
     av_s0_m: float | None = None  #: AV nominal initial position along its path [m]
     av_v0_mps: float = 4.0  #: AV nominal initial speed [m/s]
@@ -243,8 +274,11 @@ class ScenarioParams:
         _choice(p + "kind", self.kind, SCENARIO_KINDS)
         if self.angle_deg is not None:
             _in_range(p + "angle_deg", self.angle_deg, 0.0, 180.0, lo_open=True, hi_open=True)
-            if self.kind == "merge":
-                _in_range(p + "angle_deg", self.angle_deg, 0.0, 90.0, lo_open=True)
+            if self.kind in ANGLE_RANGES_DEG:
+                lo, hi, why = ANGLE_RANGES_DEG[self.kind]
+                if not lo <= self.angle_deg <= hi:
+                    _fail(p + "angle_deg", self.angle_deg,
+                          f"[{lo:g}, {hi:g}] degrees for a {self.kind} ({why})")
         if self.turn_radius_m is not None:
             _in_range(p + "turn_radius_m", self.turn_radius_m, 0.0, lo_open=True)
         for name in ("av_s0_m", "hv_s0_m"):
@@ -321,6 +355,11 @@ class AVParams:
 
     kind: AVKind = "persuasive"  #: persuasive | passive | cv | lfg | yield
     role: Role | None = None  #: initial role of an LFG AV; unset: the other of hv.role
+    #: the safety shield around the planner (docs/method.md §12): off | worst-case |
+    #: responsive; unset: off in paper mode, worst-case in corrected mode
+    shield: ShieldKind | None = None
+    #: responsive shield: the human may do anything for this long, then brakes [s]
+    shield_response_s: float = 1.0
     vehicle: VehicleOverrides = field(default_factory=VehicleOverrides)
 
     def __post_init__(self) -> None:
@@ -329,6 +368,9 @@ class AVParams:
         _choice("av.kind", self.kind, AV_KINDS)
         if self.role is not None:
             _choice("av.role", self.role, ROLES)
+        if self.shield is not None:
+            _choice("av.shield", self.shield, SHIELD_KINDS)
+        _in_range("av.shield_response_s", self.shield_response_s, 0.0, 60.0)
 
 
 @dataclass(frozen=True)
@@ -385,21 +427,38 @@ class ReplayParams:
 
 
 @dataclass(frozen=True)
+class RandomHumanParams:
+    """The random human (``hv.kind = "random"``): uniform accelerations within the vehicle's
+    limits, each held for a uniform random time."""
+
+    hold_min_s: float = 0.1  #: shortest hold of one acceleration [s]
+    hold_max_s: float = 2.0  #: longest hold [s]
+
+    def __post_init__(self) -> None:
+        _in_range("hv.random.hold_min_s", self.hold_min_s, 0.0, lo_open=True)
+        _in_range("hv.random.hold_max_s", self.hold_max_s, self.hold_min_s, 3600.0)
+
+
+@dataclass(frozen=True)
 class HVParams:
     """The human driver model (docs/method.md §5, §11).
 
     ``lfg``: the paper's adaptive-role LFG human; ``stubborn``: the LFG with ``p_a = 0``;
     ``noisy``: a Boltzmann-rational LFG; ``idm``: an IDM driver with gap acceptance;
     ``aggressive``: full throttle, never yields; ``replay``: a recorded trajectory, open loop;
-    ``person``: a person at the controls (``persuasive drive``; a Python policy, not a compiled
+    ``adversary``: aims at the conflict to arrive when the AV does; ``deceptive``: yields until
+    the AV commits, then accelerates fully; ``random``: bounded random accelerations held for
+    random times (docs/method.md §12.4); ``person``: a person at the controls (``persuasive drive``; a Python policy, not a compiled
     kind: ``simulate`` cannot run it, and records of the browser page carry it).
     """
 
-    kind: HVKind = "lfg"  #: lfg | stubborn | noisy | idm | aggressive | replay | person
+    kind: HVKind = "lfg"  #: lfg | stubborn | noisy | idm | aggressive | replay | adversary |
+    #: deceptive | random | person
     role: Role = "leader"  #: initial role of an LFG-type human
     noisy: NoisyParams = field(default_factory=NoisyParams)
     idm: IDMParams = field(default_factory=IDMParams)
     replay: ReplayParams = field(default_factory=ReplayParams)
+    random: RandomHumanParams = field(default_factory=RandomHumanParams)
     vehicle: VehicleOverrides = field(default_factory=VehicleOverrides)
 
     def __post_init__(self) -> None:
@@ -469,6 +528,10 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
     except OSError as exc:
         raise ConfigError(f"{what} {str(path)!r} cannot be read: "
                           f"{(exc.strerror or str(exc)).lower()}") from None
+    except UnicodeDecodeError as exc:  # TOML is UTF-8 text
+        raise ConfigError(f"{what} {str(path)!r} is not UTF-8 text (byte "
+                          f"0x{exc.object[exc.start]:02x} at offset {exc.start}); TOML files "
+                          "must be UTF-8") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -538,6 +601,14 @@ class Config:
         if self.simulation.streams is not None:
             return self.simulation.streams
         return "legacy" if self.mode == "paper" else "per-agent"
+
+    @property
+    def shield(self) -> str:
+        """The safety shield in force: ``av.shield`` as set, else "off" in paper mode (the
+        published tables) and "worst-case" in corrected mode."""
+        if self.av.shield is not None:
+            return self.av.shield
+        return "off" if self.mode == "paper" else "worst-case"
 
     @property
     def p_a_hat(self) -> float:
@@ -700,6 +771,7 @@ __all__ = [
     "IDMParams",
     "LibraryParams",
     "NoisyParams",
+    "RandomHumanParams",
     "ReplayParams",
     "VehicleOverrides",
     "MPCParams",

@@ -28,12 +28,18 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
+from ._compile import warm_up
 from ._files import OutputError, atomic_folder, atomic_write
 from .config import Config, ConfigError
 from .simulation import simulate
+from .sweep.grid import SEED_MAX
 
 TABLES = ("table1", "table2")
+#: Most runs one reproduction (or comparison) may have: its runs are summarised in memory
+#: (about 2.5 kB each at the peak, some 3 GB for the most); ``persuasive sweep`` streams any
+#: number of runs to disk.
+MAX_RUNS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -88,6 +94,9 @@ PUBLISHED: dict[str, tuple[Row, ...]] = {
     ),
 }
 
+#: The seeds of the published tables: seeds 1..1000 per row.
+PUBLISHED_SEEDS = 1000
+
 #: The sweep's name of the cases' axis (a table's row).
 CASE = "case"
 
@@ -97,11 +106,12 @@ RUN_COLUMNS = (
     "av_s0_m", "av_v0_mps", "hv_s0_m", "hv_v0_mps",
     "first_at_line", "first_at_conflict_point", "collision", "min_distance_to_line_m",
     "min_distance_m", "idx_end", "infeasible_steps", "hv_role_changes", "av_role_changes",
-    "min_dist_m", "config_hash", "version",
+    "safety_distance_m", "config_hash", "version",
 )
 
 
-_METRICS = RUN_COLUMNS[RUN_COLUMNS.index("first_at_line"):RUN_COLUMNS.index("min_dist_m")]
+_METRICS = RUN_COLUMNS[RUN_COLUMNS.index("first_at_line"):
+                       RUN_COLUMNS.index("safety_distance_m")]
 
 
 def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any]:
@@ -122,7 +132,7 @@ def run_record(table: str, row: int, config: Config, seed: int) -> dict[str, Any
         "hv_s0_m": s["hv_initial_state"][0],
         "hv_v0_mps": s["hv_initial_state"][1],
         **{k: s[k] for k in _METRICS},
-        "min_dist_m": rec.scenario.min_dist_m,  # the pair's, as the kernels use it
+        "safety_distance_m": rec.scenario.min_dist_m,  # the pair's, as the kernels use it
         "config_hash": config.digest(),
         "version": __version__,
     }
@@ -141,6 +151,20 @@ class RunFailure:
     def describe(self) -> str:
         return (f"{self.table} row {self.row} seed {self.seed} (config {self.config_hash}): "
                 f"{self.error}")
+
+
+def check_seeds(seeds: Any, n_rows: int, name: str = "seeds", rows: str = "rows") -> int:
+    """``seeds`` (seeds ``1..seeds`` for each of ``n_rows`` rows), or :class:`ConfigError`:
+    an integer in ``[1, 2^32 - 1]`` giving at most :data:`MAX_RUNS` runs in all. ``name``
+    and ``rows`` name the parameter and the rows in the message."""
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= SEED_MAX:
+        raise ConfigError(f"{name} = {seeds!r} is out of range; allowed: integer in "
+                          f"[1, {SEED_MAX}]")
+    if seeds * n_rows > MAX_RUNS:
+        raise ConfigError(f"{name} = {seeds} is out of range; allowed: 1..{MAX_RUNS // n_rows} "
+                          f"for {n_rows} {rows} (at most {MAX_RUNS} runs, summarised in "
+                          "memory; 'persuasive sweep' streams more to disk)")
+    return seeds
 
 
 def _run_chunk(task: tuple[str, int, str, list[int]]) -> tuple[list[dict], list[RunFailure]]:
@@ -190,12 +214,6 @@ def _die_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="persuasive-parent-watch", daemon=True).start()
 
 
-def warm_up() -> None:
-    """Load (or compile, on first use) the kernels in this process before workers start."""
-    simulate(Config().with_overrides({"simulation.n_steps": 1}), 1)
-    simulate(Config().with_overrides({"simulation.n_steps": 1, "av.kind": "lfg"}), 1)
-
-
 def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = None,
                mode: str | None = None, base: Config | None = None, chunk: int = 25,
                progress: Callable[[int, int, int], None] | None = None,
@@ -212,8 +230,7 @@ def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = N
     for t in tables:
         if t not in PUBLISHED:
             raise ConfigError(f"table = {t!r} is out of range; allowed: {' | '.join(TABLES)}")
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    check_seeds(seeds, sum(len(PUBLISHED[t]) for t in tables))
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
         raise ConfigError(f"chunk = {chunk!r} is out of range; allowed: integer >= 1")
     workers = (os.cpu_count() or 1) if workers is None else workers
@@ -263,10 +280,16 @@ def summarize(runs: list[dict[str, Any]], table: str, base: Config | None = None
               failures: Iterable[RunFailure] = ()) -> dict[str, Any]:
     """The printed table of docs/method.md §8 for ``table``'s rows in ``runs``.
 
-    Safety violations compare each run's distances with that run's own ``min_dist_m``.
+    Safety violations compare each run's distances with that run's own
+    ``safety_distance_m``.
     ``base`` and ``seeds`` (the configuration and seed count the runs were made with) are
-    recorded with their TOML text and digest; ``failures`` are listed.
+    recorded with their TOML text and digest; ``failures`` are listed. The differences to
+    the published shares are given for seeds 1..1000 only (those of the published tables);
+    with other seeds they are None.
     """
+    if seeds is None:
+        seeds = max((r["seed"] for r in runs if r["table"] == table), default=0)
+    comparable = seeds == PUBLISHED_SEEDS
     rows = []
     for i, spec in enumerate(PUBLISHED[table]):
         mine = [r for r in runs if r["table"] == table and r["row"] == i]
@@ -289,19 +312,19 @@ def summarize(runs: list[dict[str, Any]], table: str, base: Config | None = None
             "hv_first_pct": hv_pct,
             "published_av_first_pct": spec.published_av_first_pct,
             "published_hv_first_pct": spec.published_hv_first_pct,
-            "diff_av_first_pct": round(av_pct - spec.published_av_first_pct, 10),
-            "diff_hv_first_pct": round(hv_pct - spec.published_hv_first_pct, 10),
+            "diff_av_first_pct": round(av_pct - spec.published_av_first_pct, 10)
+            if comparable else None,
+            "diff_hv_first_pct": round(hv_pct - spec.published_hv_first_pct, 10)
+            if comparable else None,
             "collisions": int(sum(r["collision"] for r in mine)),
             "runs_with_infeasible": int(sum(r["infeasible_steps"] > 0 for r in mine)),
-            "violations_to_line": int(sum(r["min_distance_to_line_m"] < r["min_dist_m"]
+            "violations_to_line": int(sum(r["min_distance_to_line_m"] < r["safety_distance_m"]
                                           for r in mine)),
-            "violations_whole_run": int(sum(r["min_distance_m"] < r["min_dist_m"]
+            "violations_whole_run": int(sum(r["min_distance_m"] < r["safety_distance_m"]
                                             for r in mine)),
             "config_hash": mine[0]["config_hash"],
         })
     mode = base.mode if base is not None else (runs[0]["mode"] if runs else None)
-    if seeds is None:
-        seeds = max((r["seed"] for r in runs if r["table"] == table), default=0)
     out: dict[str, Any] = {"table": table, "mode": mode, "seeds": seeds,
                            "seed_range": [1, seeds], "rows": rows,
                            "scenario": base.scenario.kind if base is not None else
@@ -378,25 +401,28 @@ def verdict(summary: dict[str, Any], base: Config) -> str:
     if base != Config():
         return ("the configuration differs from the paper's, so the published values are "
                 "shown for comparison only.")
-    if n != 1000:
+    if n != PUBLISHED_SEEDS:
         return (f"the published values are for seeds 1..1000; with seeds 1..{n} the shares "
-                "differ by sampling (run with the default --seeds 1000 to compare).")
+                "differ by sampling, so they are not compared (run with the default --seeds "
+                "1000 to compare).")
     if matches_published(summary):
         return "every AV-first and HV-first cell equals the published one."
     return "NOT every cell equals the published one."
 
 
 def to_markdown(summary: dict[str, Any]) -> str:
-    """The summary as a Markdown table (one line per row)."""
+    """The summary as a Markdown table (one line per row). The published shares and the
+    differences are shown beside those of seeds 1..1000 in the intersection only (the
+    published tables'); other tables say why in :func:`verdict`."""
     t2 = summary["table"] == "table2"
     scenario = summary.get("scenario", "intersection")
-    published = scenario == "intersection"  # the paper's values are for its intersection
+    published = scenario == "intersection" and summary.get("seeds") == PUBLISHED_SEEDS
     head = ["HV initial role", "p_a"] + (["p_a_hat"] if t2 else []) + [
         "AV first %", "HV first %"] + (["published AV/HV %", "diff AV/HV"] if published
                                         else []) + [
         "same step", "neither", "collisions", "runs infeasible", "violations to line",
         "violations whole run"]
-    where = "" if published else f", {scenario} scenario"
+    where = "" if scenario == "intersection" else f", {scenario} scenario"
     lines = [
         f"**{summary['table']}**{where}, {summary['mode']} mode, seeds 1..{summary['seeds']}",
         "",
@@ -430,6 +456,8 @@ class Reproduction:
     failures: tuple[RunFailure, ...] = ()  #: runs that raised (left out of ``runs``)
     base: Config | None = None  #: the base configuration of every row
     folders: dict[str, Path] | None = None  #: per table, its results folder (when saved)
+    skipped: int = 0  #: runs finished by an earlier call into the same folders
+    ran: int = 0  #: runs computed by this call (failed ones included)
 
 
 def table_grid(table: str, base: Config, seeds: int):
@@ -438,8 +466,7 @@ def table_grid(table: str, base: Config, seeds: int):
 
     if table not in PUBLISHED:
         raise ConfigError(f"table = {table!r} is out of range; allowed: {' | '.join(TABLES)}")
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    check_seeds(seeds, len(PUBLISHED[table]))
     return Grid(base, (), 1, seeds, cases=tuple(row.overrides() for row in PUBLISHED[table]))
 
 
@@ -486,6 +513,7 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
         raise ConfigError(f"table = {table!r} is out of range; allowed: "
                           f"{' | '.join((*TABLES, 'all'))}")
     tables = TABLES if table == "all" else (table,)
+    check_seeds(seeds, sum(len(PUBLISHED[t]) for t in tables))
     base = base or Config()
     if mode is not None:
         base = base.with_overrides({"mode": mode})
@@ -506,6 +534,7 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
     runs: list[dict[str, Any]] = []
     failures: list[RunFailure] = []
     folders: dict[str, Path] = {}
+    skipped = ran = 0
     with tempfile.TemporaryDirectory(prefix="persuasive-reproduce-") as scratch:
         for t in tables:
             if out is not None:
@@ -513,8 +542,9 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
             else:
                 folder = Path(scratch) / t
             result = sweep.run(grids[t], folder, workers=workers, scheduler=scheduler,
-                               force=force, progress=tracker(t))
+                               force=force, progress=tracker(t), what="results folder")
             runs += runs_of(t, sweep.load(folder))
+            skipped, ran = skipped + result.skipped, ran + result.ran
             for f in result.failures:
                 failures.append(RunFailure(t, int(f["axes"][CASE]), int(f["seed"]),
                                            f["config_hash"], f["error"]))
@@ -525,7 +555,8 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
     for t, folder in folders.items():  # a results folder is complete: runs and summary
         _write_summary(folder, summaries[t], atomic=True)
     frame = pd.DataFrame(runs, columns=list(RUN_COLUMNS))
-    return Reproduction(frame, summaries, wall, tuple(failures), base, folders or None)
+    return Reproduction(frame, summaries, wall, tuple(failures), base, folders or None,
+                        skipped, ran)
 
 
 def save(result: Reproduction, table: str, out: str | Path, force: bool = True) -> Path:
@@ -567,25 +598,6 @@ def load_summary(folder: str | Path) -> dict[str, Any]:
     path = Path(folder) / "summary.json"
     try:
         return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # JSONDecodeError and UnicodeDecodeError included
         raise ConfigError(f"results folder {str(folder)!r} has no readable summary.json "
                           f"({exc.__class__.__name__})") from None
-
-
-def tqdm_progress(total_rows: int) -> Callable[[int, int, int], None]:
-    """A progress callback drawing a tqdm bar on stderr: runs done, runs/s, time left, rows."""
-    from tqdm import tqdm
-
-    bar: dict[str, Any] = {}
-
-    def update(done: int, total: int, rows_done: int) -> None:
-        if "bar" not in bar:
-            bar["bar"] = tqdm(total=total, unit="run", file=sys.stderr, dynamic_ncols=True,
-                              smoothing=0.1)
-        b = bar["bar"]
-        b.set_postfix_str(f"rows {rows_done}/{total_rows}", refresh=False)
-        b.update(done - b.n)
-        if done >= total:
-            b.close()
-
-    return update

@@ -31,6 +31,7 @@ of the vehicle's length and width centred on ``xy(s)`` and aligned with the path
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -115,6 +116,9 @@ class Path:
     first_s: float = -math.inf  #: the line whose first arrival decides who went first [m]
     clear_s: float = math.inf  #: past it the vehicle no longer conflicts [m]
     zone: tuple[float, float] = (-math.inf, math.inf)  #: conservative conflict window [m]
+    #: conservative interval of positions where the footprint may touch the other vehicle's
+    #: (:func:`occupancy_interval`; the safety shield and the surrogate measures use it) [m]
+    occupancy: tuple[float, float] = (-math.inf, math.inf)
     _G: np.ndarray = field(default=None, repr=False, compare=False)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
@@ -159,6 +163,17 @@ class Path:
         cx, cy, r, phi1, turn = self.arc
         return (self.b1, self.b2, *self.p1, *self.u0, cx, cy, r, phi1, turn, *self.p2, *self.u2)
 
+    @property
+    def is_straight(self) -> bool:
+        """One straight line: no arc and the same direction before and after ``b1``."""
+        return self.arc[2] == 0.0 and self.u0 == self.u2
+
+    @property
+    def half_diagonal_m(self) -> float:
+        """Half the diagonal of the vehicle's footprint [m]: no point of it is further from
+        the centre."""
+        return 0.5 * math.hypot(self.vehicle.length_m, self.vehicle.width_m)
+
     def geometry_vector(self) -> np.ndarray:
         """The path's kernel slots (``slot.PATH_B1 .. slot.PATH_UY2``)."""
         return self._G.copy()
@@ -166,8 +181,9 @@ class Path:
     def xy(self, s: Any) -> tuple[np.ndarray, np.ndarray]:
         """Positions ``(x, y)`` [m] at path positions ``s`` (any shape)."""
         s = np.asarray(s, dtype=np.float64)
-        x, y = np.empty_like(s), np.empty_like(s)
-        path_points(self._G, np.ascontiguousarray(s), x, y)
+        # C-contiguous arrays: the kernel writes through ravel(), which copies anything else
+        x, y = np.empty(s.shape), np.empty(s.shape)
+        path_points(self._G, np.ascontiguousarray(s).reshape(s.shape), x, y)
         return x, y
 
     def direction(self, s: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -218,6 +234,7 @@ def unit(angle_deg: float) -> tuple[float, float]:
     return math.cos(a), math.sin(a)
 
 
+@functools.lru_cache(maxsize=64)
 def zone_interval(path: Path, other: Path, min_dist_m: float, reach_m: float = 150.0,
                   step_m: float = 0.01) -> tuple[float, float]:
     """A conservative interval of ``s`` on ``path`` outside which every point of ``other``
@@ -241,6 +258,105 @@ def zone_interval(path: Path, other: Path, min_dist_m: float, reach_m: float = 1
     lo = -math.inf if inside[0] == 0 else float(s[inside[0]] - margin)
     hi = math.inf if inside[-1] == s.size - 1 else float(s[inside[-1]] + margin)
     return lo, hi
+
+
+@functools.lru_cache(maxsize=64)
+def occupancy_interval(path: Path, other: Path,
+                       other_range: tuple[float, float] = (-math.inf, math.inf),
+                       step_m: float = 0.05, reach_m: float = 150.0) -> tuple[float, float]:
+    """A conservative interval ``[lo, hi]`` of positions ``s`` on ``path`` outside which the
+    vehicle's footprint cannot overlap the other vehicle's, wherever the other is on ``other``
+    within ``other_range`` (docs/method.md §12.1).
+
+    Two straight paths and an unbounded ``other_range``: exact. The union of the other's
+    footprints is a strip of its width along its line, and the footprint (length ``l``, width
+    ``w``) centred at ``p + s u`` meets it when the centre's distance to the line is at most
+    ``w_o / 2 + (l / 2) |sin| + (w / 2) |cos|`` of the angle between the lines (at the paper's
+    intersection ``|s| <= 3.75 m``, the paper's collision test).
+
+    Otherwise numerical: both paths are sampled every ``step_m`` within ``reach_m`` of their
+    reference points (each straight piece and the arc on its own, ends included, so a kink is
+    never straddled), the footprints are tested pairwise with the separating-axis test, each
+    enlarged on every side by the farthest a footprint point moves between a position and its
+    nearest sample (``step/2 (1 + r/R)``: ``r`` the half-diagonal, ``R`` the arc radius), and
+    the hull of the positions found is widened by ``step/2``. Every true overlap therefore lies
+    inside the result. ``(inf, inf)``: never; an end at the scanned range is unbounded.
+    Results are kept per pair of paths (a study builds the same geometry many times).
+    """
+    if path.is_straight and other.is_straight and other_range == (-math.inf, math.inf):
+        return _straight_occupancy(path, other)
+    from scipy.spatial import cKDTree
+
+    s_own = _samples(path, -reach_m, reach_m, step_m)
+    lo_o, hi_o = max(other_range[0], -reach_m), min(other_range[1], reach_m)
+    s_oth = _samples(other, lo_o, hi_o, step_m)
+    m_own = step_m / 2 * (1.0 + path.half_diagonal_m / _radius(path))
+    m_oth = step_m / 2 * (1.0 + other.half_diagonal_m / _radius(other))
+    reach = path.half_diagonal_m + other.half_diagonal_m + m_own + m_oth
+    # only the samples within reach of the other path can take part
+    xo, yo = path.xy(s_own)
+    xt, yt = other.xy(s_oth)
+    own_pts, oth_pts = np.stack([xo, yo], axis=1), np.stack([xt, yt], axis=1)
+    keep_o = cKDTree(oth_pts).query(own_pts, distance_upper_bound=reach)[0] <= reach
+    keep_t = cKDTree(own_pts).query(oth_pts, distance_upper_bound=reach)[0] <= reach
+    if not keep_o.any() or not keep_t.any():
+        return (math.inf, math.inf)
+    edge_lo, edge_hi = bool(keep_o[0]), bool(keep_o[-1])
+    s_own, xo, yo = s_own[keep_o], xo[keep_o], yo[keep_o]
+    s_oth, xt, yt = s_oth[keep_t], xt[keep_t], yt[keep_t]
+    near = cKDTree(np.stack([xt, yt], axis=1)).query_ball_point(np.stack([xo, yo], axis=1),
+                                                                reach)
+    counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=len(near))
+    if counts.sum() == 0:
+        return (math.inf, math.inf)
+    i = np.repeat(np.arange(s_own.size), counts)
+    j = np.concatenate([np.asarray(n, dtype=np.int64) for n in near if n])
+    va, vb = path.vehicle, other.vehicle
+    hit = footprints_overlap(xo[i], yo[i], path.direction(s_own[i]), va.length_m + 2 * m_own,
+                             va.width_m + 2 * m_own, xt[j], yt[j], other.direction(s_oth[j]),
+                             vb.length_m + 2 * m_oth, vb.width_m + 2 * m_oth)
+    if not hit.any():
+        return (math.inf, math.inf)
+    found = s_own[i[hit]]
+    lo = float(found.min()) - step_m / 2
+    hi = float(found.max()) + step_m / 2
+    # an end of the scanned range that still overlaps is unbounded (e.g. a shared lane)
+    return (-math.inf if edge_lo and found.min() == s_own[0] else lo,
+            math.inf if edge_hi and found.max() == s_own[-1] else hi)
+
+
+def _radius(path: Path) -> float:
+    return path.arc[2] if path.arc[2] > 0.0 else math.inf
+
+
+def _samples(path: Path, lo: float, hi: float, step_m: float) -> np.ndarray:
+    """Positions every ``step_m`` or closer from ``lo`` to ``hi``, each piece of the path
+    (straight, arc, straight) sampled with its own ends (the last position before a kink
+    included)."""
+    cuts = sorted({lo, hi, *(b for b in (path.b1, path.b2) if lo < b < hi)})
+    parts = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        n = max(2, int(math.ceil((b - a) / step_m)) + 1)
+        piece = np.linspace(a, b, n)
+        if b in (path.b1, path.b2) and b != hi:  # the piece ends just before the next one
+            piece[-1] = math.nextafter(b, -math.inf)
+        parts.append(piece)
+    return np.unique(np.concatenate(parts + [np.array(cuts[1:-1])]))
+
+
+def _straight_occupancy(path: Path, other: Path) -> tuple[float, float]:
+    """:func:`occupancy_interval` of two straight paths (exact; see there)."""
+    (px, py), (ux, uy) = path.p1, path.u0
+    (qx, qy), (wx, wy) = other.p1, other.u0
+    k = wx * uy - wy * ux  # sin of the angle between the lines (signed)
+    c = wx * (py - qy) - wy * (px - qx)  # signed distance of path's s = 0 from other's line
+    va, vb = path.vehicle, other.vehicle
+    reach = vb.width_m / 2 + (va.length_m / 2) * abs(k) + (va.width_m / 2) * abs(
+        ux * wx + uy * wy)
+    if k == 0.0:  # parallel lines: always or never within reach
+        return (-math.inf, math.inf) if abs(c) <= reach else (math.inf, math.inf)
+    a, b = (-reach - c) / k, (reach - c) / k
+    return (min(a, b), max(a, b))
 
 
 def footprints_overlap(xa: np.ndarray, ya: np.ndarray, ua: tuple[np.ndarray, np.ndarray],
@@ -285,5 +401,5 @@ def _overlap(xa, ya, uax, uay, xb, yb, ubx, uby, la, wa, lb, wb, out):
         out[i] = hit
 
 
-__all__ = ["Path", "VehicleShape", "footprints_overlap", "path_point", "path_points",
-           "unit", "zone_interval"]
+__all__ = ["Path", "VehicleShape", "footprints_overlap", "occupancy_interval", "path_point",
+           "path_points", "unit", "zone_interval"]

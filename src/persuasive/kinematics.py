@@ -11,11 +11,17 @@ acceleration ``a`` [m/s^2]:
 - else ``ds = v dt + a dt^2 / 2``.
 
 ``a = 0`` always takes the last branch, so nothing divides by zero.
+
+:func:`check_state` checks a state handed in from outside (a planner's caller, a Python
+policy's observation): a pair of finite numbers, the speed within the vehicle's limits.
 """
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
+
+from .config import ConfigError
 
 
 @njit(cache=True, inline="always")
@@ -38,3 +44,17 @@ def saturated_step(
         return s + ds, v_min
     return s + (v * dt + a * dt * dt / 2.0), v_new
 
+
+def check_state(name: str, x, vehicle) -> tuple[float, float]:
+    """``x`` as ``(s [m], v [m/s])``, or :class:`ConfigError`: it must be a pair of finite
+    numbers with the speed inside the vehicle's ``[v_min, v_max]``."""
+    try:
+        s, v = (float(x[0]), float(x[1]))
+        if len(x) != 2:
+            raise ValueError
+    except (TypeError, ValueError, IndexError):
+        raise ConfigError(f"{name} = {x!r} is not a state (s [m], v [m/s])") from None
+    if not (np.isfinite(s) and np.isfinite(v)) or not vehicle.v_min_mps <= v <= vehicle.v_max_mps:
+        raise ConfigError(f"{name} = ({s!r}, {v!r}) is out of range; allowed: finite s, "
+                          f"v in [{vehicle.v_min_mps:g}, {vehicle.v_max_mps:g}] m/s")
+    return s, v

@@ -122,7 +122,7 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, lib_h: Lib, lib_r: Li
            idx: np.ndarray, q_l: float, q_f: float, tie_leader: bool, p_a_hat: float,
            persuade: bool, P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray,
            diag: np.ndarray, lib_h1a: Lib, lib_h1b: Lib, ahead: np.ndarray,
-           work: np.ndarray) -> tuple[int, bool]:
+           work: np.ndarray, allowed: np.ndarray) -> tuple[int, bool]:
     """One branch-MPC decision; returns ``(chosen candidate, feasible)``.
 
     ``lib_h`` / ``lib_r``: the HV's and AV's libraries at ``x_H`` / ``x_R`` with their reward
@@ -135,7 +135,9 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, lib_h: Lib, lib_r: Li
     role-L and role-F states one sample ahead (``lib_h1b`` only when the two states differ);
     ``ahead`` ``(2, 3)`` records which states they hold (``AHEAD_*``), so that the closed loop
     reuses them for the next step's prediction. ``work``: the counters of
-    ``persuasive.packing``. Index names: ``c`` candidate, ``m`` sample, ``b`` branch.
+    ``persuasive.packing``. ``allowed`` ``(n_traj,)`` bool: candidates that may count as
+    feasible (the safety shield's verdict, docs/method.md §12.3; all True without it). Index
+    names: ``c`` candidate, ``m`` sample, ``b`` branch.
     """
     SR, VR = lib_r.S, lib_r.V
     SH, VH = lib_h.S, lib_h.V
@@ -312,7 +314,8 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, lib_h: Lib, lib_r: Li
         diag[c, D_MAX_SAFE] = hi
         if best_any < 0 or expected > diag[best_any, D_EXPECTED]:
             best_any = c
-        if lo > threshold and (best_feasible < 0 or expected > diag[best_feasible, D_EXPECTED]):
+        if lo > threshold and allowed[c] and (
+                best_feasible < 0 or expected > diag[best_feasible, D_EXPECTED]):
             best_feasible = c
     work[slot.WORK_LIBRARIES] += n_libraries
     work[slot.WORK_PAIRS_MPC] += n_pairs
@@ -325,14 +328,15 @@ def decide(s_R: float, v_R: float, s_H: float, v_H: float, lib_h: Lib, lib_r: Li
 
 @njit(cache=True)
 def decide_cv(s_H: float, v_H: float, lib_r: Lib, P_av: np.ndarray, P_hv: np.ndarray,
-              diag: np.ndarray, work: np.ndarray) -> tuple[int, bool]:
+              diag: np.ndarray, work: np.ndarray, allowed: np.ndarray) -> tuple[int, bool]:
     """One decision of the constant-velocity planner; returns ``(chosen, feasible)``.
 
     The human is predicted to hold its current speed (one branch, probability 1): its sample
     ``m`` is ``m + 1`` saturated steps at zero acceleration from ``(s_H, v_H)``. Each candidate
     of ``lib_r`` (the AV's library with its reward parts) is scored ``B - w_c C`` (collision
     term as the MPC's, quirk Q4) and is feasible when every sample is safe (the chance
-    constraint with one branch). ``diag`` as :func:`decide` (beliefs NaN, P(LL) = 1).
+    constraint with one branch). ``diag`` and ``allowed`` as :func:`decide` (beliefs NaN,
+    P(LL) = 1).
     """
     SR, VR = lib_r.S, lib_r.V
     n, n_traj = SR.shape
@@ -380,7 +384,8 @@ def decide_cv(s_H: float, v_H: float, lib_r: Lib, P_av: np.ndarray, P_hv: np.nda
         diag[c, D_P_FF] = 0.0
         if best_any < 0 or expected > diag[best_any, D_EXPECTED]:
             best_any = c
-        if p > threshold and (best_feasible < 0 or expected > diag[best_feasible, D_EXPECTED]):
+        if p > threshold and allowed[c] and (
+                best_feasible < 0 or expected > diag[best_feasible, D_EXPECTED]):
             best_feasible = c
     work[slot.WORK_PAIRS_MPC] += n_pairs
     if best_feasible >= 0:

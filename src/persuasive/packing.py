@@ -42,6 +42,12 @@ W_S, W_V, PRIOR_L, EPSILON = _slots("W_S", "W_V", "PRIOR_L", "EPSILON")
 CONFLICT, MIN_DIST, MIN_DIST_SQ = _slots("CONFLICT", "MIN_DIST", "MIN_DIST_SQ")
 # 1.0 when the two paths share one lane past ``s = 0`` (a merge): a vehicle ahead there leads
 LANE_SHARED = _slots("LANE_SHARED")[0]
+# The safety shield (docs/method.md §12): its kind (``persuasive.safety.shield.SHIELD_*``), the
+# responsive human's response time [s]; the MPC's use of it (candidates the shield rejects are
+# infeasible: 0/1) and its model-confidence filter (threshold, acceleration width [m/s^2],
+# switching probability per step)
+SHIELD, SHIELD_RESPONSE, SHIELD_AWARE, CONF_THRESHOLD, CONF_STD, CONF_SWITCH = _slots(
+    "SHIELD", "SHIELD_RESPONSE", "SHIELD_AWARE", "CONF_THRESHOLD", "CONF_STD", "CONF_SWITCH")
 
 # -- per vehicle -------------------------------------------------------------------------------
 # Limits and size (§1); ``H_GO = h_st + v_max / kappa`` of the OVM law (§2)
@@ -54,6 +60,10 @@ YIELD_S, FIRST_S, CLEAR_S = _slots("YIELD_S", "FIRST_S", "CLEAR_S")
 # The conservative window of positions ``ZONE_LO < s < ZONE_HI`` [m] outside which the vehicle
 # is at least ``min_dist`` from every point of the other path (euclidean conflicts)
 ZONE_LO, ZONE_HI = _slots("ZONE_LO", "ZONE_HI")
+# The interval of positions ``OCC_LO <= s <= OCC_HI`` [m] outside which the vehicle's footprint
+# cannot touch the other's (``persuasive.geometry.occupancy_interval``); in a merge, the side
+# zone up to the merge point (the shield and the surrogate safety measures, §12)
+OCC_LO, OCC_HI = _slots("OCC_LO", "OCC_HI")
 # The path: ``xy(s)`` in three pieces (``persuasive.geometry``): straight before ``B1``
 # (direction ``U0``, through ``(X1, Y1)`` at ``B1``), an arc from ``B1`` to ``B2`` (centre,
 # radius, polar angle at ``B1``, +1 left / -1 right; none when ``R == 0``), straight after ``B2``
@@ -84,6 +94,11 @@ SLOT_NAMES: tuple[str, ...] = tuple(_names)
 CONFLICT_ALONG_PATHS, CONFLICT_EUCLIDEAN = 0, 1
 
 
+#: Shield kinds (``[av] shield``), by name: the kernels' ids.
+SHIELD_OFF, SHIELD_WORST_CASE, SHIELD_RESPONSIVE = 0, 1, 2
+SHIELD_KIND_IDS = {"off": SHIELD_OFF, "worst-case": SHIELD_WORST_CASE,
+                   "responsive": SHIELD_RESPONSIVE}
+
 #: Relative widening of each zone for the kernels' windows (a window may be a superset).
 ZONE_MARGIN = 1e-9
 
@@ -103,16 +118,13 @@ def sqrt_threshold(c: float) -> float:
     return x
 
 
-def pack(config, scenario=None) -> tuple[np.ndarray, np.ndarray]:
+def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     """The kernel parameter vectors ``(P_av, P_hv)`` of ``config``: each ``(N_SLOTS,)``.
 
-    ``scenario``: the :class:`persuasive.scenarios.Scenario` built from ``config`` (built here
-    when not given); it supplies each vehicle's path, lines and window and the conflict kind.
+    ``scenario``: the :class:`persuasive.scenarios.Scenario` built from ``config``
+    (``build_scenario(config)``; the scenarios sit above this module, which they read their
+    slots from); it supplies each vehicle's path, lines and window and the conflict kind.
     """
-    if scenario is None:
-        from .scenarios import build_scenario
-
-        scenario = build_scenario(config)
     lib, rw, roles, q = config.library, config.reward, config.roles, config.effective_quirks
     shared = np.zeros(N_SLOTS)
     shared[N_SAMPLES], shared[SAMPLE_DT], shared[N_MESH] = lib.n_samples, lib.sample_dt_s, lib.n_mesh
@@ -130,6 +142,13 @@ def pack(config, scenario=None) -> tuple[np.ndarray, np.ndarray]:
     shared[MIN_DIST] = scenario.min_dist_m
     shared[MIN_DIST_SQ] = sqrt_threshold(scenario.min_dist_m)
     shared[LANE_SHARED] = float(scenario.lane_shared)
+    shared[SHIELD] = SHIELD_KIND_IDS[config.shield]
+    shared[SHIELD_RESPONSE] = config.av.shield_response_s
+    mpc = config.mpc
+    shared[SHIELD_AWARE] = float(mpc.shield_aware)
+    shared[CONF_THRESHOLD] = mpc.confidence_threshold
+    shared[CONF_STD] = mpc.confidence_accel_std_mps2
+    shared[CONF_SWITCH] = mpc.confidence_switch
     out = []
     for path in (scenario.av, scenario.hv):
         P = shared.copy()
@@ -144,6 +163,9 @@ def pack(config, scenario=None) -> tuple[np.ndarray, np.ndarray]:
         P[ZONE_LO] = lo - ZONE_MARGIN * (1.0 + abs(lo)) if math.isfinite(lo) else lo
         P[ZONE_HI] = hi + ZONE_MARGIN * (1.0 + abs(hi)) if math.isfinite(hi) else hi
         P[PATH_B1:PATH_UY2 + 1] = path.geometry_vector()
+        lo, hi = path.occupancy  # widened like the zone: never narrower than computed
+        P[OCC_LO] = lo - ZONE_MARGIN * (1.0 + abs(lo)) if math.isfinite(lo) else lo
+        P[OCC_HI] = hi + ZONE_MARGIN * (1.0 + abs(hi)) if math.isfinite(hi) else hi
         out.append(P)
     return out[0], out[1]
 

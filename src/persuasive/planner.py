@@ -4,8 +4,11 @@
 by default) inside a user's own loop, e.g. a vehicle stack at 10 Hz. It is the same compiled
 step the closed loop calls (``persuasive.policies.step.policy_step``), and it keeps between
 calls what the policy keeps: for the MPC, the belief on the human's role and the stored
-one-step prediction of the human. It uses corrected mode by default (the paper's equations);
-pass a configuration to change any parameter, quirk, planner kind or scenario.
+one-step prediction of the human. It uses corrected mode by default (the paper's equations),
+and with it the worst-case safety shield (docs/method.md §12): every acceleration it returns
+keeps a fallback that avoids the human whatever it does within its limits (``Plan.shielded``
+says when the shield overrode the policy). Pass a configuration to change any parameter,
+quirk, planner kind, shield or scenario.
 
 Example
 -------
@@ -25,6 +28,7 @@ import numpy as np
 from . import packing as slot
 from .config import Config, ConfigError
 from .game import build_buffers, predict_buffers
+from .kinematics import check_state
 from .library import lib_buffers
 from .mpc import D_EXPECTED, D_MIN_SAFE, D_P_LL, N_DIAG
 from .packing import discounts, pack
@@ -32,6 +36,7 @@ from .policies import kinds as kd
 from .policies import kind_of, policy_params
 from .policies.step import policy_init, policy_step_buffers
 from .roles import FOLLOWER, LEADER
+from .safety.shield import N_CONFLICT, VERDICTS, conflict_vector, shield_step
 from .scenarios import build_scenario
 
 State = tuple[float, float]
@@ -54,6 +59,10 @@ class Plan:
     feasible: bool  #: some candidate met the chance constraint
     belief_hv_leader: float  #: P(HV = leader) after this call's update
     candidates: np.ndarray  #: per-candidate diagnostics ``(n_traj, 10)`` (``persuasive.mpc``)
+    proposed_accel_mps2: float = math.nan  #: the policy's acceleration before the shield
+    shielded: bool = False  #: the shield overrode the policy (``accel_mps2`` is its fallback)
+    shield_verdict: str | None = None  #: admitted | brake | go | uncertified; None: no shield
+    model_confidence: float = math.nan  #: the MPC's confidence in its human model
 
 
 class Planner:
@@ -89,6 +98,11 @@ class Planner:
         self._draws = np.zeros(2)
         self._state = np.zeros(kd.STATE_SIZE)
         self._k = 0
+        self._conflict = np.empty(N_CONFLICT)
+        conflict_vector(self._P_av, self._P_hv, self._conflict)
+        self._shielded = self.config.shield != "off"
+        self._tie_given = self.config.effective_quirks.q3_tie_break_leak and \
+            self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE)
         self.reset()
 
     def reset(self) -> None:
@@ -116,15 +130,29 @@ class Planner:
         (paper mode), where a belief tie reads the human's true role.
         """
         x_R, x_H = _state("av", av, self.config), _state("hv", hv, self.config)
-        tie_given = self.config.effective_quirks.q3_tie_break_leak and \
-            self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE)
         if human_role is not None and human_role not in ("leader", "follower"):
             raise ConfigError(f"human_role = {human_role!r} is out of range; allowed: "
                               "leader | follower")
-        if tie_given and human_role is None:
+        if self._tie_given and human_role is None:
             raise ConfigError("human_role is required with quirk Q3 (paper mode); "
                               "allowed: leader | follower")
         role = -1 if human_role is None else (LEADER if human_role == "leader" else FOLLOWER)
+        accel, proposed, verdict = self._step(x_R, x_H, role)
+        return self._plan(accel, proposed, verdict)
+
+    def accel(self, av: State, hv: State) -> float:
+        """The acceleration [m/s^2] :meth:`plan` returns for the same states, with the same
+        update of the belief and the stored prediction, but without the :class:`Plan`
+        around it and without checking the states: for a caller that plans many times per
+        step and passes finite states with speeds inside the vehicles' limits (the adapter
+        for outside simulators, ``persuasive.envs.external``). Not with quirk Q3 on."""
+        if self._tie_given:
+            raise ConfigError("Planner.accel cannot take the human's role (quirk Q3, paper "
+                              "mode); use Planner.plan")
+        return self._step((float(av[0]), float(av[1])), (float(hv[0]), float(hv[1])), -1)[0]
+
+    def _step(self, x_R: State, x_H: State, role: int) -> tuple[float, float, str | None]:
+        """One decision: ``(applied, proposed, verdict)``; advances the kept state."""
         if self._spec.needs_game:
             predict_buffers(x_H[0], x_H[1], x_R[0], x_R[1], self._P_hv, self._P_av, self._disc,
                             *self._hv, *self._av, self._idx, self._q_values, self.work)
@@ -139,9 +167,14 @@ class Planner:
             self._P_av, self._P_hv, self._disc, self.config.simulation.dt_s, self._diag,
             *self._ahead_a, *self._ahead_b, self._ahead, self._log, self.work)
         self._k += 1
-        return self._plan(float(accel))
+        proposed, verdict = float(accel), None
+        if self._shielded:
+            accel, code = shield_step(x_R[0], x_R[1], proposed, self.config.simulation.dt_s,
+                                      x_H[0], x_H[1], self._conflict)
+            verdict = VERDICTS[code]
+        return float(accel), proposed, verdict
 
-    def _plan(self, accel: float) -> Plan:
+    def _plan(self, accel: float, proposed: float, verdict: str | None) -> Plan:
         n = self.config.library.n_samples
         col = self._spec.log.index("trajectory")
         k = int(self._log[col]) if not math.isnan(self._log[col]) else -1
@@ -167,6 +200,11 @@ class Planner:
             feasible=feasible,
             belief_hv_leader=self.belief_hv_leader,
             candidates=self._diag.copy() if mpc else np.full_like(self._diag, np.nan),
+            proposed_accel_mps2=proposed,
+            shielded=verdict not in (None, "admitted"),
+            shield_verdict=verdict,
+            model_confidence=float(self._log[self._spec.log.index("model_confidence")])
+            if "model_confidence" in self._spec.log else math.nan,
         )
 
 
@@ -175,19 +213,4 @@ def _state(name: str, x, config: Config) -> tuple[float, float]:
     return check_state(name, x, config.vehicle_of(name))
 
 
-def check_state(name: str, x, vehicle) -> tuple[float, float]:
-    """``x`` as ``(s [m], v [m/s])``, or :class:`ConfigError`: it must be a pair of finite
-    numbers with the speed inside the vehicle's ``[v_min, v_max]``."""
-    try:
-        s, v = (float(x[0]), float(x[1]))
-        if len(x) != 2:
-            raise ValueError
-    except (TypeError, ValueError, IndexError):
-        raise ConfigError(f"{name} = {x!r} is not a state (s [m], v [m/s])") from None
-    if not (np.isfinite(s) and np.isfinite(v)) or not vehicle.v_min_mps <= v <= vehicle.v_max_mps:
-        raise ConfigError(f"{name} = ({s!r}, {v!r}) is out of range; allowed: finite s, "
-                          f"v in [{vehicle.v_min_mps:g}, {vehicle.v_max_mps:g}] m/s")
-    return s, v
-
-
-__all__ = ["Plan", "Planner", "check_state"]
+__all__ = ["Plan", "Planner"]

@@ -238,9 +238,9 @@ def simulate(config, seed: int) -> dict[str, np.ndarray]:
     ``hv_role``, ``av_role`` (LFG AV), ``av_trajectory`` and ``av_feasible`` (MPC),
     ``hv_belief`` and ``av_belief`` ``(n, 2)``. The random streams, the scenario and the
     initial state come from the same definitions as the fast path
-    (:func:`persuasive.simulation.setup`).
+    (:func:`persuasive.record.setup`).
     """
-    from .simulation import setup
+    from .record import setup
 
     if config.hv.kind not in ("lfg", "stubborn") or config.av.kind not in (
             "lfg", "persuasive", "passive"):

@@ -3,13 +3,8 @@
 One run is a pure function of its configuration and seed. The world owns what the two
 policies share and nothing of what they decide:
 
-- the **random streams** (:func:`draw_streams`): the initial state, each agent's uniforms and
-  the world's noise, in one of two layouts (``Config.streams``): ``legacy``, the reference's
-  single MT19937 stream (``numpy.random.RandomState(seed)``) in the order of docs/method.md §7.5, used by paper
-  mode so that the published tables stay exact; ``per-agent``, independent streams from
-  ``numpy.random.SeedSequence(seed).spawn(4)`` (initial state, HV, AV, world noise), so that the
-  human's draws and the initial state do not depend on which AV drives (what ``compare``
-  needs). None of the draws depends on the state, so they are drawn up front;
+- the **random streams** (``persuasive.streams``, drawn by ``persuasive.record.setup``): the
+  initial state, each agent's uniforms and the world's noise, drawn up front;
 - **measuring** and **advancing** (:func:`measure_states`, :func:`advance_states`): additive
   measurement noise (speeds clipped to each vehicle's limits), acceleration noise, the
   saturated step of each vehicle;
@@ -29,8 +24,6 @@ to ``x_{k+1}``. The run never stops early.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numba import njit, objmode
@@ -43,79 +36,9 @@ from .library import lib_buffers, new_lib
 from .mpc import AHEAD_S, AHEAD_V, AHEAD_VALID, N_DIAG
 from .policies import kinds as kd
 from .policies.step import policy_init, policy_role, policy_step
-
-# Columns of the world's own per-step log.
-WORLD_LOG = ("av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m", "hv_meas_v_mps", "av_accel_mps2",
-             "hv_accel_mps2")
-(W_AV_S, W_AV_V, W_HV_S, W_HV_V, W_AV_A, W_HV_A) = range(len(WORLD_LOG))
-
-
-# -- random streams ----------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Streams:
-    """Every random number of a run, drawn up front."""
-
-    layout: str  #: "legacy" or "per-agent"
-    x_av: tuple[float, float]  #: initial (s [m], v [m/s])
-    x_hv: tuple[float, float]
-    draws_av: np.ndarray  #: (n_steps, k_av) uniforms of the AV's policy
-    draws_hv: np.ndarray  #: (n_steps, k_hv) uniforms of the HV's policy
-    meas_noise: np.ndarray  #: (n_steps, 4): AV s, v, HV s, v
-    accel_noise: np.ndarray  #: (n_steps, 2): AV, HV
-    noisy: bool  #: whether any noise is on
-    av_rng: Any = None  #: the AV's own generator after its draws (per-agent layout)
-    hv_rng: Any = None
-
-
-def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int) -> Streams:
-    """The random numbers of a run (see the module docstring for the two layouts).
-
-    Legacy order (one ``RandomState(seed)``): the initial state's uniforms; then per step the
-    measurement noise (AV s, v, HV s, v, when enabled), the HV policy's ``k_hv`` uniforms, the
-    AV policy's ``k_av``, the acceleration noise (AV, HV, when enabled). Per-agent: the initial
-    state from child 0; the HV's uniforms from child 1 and the AV's from child 2, one column
-    (all steps) after the other, so that a policy's first column does not depend on how many it
-    draws; the noise from child 3, measurement then acceleration.
-    """
-    sim = config.simulation
-    n = sim.n_steps
-    layout = config.streams
-    kind, w_acc = sim.measurement_noise, sim.accel_noise_mps2
-    noisy = kind != "none" or w_acc > 0.0
-    widths = (sim.noise_s_m, sim.noise_v_mps) * 2
-    meas, accel = np.zeros((n, 4)), np.zeros((n, 2))
-    if layout == "legacy":
-        rng = np.random.RandomState(seed)
-        x_av, x_hv = scenario.initial_states(rng.random_sample)
-        draws = np.zeros((n, k_hv + k_av))
-        if not noisy:
-            if k_hv + k_av:
-                draws[:] = rng.random_sample((n, k_hv + k_av))
-        else:
-            for k in range(n):
-                if kind == "uniform":
-                    meas[k] = [-w + 2.0 * w * rng.random_sample() for w in widths]
-                elif kind == "gaussian":
-                    meas[k] = [w * rng.standard_normal() for w in widths]
-                draws[k] = [rng.random_sample() for _ in range(k_hv + k_av)]
-                if w_acc > 0.0:
-                    accel[k] = [-w_acc + 2.0 * w_acc * rng.random_sample() for _ in range(2)]
-        return Streams(layout, x_av, x_hv, draws[:, k_hv:].copy(), draws[:, :k_hv].copy(),
-                       meas, accel, noisy)
-    init, hv, av, world = (np.random.Generator(np.random.PCG64(s))
-                           for s in np.random.SeedSequence(seed).spawn(4))
-    x_av, x_hv = scenario.initial_states(init.random)
-    draws_hv = np.stack([hv.random(n) for _ in range(k_hv)], axis=1) if k_hv else np.zeros((n, 0))
-    draws_av = np.stack([av.random(n) for _ in range(k_av)], axis=1) if k_av else np.zeros((n, 0))
-    if kind == "uniform":
-        meas[:] = -np.array(widths) + (2.0 * np.array(widths)) * world.random((n, 4))
-    elif kind == "gaussian":
-        meas[:] = np.array(widths) * world.standard_normal((n, 4))
-    if w_acc > 0.0:
-        accel[:] = -w_acc + (2.0 * w_acc) * world.random((n, 2))
-    return Streams(layout, x_av, x_hv, draws_av, draws_hv, meas, accel, noisy, av, hv)
+from .record import (W_AV_A, W_AV_PROPOSED, W_AV_S, W_AV_V, W_HV_A, W_HV_S, W_HV_V, W_SHIELD,
+                     WORLD_LOG, make_record, setup)
+from .safety.shield import N_CONFLICT, conflict_vector, shield_step
 
 
 # -- measuring and advancing (shared by both loops) --------------------------------------------
@@ -186,6 +109,9 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
     policy_init(av_kind, av_prm, av_st, P_av[slot.PRIOR_L])
     policy_init(hv_kind, hv_prm, hv_st, P_hv[slot.PRIOR_L])
     need_game, need_av_lib, av_uses_libs = needs[0], needs[1], needs[2]
+    shielded = P_av[slot.SHIELD] != slot.SHIELD_OFF
+    conflict = np.empty(N_CONFLICT)
+    conflict_vector(P_av, P_hv, conflict)
     no_draws = np.zeros(2)
     x = np.empty(4)
     x[:] = x0
@@ -219,9 +145,14 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
         a_av = policy_step(av_kind, kd.AV, av_prm, av_st, k, ms_av, mv_av, ms_hv, mv_hv,
                            av_draw, policy_role(hv_kind, hv_st), lib_h, lib_r, idx, q_values,
                            P_av, P_hv, disc, dt, diag, lib_h1a, lib_h1b, ahead, av_log[k], work)
+        row = world_log[k]
+        row[W_AV_PROPOSED] = a_av
+        row[W_SHIELD] = -1.0
+        if shielded:
+            a_av, verdict = shield_step(ms_av, mv_av, a_av, dt, ms_hv, mv_hv, conflict)
+            row[W_SHIELD] = verdict
         if timed:
             av_time_ns[k] = (_clock_ns() - t1) + (t_libs if av_uses_libs else 0)
-        row = world_log[k]
         row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
         row[W_AV_A], row[W_HV_A] = advance_states(x, a_av, a_hv, k, noisy, accel_noise, dt,
                                                   P_av, P_hv, x)
@@ -321,7 +252,6 @@ class PythonWorld:
 
     def __init__(self, config: Config, seed: int, av=None, hv=None, timed: bool = False):
         from .policies import Context, make_policy
-        from .simulation import setup
 
         self.config = config
         self.av = av if av is not None else make_policy(config, kd.AV)
@@ -333,6 +263,9 @@ class PythonWorld:
         self.n_steps = n = config.simulation.n_steps
         self.dt = config.simulation.dt_s
         self.games = GameCache(s.P_av, s.P_hv, s.disc)
+        self.conflict = np.empty(N_CONFLICT)
+        conflict_vector(s.P_av, s.P_hv, self.conflict)
+        self.shielded = s.P_av[slot.SHIELD] != slot.SHIELD_OFF
         st = s.streams
         for policy, side, draws, rng in ((self.av, kd.AV, st.draws_av, st.av_rng),
                                          (self.hv, kd.HV, st.draws_hv, st.hv_rng)):
@@ -374,10 +307,14 @@ class PythonWorld:
         obs.human_role = int(getattr(self.hv, "role", -1))
         t1 = time.perf_counter_ns()
         a_av = float(self.av.act(obs))
+        row = self.world_log[k]
+        row[W_AV_PROPOSED], row[W_SHIELD] = a_av, -1.0
+        if self.shielded:  # the same filter as the compiled loop, after any AV policy
+            a_av, verdict = shield_step(ms_av, mv_av, a_av, self.dt, ms_hv, mv_hv, self.conflict)
+            row[W_SHIELD] = verdict
         own = t_game if getattr(self.av, "needs_game", False) else 0
         self.av_ms[k] = (time.perf_counter_ns() - t1 + own) / 1e6
         self.av_log[k, :len(self.av.log_columns)] = _last_log(self.av)
-        row = self.world_log[k]
         row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
         row[W_AV_A], row[W_HV_A] = advance_states(self.x, a_av, a_hv, k, st.noisy,
                                                   st.accel_noise, self.dt, s.P_av, s.P_hv,
@@ -389,8 +326,6 @@ class PythonWorld:
     def record(self):
         """The :class:`~persuasive.simulation.RunRecord` of the steps taken so far (all of
         them once :attr:`done`)."""
-        from .simulation import make_record
-
         k = self.k
         return make_record(self.setup, self.states[:k + 1], self.world_log[:k], self.av_log[:k],
                            self.hv_log[:k], self.av_ms[:k] if self.timed else None,

@@ -13,7 +13,7 @@ import sys
 
 import click
 
-from .. import __version__
+from .._version import __version__
 from ..config import ConfigError
 
 
@@ -32,12 +32,14 @@ def _register() -> None:
     from .plots import animate, plot, plot_compare
     from .reproduce import reproduce
     from .simulate import simulate
+    from .sumo import sumo
     from .sweep import plot_sweep, sweep
 
     for command in (simulate, reproduce, compare, sweep, bench, plot, animate, drive):
         cli.add_command(command)
     cli.add_command(highway)
     cli.add_command(fit)
+    cli.add_command(sumo)
     plot.add_command(plot_sweep)
     plot.add_command(plot_compare)
 
@@ -45,10 +47,19 @@ def _register() -> None:
 _register()
 
 
+#: Raised by click 8.2 and later for a group called without a command (click 8.1 prints the
+#: help and exits 0 itself).
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: one-line errors, exit status 2 for bad input."""
+    """Entry point: one-line errors, exit status 2 for bad input; a group without a command
+    (``persuasive``, ``persuasive plot``) prints its help and exits 0."""
     try:
         rv = cli.main(args=argv, prog_name="persuasive", standalone_mode=False)
+    except _NO_ARGS_IS_HELP as exc:
+        click.echo(exc.ctx.get_help())
+        return 0
     except click.exceptions.Abort:
         click.echo("error: aborted", err=True)
         return 130

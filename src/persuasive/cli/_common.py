@@ -15,8 +15,7 @@ from typing import Any, Callable
 import click
 
 from ..config import (AV_KIND_ALIASES, AV_KINDS, MODES, ROLES, SCENARIO_KINDS,
-                      SIMULATED_HV_KINDS,
-                      Config, ConfigError)
+                      SHIELD_KINDS, SIMULATED_HV_KINDS, Config, ConfigError)
 
 #: Seed of the run the paper shows in its Figs. 2 and 3 (the default of the figure commands).
 PAPER_SEED = 996
@@ -52,7 +51,18 @@ def build_config(config_file: str | None, sets: tuple[str, ...],
 
 #: Explicit run options and the fields they set.
 RUN_FIELDS = {"av": "av.kind", "hv": "hv.kind", "hv_role": "hv.role", "pa": "roles.p_a",
-              "pa_hat": "mpc.p_a_hat", "scenario": "scenario.kind", "mode": "mode"}
+              "pa_hat": "mpc.p_a_hat", "scenario": "scenario.kind", "mode": "mode",
+              "shield": "av.shield"}
+
+#: Help of ``--shield`` (one setting).
+SHIELD_HELP = ("Safety shield around the AV planner (docs/method.md §12): off, worst-case, "
+               "responsive [off in paper mode, worst-case in corrected mode].")
+
+
+def shield_option(func: Callable) -> Callable:
+    """``--shield`` (one setting), setting ``av.shield``."""
+    return click.option("--shield", type=click.Choice(list(SHIELD_KINDS)), default=None,
+                        help=SHIELD_HELP)(func)
 
 
 def run_explicit(options: dict[str, Any]) -> dict[str, Any]:
@@ -87,7 +97,10 @@ def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable
                      help="AV planner [persuasive; mpc is its old name]: persuasive, passive, "
                           "cv, lfg (the 2-LFG case), yield (docs/method.md §11)."),
         click.option("--hv", type=click.Choice(list(SIMULATED_HV_KINDS)), default=None,
-                     help="Human model [lfg]: lfg, stubborn, noisy, idm, aggressive, replay."),
+                     help="Human model [lfg]: lfg, stubborn, noisy, idm, aggressive, replay, "
+                          "adversary, deceptive, random."),
+        click.option("--shield", type=click.Choice(list(SHIELD_KINDS)), default=None,
+                     help=SHIELD_HELP),
         click.option("--hv-role", type=click.Choice(list(ROLES)), default=None,
                      help="HV initial role [leader]."),
         click.option("--pa", type=float, default=None, help="Human's p_a in [0, 1] [1.0]."),
@@ -133,3 +146,38 @@ def compile_notice() -> None:
         click.echo("compiling the numerical kernels once (about 25 s; cached for later runs)",
                    err=True)
         sys.stderr.flush()
+
+
+def progress_bar(quiet: bool, rows: int | None = None) -> Callable[..., None] | None:
+    """A progress callback drawing a tqdm bar on stderr (``None`` when ``quiet``):
+    ``update(done_runs, total_runs[, rows_done])``, rows shown when ``rows`` is given.
+
+    The bar appears at the first update with runs left (a study resumed with nothing to run
+    shows none). ``update.close()`` ends its line: a command calls it when it stops, whether
+    it finished or failed, so that an error that follows is printed on a line of its own.
+    """
+    if quiet:
+        return None
+    from tqdm import tqdm
+
+    bar: dict[str, Any] = {}
+
+    def update(done: int, total: int, rows_done: int | None = None) -> None:
+        if "bar" not in bar:
+            if done >= total:
+                return  # nothing left to run: no bar
+            bar["bar"] = tqdm(total=total, initial=done, unit="run", file=sys.stderr,
+                              dynamic_ncols=True, smoothing=0.1)
+        b = bar["bar"]
+        if rows is not None and rows_done is not None:
+            b.set_postfix_str(f"rows {rows_done}/{rows}", refresh=False)
+        b.update(done - b.n)
+        if done >= total:
+            b.close()
+
+    def close() -> None:
+        if "bar" in bar:
+            bar["bar"].close()
+
+    update.close = close  # type: ignore[attr-defined]
+    return update

@@ -11,8 +11,8 @@ from ._common import compile_notice
 
 
 @click.command()
-@click.option("--runs", "n_runs", type=click.IntRange(min=1), default=10, show_default=True,
-              help="Closed-loop runs whose states are replayed.")
+@click.option("--runs", "n_runs", type=click.IntRange(1, 1000), default=10, show_default=True,
+              help="Closed-loop runs (seeds 1..N, at most 1000) whose states are replayed.")
 @click.option("--repeats", type=click.IntRange(min=1), default=3, show_default=True,
               help="Passes over those states.")
 @click.option("--full", is_flag=True, help="Also time 'reproduce all' (16,000 runs).")
@@ -46,6 +46,10 @@ def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, as_jso
     click.echo(f"{av} AV decision ({scenario}): median "
                f"{result['mpc_decision_ms_median']:.3f} ms, "
                f"p99 {result['mpc_decision_ms_p99']:.3f} ms")
+    click.echo(f"the same decisions with the worst-case shield: median "
+               f"{result['shielded_decision_ms_median']:.3f} ms, p99 "
+               f"{result['shielded_decision_ms_p99']:.3f} ms; the shield alone: median "
+               f"{result['shield_us_median']:.2f} us, p99 {result['shield_us_p99']:.2f} us")
     click.echo(f"closed-loop run (61 steps): median {result['mpc_run_ms_median']:.2f} ms")
     work = ", ".join(f"{k} {v:.1f}" for k, v in result["work_per_decision"].items())
     click.echo(f"work per decision: {work}")
@@ -60,9 +64,9 @@ def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, as_jso
 
 
 def _bench_sweep(workers: int, repeats: int, as_json: bool) -> None:
-    """``bench --sweep``: the Dask sweep against the process pool (persuasive.sweep.bench),
+    """``bench --sweep``: the Dask sweep against the process pool (persuasive.bench_sweep),
     each timed ``repeats`` times, the best time kept."""
-    from ..sweep import bench_sweep
+    from ..bench_sweep import bench_sweep
 
     result = bench_sweep(workers=workers, repeats=repeats)
     if as_json:

@@ -14,7 +14,7 @@ import sys
 
 import click
 
-from ._common import compile_notice
+from ._common import compile_notice, shield_option
 
 #: Where trials go unless ``--out`` says otherwise.
 DEFAULT_OUT = "results/drive"
@@ -48,7 +48,9 @@ def _need_web_extra() -> None:
               help="Folder for the trials and study summaries (created if missing).")
 @click.option("--seed", type=int, default=None,
               help="Base seed (practice uses it, condition j seed + 1 + j) [the study's].")
-def drive(host: str, port: int, study_file: str | None, out: str, seed: int | None) -> None:
+@shield_option
+def drive(host: str, port: int, study_file: str | None, out: str, seed: int | None,
+          shield: str | None) -> None:
     """Drive the HV against the AV's planner in a browser (a user-study server)."""
     import asyncio
     import secrets
@@ -63,43 +65,46 @@ def drive(host: str, port: int, study_file: str | None, out: str, seed: int | No
     study = load_study(study_file) if study_file else default_study()
     if seed is not None:
         study = study.with_seed(seed)
+    if shield is not None:
+        study = study.with_shield(shield)
     out_dir = check_output_folder(out, "output folder")
-    try:
-        Path(out_dir).mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"output folder {out!r} cannot be created: "
-                          f"{(exc.strerror or str(exc)).lower()}") from None
     loopback = is_loopback(host)
     token = None if loopback else secrets.token_urlsafe(24)
-    app = create_app(study, out_dir, token, host)
-    sock = bind(host, port)
-
-    logger = logging.getLogger("persuasive.web")  # one line per session event, on stderr
-    if not any(getattr(h, "_persuasive_drive", False) for h in logger.handlers):
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s", "%H:%M:%S"))
-        handler._persuasive_drive = True
-        logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    logger.propagate = False
-
-    compile_notice()
-    warm_up(study)
-    n = len(study.conditions)
-    click.echo(f"study: {study.title} ({study.source}); {n} condition{'s' * (n != 1)}"
-               f"{' + practice' if study.practice else ''}; trials go to {out_dir}")
-    if not loopback:
-        click.echo(f"warning: listening on {host}, not a loopback address: anyone who can "
-                   "reach this machine and has the token can open the page; share the URL "
-                   "only with participants", err=True)
-    click.echo(f"open {url_of(sock, host, token)} in a browser "
-               "(add participant=ID to the query to fill in the ID); Ctrl-C stops")
-    sys.stdout.flush()
-    server = uvicorn_server(app)
+    sock = bind(host, port)  # a bad host or a port in use fails here, before anything is made
     try:
-        asyncio.run(server.serve(sockets=[sock]))
-    except KeyboardInterrupt:
-        pass  # uvicorn re-raises the Ctrl-C it handled, after a clean shutdown
+        compile_notice()
+        warm_up(study)
+        try:  # only now, when the server can start
+            Path(out_dir).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputError(f"output folder {out!r} cannot be created: "
+                              f"{(exc.strerror or str(exc)).lower()}") from None
+        app = create_app(study, out_dir, token, host)
+
+        logger = logging.getLogger("persuasive.web")  # one line per session event, on stderr
+        if not any(getattr(h, "_persuasive_drive", False) for h in logger.handlers):
+            handler = logging.StreamHandler(sys.stderr)
+            handler.setFormatter(logging.Formatter("%(asctime)s %(message)s", "%H:%M:%S"))
+            handler._persuasive_drive = True
+            logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+        logger.propagate = False
+
+        n = len(study.conditions)
+        click.echo(f"study: {study.title} ({study.source}); {n} condition{'s' * (n != 1)}"
+                   f"{' + practice' if study.practice else ''}; trials go to {out_dir}")
+        if not loopback:
+            click.echo(f"warning: listening on {host}, not a loopback address: anyone who can "
+                       "reach this machine and has the token can open the page; share the URL "
+                       "only with participants", err=True)
+        click.echo(f"open {url_of(sock, host, token)} in a browser "
+                   "(add participant=ID to the query to fill in the ID); Ctrl-C stops")
+        sys.stdout.flush()
+        server = uvicorn_server(app)
+        try:
+            asyncio.run(server.serve(sockets=[sock]))
+        except KeyboardInterrupt:
+            pass  # uvicorn re-raises the Ctrl-C it handled, after a clean shutdown
     finally:
         sock.close()
     files = sorted(p.name for p in Path(out_dir).glob("*.parquet"))

@@ -32,10 +32,13 @@ def _num(value, digits: int = 2) -> str:
               help="The AV planner driving the ego (corrected mode).")
 @click.option("--seed", type=int, default=1, show_default=True,
               help="Seed of the first episode (highway-env's reset seed).")
+@click.option("--shield", type=click.Choice(["off", "worst-case", "responsive"]), default=None,
+              help="Safety shield over every vehicle the ego can meet (docs/method.md §12) "
+                   "[worst-case].")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--video", type=click.Path(dir_okay=False), default=None,
               help="Write the planner's first episode as .mp4 or .gif (the folder must exist).")
-def highway(episodes, planner, seed, as_json, video) -> None:
+def highway(episodes, planner, seed, shield, as_json, video) -> None:
     """Drive highway-env's intersection ego with the planner, against its IDM traffic,
     beside highway-env's own ego driver on the same seeds."""
     from ..envs.highway import (CONTEST_RANGE_M, DEFAULT_DRIVER, run_highway, write_video)
@@ -46,7 +49,7 @@ def highway(episodes, planner, seed, as_json, video) -> None:
         check_animation_path(video)  # before any work
     compile_notice()
     frames = [] if video else None
-    report = run_highway(episodes, planner, seed, frames=frames)
+    report = run_highway(episodes, planner, seed, frames=frames, shield=shield)
     if video:
         write_video(frames, video)
     if as_json:
@@ -57,7 +60,8 @@ def highway(episodes, planner, seed, as_json, video) -> None:
         return
     first, last = report.seeds[0], report.seeds[-1]
     click.echo(f"highway-env {report.env_id}: the ego goes straight (o0 -> o2) at 10 Hz; "
-               f"{report.planner} planner vs highway-env's IDM ego ({DEFAULT_DRIVER}); "
+               f"{report.planner} planner (shield: {report.shield}) vs highway-env's IDM ego "
+               f"({DEFAULT_DRIVER}); "
                f"seeds {first}..{last}")
     head = (f"{'seed':>6}  {'driver':<11}{'collision':<11}{'crossed':<9}{'arrived':<9}"
             f"{'first':<7}{'ego/other':<11}{'time to cross [s]':>18}{'min dist [m]':>14}"
@@ -71,12 +75,14 @@ def highway(episodes, planner, seed, as_json, video) -> None:
     click.echo("")
     click.echo(f"{'driver':<11}{'episodes':>9}{'collisions':>11}{'crossed':>9}{'arrived':>9}"
                f"{'ego first':>10}{'other first':>12}{'mean time to cross [s]':>24}"
-               f"{'min dist [m]':>14}{'median min conflict dist [m]':>30}")
+               f"{'min dist [m]':>14}{'median min conflict dist [m]':>30}"
+               f"{'shield interventions':>22}")
     for driver, s in report.summary().items():
         click.echo(f"{driver:<11}{s['episodes']:>9}{s['collisions']:>11}{s['crossed']:>9}"
                    f"{s['arrived']:>9}{s['ego_first']:>10}{s['other_first']:>12}"
                    f"{_num(s['mean_time_to_cross_s'], 2):>24}{_num(s['min_distance_m']):>14}"
-                   f"{_num(s['median_min_conflict_distance_m']):>30}")
+                   f"{_num(s['median_min_conflict_distance_m']):>30}"
+                   f"{s['shield_interventions']:>22}")
     click.echo(f"first: who reached the conflict point first against the vehicles that were "
                f"within {CONTEST_RANGE_M:g} m of it with the ego; min dist: to any vehicle "
                f"(oncoming traffic passes 4 m beside); min conflict dist: to vehicles whose "

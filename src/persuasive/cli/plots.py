@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Callable
 
 import click
+from click.core import ParameterSource
 
 from ._common import PAPER_SEED, compile_notice, config_of, run_options
 
@@ -31,6 +32,25 @@ def _plots():
     return plots
 
 
+#: The options that describe the run to simulate, which ``--from`` replaces.
+_RUN_PARAMS = ("av", "hv", "hv_role", "pa", "pa_hat", "scenario", "seed", "mode",
+               "config_file", "sets", "single")
+
+
+def _check_from(source: str | None) -> None:
+    """Refuse the options that ``--from`` overrides (a saved run has its own seed,
+    configuration and kinds): a usage error, exit status 2, naming them."""
+    if source is None:
+        return
+    ctx = click.get_current_context()
+    given = [p.opts[0] for p in ctx.command.params if p.name in _RUN_PARAMS
+             and ctx.get_parameter_source(p.name) not in (None, ParameterSource.DEFAULT,
+                                                            ParameterSource.DEFAULT_MAP)]
+    if given:
+        raise click.UsageError(f"{', '.join(given)} cannot be used with --from: the saved "
+                               "run has its own seed and configuration")
+
+
 def _runs(single: bool, run: dict):
     """The run the options describe (``single``), the run saved in ``--from``, or the LFG-AV
     and persuasive-AV runs of Figs. 2-3."""
@@ -38,6 +58,10 @@ def _runs(single: bool, run: dict):
 
     source = run.pop("source", None)
     fit_run = run.pop("fit_run", None)
+    _check_from(source)
+    if fit_run is not None and source is None:
+        raise click.UsageError("--run applies only with --from a fit's file (persuasive fit "
+                               "--out FILE.parquet)")
     if source is not None:
         from ..fitting.output import is_fit_file, load_fitted_run
 
@@ -77,7 +101,8 @@ def _from_option(func: Callable) -> Callable:
     return click.option("--from", "source", type=click.Path(dir_okay=False), default=None,
                         help="Plot a saved run instead of simulating one: a Parquet log of "
                              "'simulate --out', a recorded trial of 'drive', or a fit's runs "
-                             "('fit --out FILE.parquet', with --run).")(func)
+                             "('fit --out FILE.parquet', with --run); it has its own seed and "
+                             "configuration: no run option goes with it.")(func)
 
 
 def _fit_run_option(func: Callable) -> Callable:

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import click
 
-from ._common import build_config, check_workers, compile_notice, config_options
+from ._common import (build_config, check_workers, compile_notice, config_options,
+                      progress_bar, shield_option)
 
 
 @click.command()
@@ -19,6 +20,7 @@ from ._common import build_config, check_workers, compile_notice, config_options
 @click.option("--scenario", type=click.Choice(["intersection", "crossing", "left-turn",
                                                "merge"]), default=None,
               help="Run the tables in another scenario [intersection, the paper's].")
+@shield_option
 @config_options
 @click.option("--out", type=click.Path(file_okay=False), default=None,
               help="Results folder [results/<table>-<mode>-<settings hash>/]; with 'all', one "
@@ -27,8 +29,8 @@ from ._common import build_config, check_workers, compile_notice, config_options
               help="Replace a results folder made with other settings.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, force, as_json,
-              quiet) -> None:
+def reproduce(table, seeds, workers, scenario, shield, mode, config_file, sets, out, force,
+              as_json, quiet) -> None:
     """Rerun the paper's Table 1 and/or Table 2 beside the published numbers.
 
     Each row sets its own agents, p_a and p_a_hat on top of the base configuration
@@ -38,8 +40,10 @@ def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, for
     from .. import experiments as ex
     from .._files import check_output_folder
 
-    base = build_config(config_file, sets, {"mode": mode, "scenario.kind": scenario})
     tables = ex.TABLES if table == "all" else (table,)
+    ex.check_seeds(seeds, sum(len(ex.PUBLISHED[t]) for t in tables), "--seeds")
+    base = build_config(config_file, sets, {"mode": mode, "scenario.kind": scenario,
+                                           "av.shield": shield})
     grids = {t: ex.table_grid(t, base, seeds) for t in tables}
     folders = {}
     for t in tables:
@@ -57,16 +61,20 @@ def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, for
     workers = check_workers(workers, max(-(-len(g) // default_chunk(len(g)))
                                          for g in grids.values()))
     compile_notice()
-    progress = None if quiet else ex.tqdm_progress(n_rows)
+    progress = progress_bar(quiet, n_rows)
     offset = 0
     results = []
-    for t in tables:
-        def shifted(done, _total, _rows, offset=offset):
-            if progress is not None:
-                progress(offset + done, total, (offset + done) // seeds)
-        results.append(ex.reproduce(t, seeds, workers, None, base, progress=shifted,
-                                    out=folders[t], force=force))
-        offset += len(grids[t])
+    try:
+        for t in tables:
+            def shifted(done, _total, _rows, offset=offset):
+                if progress is not None:
+                    progress(offset + done, total, (offset + done) // seeds)
+            results.append(ex.reproduce(t, seeds, workers, None, base, progress=shifted,
+                                        out=folders[t], force=force))
+            offset += len(grids[t])
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
     summaries = {t: r.summaries[t] for t, r in zip(tables, results)}
     failures = [f for r in results for f in r.failures]
     for t, r in zip(tables, results):
@@ -82,8 +90,13 @@ def reproduce(table, seeds, workers, scenario, mode, config_file, sets, out, for
             click.echo(f"{ex.verdict(summaries[t], base)}")
             click.echo(f"written to {folders[t]}/\n")
         wall = sum(r.wall_time_s for r in results)
-        click.echo(f"{total - len(failures)} runs in {wall:.1f} s with "
-                   f"{workers} worker{'s' if workers > 1 else ''}")
+        skipped, ran = sum(r.skipped for r in results), sum(r.ran for r in results)
+        with_workers = f"with {workers} worker{'s' if workers > 1 else ''}"
+        if not skipped:
+            click.echo(f"{total - len(failures)} runs in {wall:.1f} s {with_workers}")
+        else:  # resumed: as 'persuasive sweep' says it
+            now = f"{ran} run now {with_workers}" if ran else "none to run"
+            click.echo(f"{total} runs: {skipped} finished earlier, {now}, {wall:.1f} s")
     if failures:
         click.echo(f"error: {len(failures)} run(s) failed and are left out of the results "
                    "(listed above and in summary.json); run the same command again to retry "

@@ -66,7 +66,8 @@ def simulate(out, as_json, **run) -> None:
                f"first at the conflict point: {ARRIVAL_LABELS[o.first_at_conflict_point]}")
     click.echo(f"collision: {'yes' if o.collision else 'no'}; minimum distance "
                f"{o.min_distance_to_line_m:.2f} m up to the line, {o.min_distance_m:.2f} m over "
-               f"the run (safe set {record.scenario.min_dist_m:g} m)")
+               f"the run ({summary['distance_measured']}; safe set "
+               f"{summary['safety_distance_m']:g} m)")
     changes = f"HV role changes: {o.hv_role_changes}"
     if config.av.kind == "lfg":
         changes += f"; AV role changes: {o.av_role_changes}"

@@ -4,13 +4,12 @@ sweep`` (a metric of a sweep over one or two axes, with 95 % intervals)."""
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import click
 
-from ._common import check_workers, compile_notice
+from ._common import check_workers, compile_notice, progress_bar, shield_option
 
 _GRID_HELP = """Run every run of a grid of configurations times seeds, on Dask.
 
@@ -36,32 +35,6 @@ def _default_out(grid_path: str, digest: str) -> Path:
     return Path("results") / f"sweep-{Path(grid_path).stem}-{digest[:10]}"
 
 
-def _progress(quiet: bool) -> Callable[[int, int], None] | None:
-    if quiet:
-        return None
-    from tqdm import tqdm
-
-    bar: dict[str, Any] = {}
-
-    def update(done: int, total: int) -> None:
-        if "bar" not in bar:
-            if done >= total:
-                return  # nothing left to run: no bar
-            bar["bar"] = tqdm(total=total, initial=done, unit="run", file=sys.stderr,
-                              dynamic_ncols=True, smoothing=0.1)
-        b = bar["bar"]
-        b.update(done - b.n)
-        if done >= total:
-            b.close()
-
-    def close() -> None:
-        if "bar" in bar:
-            bar["bar"].close()
-
-    update.close = close  # type: ignore[attr-defined]
-    return update
-
-
 @click.command(help=_GRID_HELP)
 @click.argument("grid_file", metavar="GRID.toml", type=click.Path(dir_okay=False))
 @click.option("--out", type=click.Path(file_okay=False), default=None,
@@ -79,11 +52,13 @@ def _progress(quiet: bool) -> Callable[[int, int], None] | None:
               help="Replace a folder holding another sweep (clears its parts).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def sweep(grid_file, out, workers, scheduler, chunk, force, as_json, quiet) -> None:
+@shield_option
+def sweep(grid_file, out, workers, scheduler, chunk, force, as_json, quiet, shield) -> None:
     from .. import sweep as sw
     from ..config import ConfigError
 
-    grid = sw.Grid.from_toml(grid_file)  # validated whole before anything runs
+    # validated whole before anything runs; --shield sets the base's av.shield
+    grid = sw.Grid.from_toml(grid_file, {"av.shield": shield} if shield else None)
     if workers is not None and scheduler is not None:
         raise ConfigError("--workers applies to the local cluster only; the workers of "
                           "--scheduler are those started with 'dask worker'")
@@ -92,7 +67,7 @@ def sweep(grid_file, out, workers, scheduler, chunk, force, as_json, quiet) -> N
         n_chunks = -(-len(grid) // (chunk or sw.store.default_chunk(len(grid))))
         workers = check_workers(workers, n_chunks)
         compile_notice()
-    progress = _progress(quiet)
+    progress = progress_bar(quiet)
     try:
         summary = sw.run(grid, folder, workers=workers, scheduler=scheduler, chunk=chunk,
                          force=force, progress=progress)

@@ -234,7 +234,7 @@ class ConflictEnv(gym.Env):
         self.render_mode = render_mode
         sim = self.config.simulation
         self.metadata = {**self.metadata, "render_fps": max(1, round(1.0 / sim.dt_s))}
-        from ..simulation import static_setup
+        from ..record import static_setup
 
         self.scenario = static_setup(self.config)[0]
         veh = self.config.vehicle_of(controlled)

@@ -21,18 +21,30 @@ right-angle crossing. A vehicle's lane sequence and conflict point are kept from
 first seen, so that a vehicle past the point is still measured against it until it has
 cleared it.
 
-Which vehicle the planner plans against: **all of them, and the ego takes the most cautious
-answer**. One planner per conflicting vehicle (each keeps its own belief on that driver's
-role and its stored prediction of that driver, which a single planner switching between
-vehicles would mix up) plans against that vehicle while neither has cleared the conflict
-(``s < min_dist`` for both); the ego applies the lowest of their accelerations. Planning
-against only the "most critical" vehicle (e.g. the earliest arrival) would switch targets
-between steps and lose the beliefs, and could accelerate into a second vehicle the planner
-does not see. Without a conflict the ego accelerates at ``u_max`` up to ``v_max`` (free flow,
-as ``persuasive.simulation.free_flow_time``). A vehicle ahead in the ego's own lane is no
-crossing: the ego keeps an IDM gap to it (``config.hv.idm`` parameters) by taking the lower of
-the two accelerations. The acceleration is finally limited so that the speed stays in
-``[v_min, v_max]`` within the step (highway-env integrates with Euler steps).
+Which vehicle the planner plans against, and the shield: **all of them**, through the
+adapter every outside simulator shares (``persuasive.envs.external.ExternalPlanner``): one
+planner per conflicting vehicle (each keeps its own belief on that driver's role), the lowest
+of their accelerations, an IDM gap to a vehicle ahead in the ego's lane, full throttle without
+a conflict, and the safety shield over every conflicting vehicle and every vehicle ahead in
+the lane (corrected mode: the worst-case shield; ``--shield`` sets it). For the shield each
+projected vehicle also gets its **occupancy**: the stretch of its lanes where its footprint
+can touch the ego's (its centre within ``ego width / 2 + its half-diagonal +`` :data:`TRACK_MARGIN_M`
+of the ego's line) and the stretch of the ego's path facing it (widened by ``ego length / 2 +
+its half-diagonal``); a vehicle whose lanes stay in that band to their end joins the ego's lane
+(a merge, with its merge point where its lane centre comes within :data:`SAME_LANE_M` of the
+ego's line), one in the ego's lane ahead of it is followed. Its limits are highway-env's own:
+``IDMVehicle`` accelerates at most at its ``COMFORT_ACC_MAX``, brakes at most at its
+``ACC_MAX`` and never drives faster than the larger of its speed and its target speed.
+highway-env integrates positions with the speed of the step's start (Euler): a braking ego
+rolls further than the planner's exact step says, by ``v dt / 2`` from speed ``v`` plus at most
+``b dt^2 / 8`` for the last, partial step of deceleration ``b`` (the speed is clipped at 0), and
+an accelerating one lags behind it. The shield therefore takes the ego
+that much further along than it is (:func:`euler_lead`: the exact Euler surplus of a stop at
+``u_min``, 0 at rest), and the far end of the ego's
+occupancy is widened by ``v_max dt`` for the lag (at ``u_max = 1 m/s^2`` it stays below that
+for the 10 s it takes the ego to accelerate from rest to ``v_max``); the other vehicles' near
+ends by their ``v_max dt / 2`` (an Euler vehicle that stops, stops that much further). The acceleration is finally limited so
+that the speed stays in ``[v_min, v_max]`` within the step.
 
 The comparison driver (``default``) is highway-env's own: the ego becomes one of the env's
 ``IDMVehicle`` (its parameters as the env sets them for traffic, lane changes off, routed to
@@ -87,6 +99,10 @@ SAME_LANE_M = 1.0
 SAME_LANE_COS = math.cos(math.radians(30.0))
 #: Driver names of the report.
 DEFAULT_DRIVER = "default"
+#: Lateral allowance for how far a vehicle strays from its lane's centre line [m].
+TRACK_MARGIN_M = 0.25
+#: Spacing of the lane samples searched for a vehicle's occupancy [m].
+OCCUPANCY_SAMPLE_M = 0.1
 
 
 def _import_highway_env():
@@ -121,14 +137,25 @@ def highway_env_id() -> str:
     raise ConfigError(f"highway-env provides none of {', '.join(HIGHWAY_ENV_IDS)}")
 
 
-def planner_config(kind: str = "persuasive") -> Config:
+#: The ego's strongest braking [m/s^2]: highway-env's own drivers brake comfortably at
+#: 5 m/s^2 (``COMFORT_ACC_MIN``) and at most at 6; the paper's 2 m/s^2 cannot stop the ego
+#: from highway-env's initial 10 m/s in the room its traffic leaves it (the shield then has no
+#: fallback from the first step on).
+EGO_BRAKING_MPS2 = 5.0
+
+
+def planner_config(kind: str = "persuasive", shield: str | None = None) -> Config:
     """The planner's configuration: corrected mode (the :class:`~persuasive.Planner`'s
     default; paper mode's quirk Q3 reads a human role highway-env's drivers do not have) with
-    ``av.kind = kind``."""
+    ``av.kind = kind``, ``av.shield = shield`` (default: corrected mode's, worst-case) and the
+    ego braking at up to :data:`EGO_BRAKING_MPS2`."""
     if kind not in AV_KINDS and kind not in AV_KIND_ALIASES:
         raise ConfigError(f"--planner = {kind!r} is out of range; allowed: "
                           f"{' | '.join(AV_KINDS)}")
-    return Config(mode="corrected").with_overrides({"av.kind": kind})
+    overrides = {"av.kind": kind, "av.vehicle.u_min_mps2": -EGO_BRAKING_MPS2}
+    if shield:
+        overrides["av.shield"] = shield
+    return Config(mode="corrected").with_overrides(overrides)
 
 
 def highway_config(config: Config) -> dict[str, Any]:
@@ -210,6 +237,14 @@ class Track:
     conflict_arc_m: float = math.nan
     point: np.ndarray | None = None
     conflict_u_m: float = math.nan
+    #: the shield's view (module docstring): "crossing" or "merge" (None: no footprint
+    #: conflict), the arc and ego positions of the conflict's origin, and the two occupancy
+    #: intervals relative to it [m]
+    kind: str | None = None
+    origin_arc_m: float = math.nan
+    origin_u_m: float = math.nan
+    ego_occupancy: tuple[float, float] = (math.nan, math.nan)
+    other_occupancy: tuple[float, float] = (math.nan, math.nan)
 
 
 @dataclass(frozen=True)
@@ -308,9 +343,12 @@ class Projector:
     ``network``: the road network; ``ego_lanes``: the ego's route as lane indices.
     """
 
-    def __init__(self, network, ego_lanes: list[tuple]):
+    def __init__(self, network, ego_lanes: list[tuple], ego_size: tuple[float, float] = (5.0, 2.0),
+                 euler_margin_m: float = 0.0):
         self.network = network
         self.ego = EgoPath.from_lanes(network, ego_lanes)
+        self.ego_size = ego_size  #: the ego's (length, width) [m]
+        self.euler_margin_m = euler_margin_m  #: widening for Euler steps [m] (module docstring)
         self._tracks: dict[int, Track] = {}
 
     def track(self, vehicle) -> Track:
@@ -332,8 +370,60 @@ class Projector:
             track.conflict_arc_m = offsets[i] + long_m
             track.point = np.asarray(point, float)
             track.conflict_u_m = self.ego.coordinates(point)[0]
+        self._occupancy(track, vehicle)
         self._tracks[id(vehicle)] = track
         return track
+
+    def _occupancy(self, track: Track, vehicle) -> None:
+        """The shield's view of a track (module docstring): the first stretch of its lanes,
+        not yet behind the vehicle, where its footprint can touch the ego's."""
+        ego_len, ego_wid = self.ego_size
+        r_o = 0.5 * math.hypot(vehicle.LENGTH, vehicle.WIDTH)
+        band = 0.5 * ego_wid + r_o + TRACK_MARGIN_M
+        reach = 0.5 * ego_len + r_o
+        arcs, us, lats = [], [], []
+        for lane_index, offset in zip(track.lanes, track.offsets):
+            lane = self.network.get_lane(lane_index)
+            n = max(2, int(math.ceil(lane.length / OCCUPANCY_SAMPLE_M)) + 1)
+            for x in np.linspace(0.0, lane.length, n):
+                u, lat = self.ego.coordinates(lane.position(float(x), 0.0))
+                arcs.append(offset + float(x))
+                us.append(u)
+                lats.append(lat)
+        arcs, us, lats = np.array(arcs), np.array(us), np.array(lats)
+        inside = (np.abs(lats) <= band) & (us >= -reach) & (us <= self.ego.length_m + reach)
+        now = self.arc_position(track, vehicle)
+        idx = np.flatnonzero(inside)
+        if idx.size == 0:
+            return
+        # the contiguous stretches of samples in the band; the first not behind the vehicle
+        breaks = np.flatnonzero(np.diff(idx) > 1)
+        starts, ends = np.r_[idx[0], idx[breaks + 1]], np.r_[idx[breaks], idx[-1]]
+        ahead = np.flatnonzero(arcs[ends] >= now)
+        if ahead.size == 0:
+            return
+        a, b = starts[ahead[0]], ends[ahead[0]]
+        h = OCCUPANCY_SAMPLE_M
+        u_lo = float(us[a:b + 1].min()) - reach
+        u_hi = float(us[a:b + 1].max()) + reach + 2.0 * self.euler_margin_m  # the lag of GO
+        other_lead = 0.5 * highway_limits(vehicle).v_max_mps / FREQUENCY_HZ
+        if b == arcs.size - 1:  # in the band to the end of its lanes: it joins the ego's lane
+            on_line = np.flatnonzero(np.abs(lats[a:b + 1]) <= SAME_LANE_M)
+            m = a + (int(on_line[0]) if on_line.size else int(np.argmin(np.abs(lats[a:b + 1]))))
+            track.kind = "merge"
+            track.origin_arc_m, track.origin_u_m = float(arcs[m]), float(us[m])
+            track.ego_occupancy = (u_lo - track.origin_u_m, 0.0)
+            track.other_occupancy = (float(arcs[a]) - h - other_lead - track.origin_arc_m,
+                                     0.5 * (ego_len + vehicle.LENGTH) + ego_len + 1.0)
+        else:
+            track.kind = "crossing"
+            if track.conflict_lane is not None:  # the planner's origin (the band's entry)
+                track.origin_arc_m, track.origin_u_m = track.conflict_arc_m, track.conflict_u_m
+            else:
+                track.origin_arc_m, track.origin_u_m = float(arcs[a]), float(us[a])
+            track.ego_occupancy = (u_lo - track.origin_u_m, u_hi - track.origin_u_m)
+            track.other_occupancy = (float(arcs[a]) - h - other_lead - track.origin_arc_m,
+                                     float(arcs[b]) + h - track.origin_arc_m)
 
     @staticmethod
     def _lane_position(track: Track, vehicle) -> int | None:
@@ -368,6 +458,39 @@ class Projector:
         return Projection(float(other_s), float(vehicle.speed), float(ego_s),
                           (float(track.point[0]), float(track.point[1])), track)
 
+    def conflicts(self, ego_vehicle, vehicles: Iterable) -> list:
+        """Every other vehicle that can touch the ego, as the shared adapter's
+        :class:`~persuasive.envs.external.Conflict` (module docstring): a crossing or merging
+        vehicle relative to its conflict's origin, a vehicle ahead in the ego's lane to follow.
+        Vehicles behind the ego in its lane, or whose lanes never come near it, are left out."""
+        from .external import CROSSING, FOLLOW, MERGE, Conflict
+
+        u_ego = self.ego.coordinates(ego_vehicle.position)[0]
+        out = []
+        for v in vehicles:
+            if v is ego_vehicle:
+                continue
+            limits = highway_limits(v)
+            if self.in_ego_lane(v):
+                u = self.ego.coordinates(v.position)[0]
+                if u > u_ego:
+                    out.append(Conflict(id(v), FOLLOW, u_ego, u, float(v.speed), other=limits))
+                continue
+            track = self.track(v)
+            if track.kind is None:
+                continue
+            s_other = self.arc_position(track, v) - track.origin_arc_m
+            s_ego = u_ego - track.origin_u_m
+            if track.kind == "merge" and s_other >= 0.0:  # it has joined the lane
+                if s_other > s_ego:
+                    out.append(Conflict(id(v), FOLLOW, s_ego, s_other, float(v.speed),
+                                        other=limits))
+                continue
+            out.append(Conflict(id(track), CROSSING if track.kind == "crossing" else MERGE,
+                                s_ego, s_other, float(v.speed), track.ego_occupancy,
+                                track.other_occupancy, limits))
+        return out
+
     def leader(self, ego_vehicle, vehicles: Iterable) -> tuple[float, float] | None:
         """The nearest vehicle ahead in the ego's lane: ``(bumper gap [m], speed [m/s])``."""
         u_ego = self.ego.coordinates(ego_vehicle.position)[0]
@@ -382,69 +505,73 @@ class Projector:
         return best
 
 
-def idm_accel(config: Config, v: float, leader: tuple[float, float]) -> float:
-    """IDM acceleration [m/s^2] behind a leader ``(gap [m], speed [m/s])`` with the
-    parameters of ``config.hv.idm`` and the ego's ``v_max`` as desired speed."""
-    p = config.hv.idm
-    v0 = config.vehicle_of("av").v_max_mps
-    gap, v_lead = leader
-    s_star = p.jam_gap_m + max(0.0, v * p.time_gap_s + v * (v - v_lead) / (
-        2.0 * math.sqrt(p.max_accel_mps2 * p.comfort_decel_mps2)))
-    return p.max_accel_mps2 * (1.0 - (v / v0) ** p.delta - (s_star / max(gap, 0.1)) ** 2)
+def highway_limits(vehicle):
+    """A highway-env vehicle's envelope for the shield (module docstring): its IDM accelerates
+    at most at ``COMFORT_ACC_MAX`` and brakes at most at ``ACC_MAX``, and never beyond the
+    larger of its speed and its target speed."""
+    from .external import Limits
 
-
-# -- the drivers ---------------------------------------------------------------------------
+    u_max = float(getattr(vehicle, "COMFORT_ACC_MAX", 3.0))
+    u_min = -float(getattr(vehicle, "ACC_MAX", 6.0))
+    v_max = max(float(vehicle.speed), float(getattr(vehicle, "target_speed", vehicle.speed)))
+    return Limits(float(vehicle.LENGTH), float(vehicle.WIDTH), u_min, u_max, 0.0,
+                  max(v_max, 1e-3))
 
 
 class PlannerDriver:
-    """The ego driven by :class:`~persuasive.Planner` (module docstring: one planner per
-    conflicting vehicle, the most cautious answer, an IDM gap to a leader in the lane)."""
+    """The ego driven by the planner through the shared adapter
+    (:class:`~persuasive.envs.external.ExternalPlanner`: one planner per conflicting vehicle,
+    the most cautious answer, an IDM gap to a leader, the shield over all)."""
 
     def __init__(self, config: Config, seed: int):
+        from .external import ExternalPlanner
+
         self.config = config
-        self.seed = seed
-        self._planners: dict[int, Any] = {}
-        self._made = 0
+        self.planner = ExternalPlanner(config, seed)
         self.last_targets = 0  #: vehicles planned against at the last step
+        self.interventions = 0  #: steps where the shield overrode the planner
 
-    def act(self, env, projections: list[Projection], projector: Projector) -> float:
-        from ..planner import Planner
-
-        cfg = self.config
-        av, hv = cfg.vehicle_of("av"), cfg.vehicle_of("hv")
+    def act(self, env, projector: Projector) -> float:
+        av = self.config.vehicle_of("av")
         ego = env.unwrapped.vehicle
-        clear = clear_distance(cfg)
-        v_ego = min(max(float(ego.speed), av.v_min_mps), av.v_max_mps)
-        accels, live = [], set()
-        for p in projections:
-            if not (p.other_s_m < clear and p.ego_s_m < clear):
-                continue
-            key = id(p.track)
-            planner = self._planners.get(key)
-            if planner is None:
-                planner = self._planners[key] = Planner(cfg, seed=self.seed * 1000 + self._made)
-                self._made += 1
-            live.add(key)
-            v_other = min(max(p.other_v_mps, hv.v_min_mps), hv.v_max_mps)
-            accels.append(planner.plan(av=(p.ego_s_m, v_ego), hv=(p.other_s_m, v_other))
-                          .accel_mps2)
-        for key in list(self._planners):
-            if key not in live:
-                del self._planners[key]
-        self.last_targets = len(accels)
-        a = min(accels) if accels else av.u_max_mps2
-        leader = projector.leader(ego, env.unwrapped.road.vehicles)
-        if leader is not None:
-            a = min(a, idm_accel(cfg, v_ego, leader))
+        conflicts = projector.conflicts(ego, env.unwrapped.road.vehicles)
         dt = 1.0 / FREQUENCY_HZ
-        a = min(max(a, av.u_min_mps2, (av.v_min_mps - float(ego.speed)) / dt),
+        lead = euler_lead(float(ego.speed), abs(av.u_min_mps2), dt)
+        decision = self.planner.act(float(ego.speed), conflicts, dt, shield_lead_m=lead)
+        self.last_targets = decision.targets
+        if decision.verdict not in (None, "admitted"):
+            self.interventions += 1
+        a = min(max(decision.accel_mps2, av.u_min_mps2, (av.v_min_mps - float(ego.speed)) / dt),
                 av.u_max_mps2, (av.v_max_mps - float(ego.speed)) / dt)
         return float(a)
 
 
+def euler_lead(v_mps: float, brake_mps2: float, dt_s: float) -> float:
+    """How much further highway-env's Euler steps take a vehicle braking at ``brake_mps2``
+    from ``v_mps`` to rest than the exact stop ``v^2 / (2 b)`` [m] (module docstring).
+
+    Each step moves ``v_k dt`` with the speed ``v_k = v - k b dt`` of its start, the last one
+    with the speed clipped at 0 (the driver never asks for more braking than stops the
+    vehicle within the step), so the Euler stop is ``dt * sum_k v_k`` over the steps whose
+    start speed is positive: exactly ``v dt / 2`` more than the exact stop when ``v`` is a
+    multiple of ``b dt``, at most ``v dt / 2 + b dt^2 / 8``, and 0 at rest (a stopped ego
+    does not roll)."""
+    if v_mps <= 0.0:
+        return 0.0
+    m = math.ceil(v_mps / (brake_mps2 * dt_s)) - 1  # the last step with a positive start speed
+    euler = dt_s * ((m + 1) * v_mps - brake_mps2 * dt_s * m * (m + 1) / 2.0)
+    return max(euler - v_mps * v_mps / (2.0 * brake_mps2), 0.0)
+
+
+def euler_margin(config: Config) -> float:
+    """``v_max dt / 2`` [m]: how much further highway-env's Euler step lets the ego roll
+    than the exact step, at most (module docstring)."""
+    return 0.5 * config.vehicle_of("av").v_max_mps / FREQUENCY_HZ
+
+
 def clear_distance(config: Config) -> float:
     """Where a vehicle has cleared the conflict of the planner's scenario [m] (7.5)."""
-    from ..simulation import static_setup
+    from ..record import static_setup
 
     return float(static_setup(config)[0].hv.clear_s)
 
@@ -493,6 +620,7 @@ class EpisodeResult:
     #: (oncoming traffic passes 4 m beside the ego and sets ``min_distance_m``) [m]
     min_conflict_distance_m: float
     steps: int
+    shield_interventions: int = 0  #: steps where the shield overrode the planner
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -527,7 +655,9 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
         start = u.vehicle.lane_index
         nodes = network.shortest_path(start[1], DESTINATION)
         ego_lanes = [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
-        projector = Projector(network, ego_lanes)
+        veh = u.vehicle
+        projector = Projector(network, ego_lanes, (float(veh.LENGTH), float(veh.WIDTH)),
+                              euler_margin(config))
         if driver == DEFAULT_DRIVER:
             install_default_ego(env)
             planner = None
@@ -567,7 +697,7 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
         projections = observe(0)
         k, terminated, truncated = 0, False, False
         while not (terminated or truncated):
-            accel = 0.0 if planner is None else planner.act(env, projections, projector)
+            accel = 0.0 if planner is None else planner.act(env, projector)
             _, _, terminated, truncated, _ = env.step(_action(config, accel))
             k += 1
             if frames is not None:
@@ -599,7 +729,8 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             ego_first=ego_first, other_first=other_first, contested=contested,
             time_to_cross_s=None if state["cross"] is None else round(state["cross"] * dt, 10),
             min_distance_m=float(state["min_d"]),
-            min_conflict_distance_m=float(state["min_conflict_d"]), steps=k)
+            min_conflict_distance_m=float(state["min_conflict_d"]), steps=k,
+            shield_interventions=0 if planner is None else planner.interventions)
     finally:
         env.close()
 
@@ -612,6 +743,7 @@ class HighwayReport:
     planner: str
     seeds: tuple[int, ...]
     episodes: tuple[EpisodeResult, ...]
+    shield: str = "off"  #: the planner's safety shield
 
     def summary(self) -> dict[str, dict[str, Any]]:
         """Per driver: counts of collisions, crossings, arrivals and of who went first; the
@@ -636,31 +768,33 @@ class HighwayReport:
                 "min_conflict_distance_m": float(np.min(conflict)) if conflict else None,
                 "median_min_conflict_distance_m": float(np.median(conflict)) if conflict
                 else None,
+                "shield_interventions": sum(e.shield_interventions for e in eps),
             }
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        return {"env_id": self.env_id, "planner": self.planner, "seeds": list(self.seeds),
+        return {"env_id": self.env_id, "planner": self.planner, "shield": self.shield,
+                "seeds": list(self.seeds),
                 "episodes": [e.to_dict() for e in self.episodes], "summary": self.summary()}
 
 
 def run_highway(episodes: int = 5, planner: str = "persuasive", seed: int = 1,
-                frames: list | None = None) -> HighwayReport:
+                frames: list | None = None, shield: str | None = None) -> HighwayReport:
     """``episodes`` episodes (seeds ``seed .. seed + episodes - 1``), each driven by the
-    planner and by highway-env's default ego. ``frames`` receives the frames of the
-    planner's first episode."""
+    planner (``shield``: its safety shield, default worst-case) and by highway-env's default
+    ego. ``frames`` receives the frames of the planner's first episode."""
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise ConfigError(f"--episodes = {episodes!r} is out of range; allowed: integer >= 1")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**31 - episodes:
         raise ConfigError(f"--seed = {seed!r} is out of range; allowed: integer in "
                           f"[0, 2^31 - episodes)")
-    config = planner_config(planner)
+    config = planner_config(planner, shield)
     seeds = tuple(range(seed, seed + episodes))
     results = []
     for i, s in enumerate(seeds):
         results.append(run_episode(s, config.av.kind, config, frames if i == 0 else None))
         results.append(run_episode(s, DEFAULT_DRIVER, config))
-    return HighwayReport(highway_env_id(), config.av.kind, seeds, tuple(results))
+    return HighwayReport(highway_env_id(), config.av.kind, seeds, tuple(results), config.shield)
 
 
 def write_video(frames: list[np.ndarray], path: str | Path, fps: int = FREQUENCY_HZ) -> Path:

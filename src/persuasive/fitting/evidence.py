@@ -150,7 +150,7 @@ def read_log(path: str | Path) -> RunLog:
     be fitted: not a Parquet run log, missing columns, no steps, NaN or infinite values."""
     import pyarrow.parquet as pq
 
-    from ..simulation import RECORD_METADATA
+    from ..record import RECORD_METADATA
 
     path = Path(path)
     name = str(path)
@@ -261,7 +261,7 @@ class Evidence:
 
 def evidence_of(logs: Sequence[RunLog]) -> Evidence:
     """Re-solve the human's game at every logged step of every run (in parallel over runs)."""
-    from ..simulation import static_setup
+    from ..record import static_setup
 
     if not logs:
         raise ConfigError("no log to fit")

@@ -33,7 +33,7 @@ OUT_EXTENSIONS = (".json", ".parquet")
 
 def report_dict(reports: Sequence, runs: bool = True) -> dict:
     """The JSON report of one fit, or of a per-participant fit (``groups``)."""
-    from .. import __version__
+    from .._version import __version__
 
     if len(reports) == 1 and reports[0].group is None:
         body = reports[0].to_dict(runs)
@@ -103,7 +103,7 @@ def load_fitted_run(path: str | Path, run: int = 0):
     import pyarrow.parquet as pq
 
     from ..config import Config
-    from ..simulation import RunRecord, outcome, static_setup
+    from ..record import RunRecord, outcome, static_setup
 
     table = pq.read_table(path)
     meta = json.loads(table.schema.metadata[FIT_METADATA])

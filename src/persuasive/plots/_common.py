@@ -90,6 +90,21 @@ def _planner(run: RunRecord) -> str:
     return PLANNER_NAMES.get(run.config.av.kind, run.config.av.kind)
 
 
+def _human(run: RunRecord) -> str:
+    return HUMAN_NAMES.get(run.config.hv.kind, run.config.hv.kind)
+
+
+def hv_label(runs: Sequence[RunRecord]) -> str:
+    """The HV's legend entry for ``runs``: who drives it, e.g. ``"HV (human-driven, IDM)"``,
+    ``"HV (driven by a person)"``; the kinds joined with ``/`` when the runs differ."""
+    kinds = list(dict.fromkeys(run.config.hv.kind for run in runs))
+    if kinds == ["person"]:
+        return "HV (driven by a person)"
+    if kinds == ["replay"]:
+        return "HV (a replayed recording)"
+    return f"HV (human-driven, {' / '.join(HUMAN_NAMES.get(k, k) for k in kinds)})"
+
+
 def _check_runs(runs: Sequence[RunRecord]) -> None:
     for run in runs:
         if not isinstance(run, RunRecord):
@@ -107,8 +122,7 @@ def _step_line(values: np.ndarray) -> np.ndarray:
 
 def case_title(run: RunRecord) -> str:
     """Short description of who plans what, e.g. ``"HV: LFG, AV: branch MPC"``."""
-    human = HUMAN_NAMES.get(run.config.hv.kind, run.config.hv.kind)
-    return f"HV: {human}, AV: {_planner(run)}"
+    return f"HV: {_human(run)}, AV: {_planner(run)}"
 
 
 def _run_facts(run: RunRecord) -> list[str]:
@@ -184,6 +198,6 @@ def _subtitle(fig: Figure, text: str) -> None:
         fig.suptitle(text, fontsize=_FONT["title"])
 
 
-def _vehicle_handles() -> list[Any]:
-    return [Line2D([], [], color=HV_COLOR, lw=1.6, label="HV (human-driven, LFG)"),
+def _vehicle_handles(runs: Sequence[RunRecord]) -> list[Any]:
+    return [Line2D([], [], color=HV_COLOR, lw=1.6, label=hv_label(runs)),
             Line2D([], [], color=AV_COLOR, lw=1.6, label="AV (autonomous)")]

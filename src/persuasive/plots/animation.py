@@ -20,8 +20,8 @@ from matplotlib.patches import Patch
 
 from ..config import ConfigError
 from ..simulation import RunRecord
-from ._common import (_COLORS, _FONT, AV_COLOR, HUMAN_NAMES, HV_COLOR, _has_role, _planner, _state_times,
-                      _style, belief_column, case_title, crossing_time, run_label)
+from ._common import (_COLORS, _FONT, AV_COLOR, HV_COLOR, _has_role, _planner, _state_times,
+                      _style, belief_column, case_title, crossing_time, hv_label, run_label)
 from .files import check_animation_path, write_frames
 from .topview import (_corners, _scene_handles, _vehicle_patch, _vehicle_xy,
                       _view_limits, draw_intersection)
@@ -73,8 +73,7 @@ class _AnimationScene:
                               fontsize=_FONT["legend"])
         _style(self.ax_belief)
         # The key to the top view, below the status text.
-        vehicles = [Patch(fc=HV_COLOR, ec="black", lw=0.5,
-                          label=f"HV (human-driven, {HUMAN_NAMES.get(run.config.hv.kind)})"),
+        vehicles = [Patch(fc=HV_COLOR, ec="black", lw=0.5, label=hv_label([run])),
                     Patch(fc=AV_COLOR, ec="black", lw=0.5, label="AV (autonomous)")]
         self.ax_text.legend(handles=vehicles + _scene_handles(run), loc="lower left",
                             ncols=2, frameon=False, fontsize=_FONT["legend"], handlelength=1.6,

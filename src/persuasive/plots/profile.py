@@ -16,8 +16,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from ..simulation import RunRecord
-from ._common import (_COLORS, _FONT, AV_COLOR, DOUBLE_COLUMN_IN, SINGLE_COLUMN_IN,
-                      _check_runs, _has_role, _new_figure, _planner, _state_times, _step_line,
+from ._common import (_COLORS, _FONT, DOUBLE_COLUMN_IN, SINGLE_COLUMN_IN, _check_runs,
+                      _has_role, _human, _new_figure, _planner, _state_times, _step_line,
                       _style, _subtitle, _titles, _vehicle_handles, belief_column,
                       crossing_time)
 
@@ -62,12 +62,17 @@ def _profile_column(axes: Sequence[Axes], run: RunRecord) -> None:
         # the human's role as a fit of its driving infers it: P(role = L), smoothed
         ax_role.plot(t_states, _step_line(run.log[FIT_COLUMN]), drawstyle="steps-post",
                      color=_COLORS["hv"], lw=1.0, ls=":", zorder=4, gid="hv-role-fit")
-    if not _has_role(run, "av"):
-        # Above the L level, where only the crossing markers pass.
-        ax_role.text(0.99, 0.96, f"AV ({_planner(run)}): no role",
-                     transform=ax_role.transAxes, ha="right", va="top",
-                     fontsize=_FONT["note"], color=AV_COLOR, style="italic", zorder=5,
-                     bbox=dict(fc="white", ec="none", alpha=0.9, pad=1.5))
+    # A vehicle whose driver holds no role (a person, a replay, IDM, the MPC AV, ...) says so,
+    # above the L level where only the crossing markers pass: the HV at the left, the AV at
+    # the right; a human whose role a fit inferred has the fitted line instead.
+    for who, name, x, ha in (("hv", _human(run), 0.01, "left"),
+                             ("av", _planner(run), 0.99, "right")):
+        if not _has_role(run, who) and not (who == "hv" and FIT_COLUMN in run.log):
+            ax_role.text(x, 0.96, f"{who.upper()} ({name}): no role",
+                         transform=ax_role.transAxes, ha=ha, va="top",
+                         fontsize=_FONT["note"], color=_COLORS[who], style="italic", zorder=5,
+                         bbox=dict(fc="white", ec="none", alpha=0.9, pad=1.5),
+                         gid=f"{who}-no-role")
     veh = run.config.vehicle
     ax_role.set_ylim(-0.35, 1.35)
     ax_role.set_yticks([0.0, 1.0], ["F", "L"])
@@ -94,7 +99,7 @@ def _profile(runs: Sequence[RunRecord], width_in: float) -> Figure:
         axes[-1, j].set_xlabel("time [s]", fontsize=_FONT["label"])
     for i, (_, label) in enumerate(PROFILE_ROWS):
         axes[i, 0].set_ylabel(label, fontsize=_FONT["label"])
-    handles = _vehicle_handles() + [
+    handles = _vehicle_handles(runs) + [
         Line2D([], [], color="0.3", ls="--", lw=0.9, label="reaches the crossing line")]
     if any(FIT_COLUMN in run.log for run in runs):
         handles.append(Line2D([], [], color=_COLORS["hv"], ls=":", lw=1.0,

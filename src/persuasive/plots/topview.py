@@ -8,7 +8,8 @@ The scenario geometry comes from the run's scenario (``persuasive.scenarios``): 
 path gives its centre ``xy(s)`` and direction, so every scenario is drawn to scale:
 :func:`draw_intersection` (roads along the paths, crossing and yield lines, safety circle),
 :func:`_vehicle_xy`, :func:`_heading`, :func:`_corners` and :func:`_vehicle_patch` (the
-footprint, oriented along the path). The snapshot time labels are placed from these alone.
+footprint, oriented along the path). The snapshot time labels are placed from these and
+from the lines drawn (:func:`_draw_time_labels`).
 """
 
 from __future__ import annotations
@@ -208,14 +209,22 @@ def _draw_snapshots(ax: Axes, run: RunRecord, idx: np.ndarray) -> list[_Box]:
 
 # -- time labels --------------------------------------------------------------------------------
 
-#: Clearance kept between a label and a footprint, the axes' frame or a path [m].
+#: Clearance kept between a label and a footprint or the axes' frame [m].
 _LABEL_PAD_M = 0.15
+#: Clearance kept between a label and a drawn line, beyond the line's half width [m].
+_LINE_PAD_M = 0.4
 #: Clearance kept between two labels, as a fraction of the label's height.
 _LABEL_GAP = 0.35
 #: Step of the shifts along the road that move a label clear of an obstacle [m].
 _SHIFT_STEP_M = 0.25
-#: Labels whose sides lie within this distance of the other path count as equally far [m].
-_SIDE_TOL_M = 1.0
+#: Spacing of the points that stand for the drawn lines [m]; below twice ``_LINE_PAD_M``, so
+#: that a line crossing a label always has a point within the clearance.
+_LINE_STEP_M = 0.2
+#: Lines of :func:`draw_intersection` and :func:`_draw_snapshots` a label must not touch.
+_LINE_GIDS = ("av-path", "hv-path", "av-crossing-line", "hv-crossing-line", "av-yield-line",
+              "hv-yield-line", "conflict-point")
+#: Half the size of the conflict point's marker, as an obstacle [m].
+_MARKER_M = 0.4
 
 
 def _overlap(a: _Box, b: _Box) -> float:
@@ -231,9 +240,35 @@ def _grow(box: _Box, pad: float) -> _Box:
 
 def _distance(box: _Box, points: np.ndarray) -> float:
     """Smallest distance from the points ``(n, 2)`` to the box [m]; 0 for a point inside."""
+    if len(points) == 0:
+        return np.inf
     dx = np.maximum.reduce([box[0] - points[:, 0], np.zeros(len(points)), points[:, 0] - box[2]])
     dy = np.maximum.reduce([box[1] - points[:, 1], np.zeros(len(points)), points[:, 1] - box[3]])
     return float(np.min(np.hypot(dx, dy)))
+
+
+def _line_points(ax: Axes) -> tuple[np.ndarray, float]:
+    """Points ``(n, 2)`` [m] along every line a label must keep clear of (the vehicles' paths,
+    the crossing and yield lines, the conflict point), at most ``_LINE_STEP_M`` apart, and the
+    largest half width of those lines as drawn [m]."""
+    (x0, x1) = ax.get_xlim()
+    m_per_pt = (x1 - x0) / (ax.get_window_extent().width * 72.0 / ax.figure.dpi)
+    out = [np.zeros((0, 2))]
+    half_width = 0.0
+    for line in ax.get_lines():
+        if line.get_gid() not in _LINE_GIDS:
+            continue
+        half_width = max(half_width, line.get_linewidth() / 2 * m_per_pt)
+        xy = np.asarray(line.get_xydata(), dtype=float)
+        if line.get_gid() == "conflict-point":  # a marker: its extent
+            out.append(xy + np.array([[dx, dy] for dx in (-_MARKER_M, 0.0, _MARKER_M)
+                                      for dy in (-_MARKER_M, 0.0, _MARKER_M)]))
+            continue
+        for a, b in zip(xy[:-1], xy[1:]):
+            n = max(1, int(np.ceil(np.hypot(*(b - a)) / _LINE_STEP_M)))
+            out.append(a + (b - a) * np.linspace(0.0, 1.0, n + 1)[:, None])
+        out.append(xy)
+    return np.concatenate(out), half_width
 
 
 class _Scene(NamedTuple):
@@ -241,28 +276,25 @@ class _Scene(NamedTuple):
 
     limits: tuple[float, float, float, float]  # x0, y0, x1, y1 of the axes [m]
     footprints: list[_Box]  # every footprint drawn [m]
+    lines: np.ndarray  # points along every line drawn, (n, 2) [m]
+    line_pad: float  # clearance from those points: _LINE_PAD_M and the lines' half width [m]
     paths: dict[str, np.ndarray]  # each vehicle's centre path, (n, 2) [m]
+    circle: tuple[float, float, float]  # the safety circle: centre x, y and radius [m]
     labels: list[_Box]  # the labels placed so far [m]
+    placed: dict[str, dict[int, float]]  # per vehicle: snapshot index -> label position [m]
 
 
 class _Candidate(NamedTuple):
-    cost: tuple[bool, bool, int, float, int]
+    cost: tuple[bool, float]  # crosses the safety circle's outline; the shift [m]
     box: _Box
-    crowded: bool  # overlaps another label or crosses the other vehicle's path
+    along: float  # the label's position along the vehicle's path [m]
 
 
-def _candidates(run: RunRecord, who: str, k: int, size: tuple[float, float],
-                scene: _Scene, max_shift_m: float) -> list[_Candidate]:
-    """Places for the time label of ``who``'s snapshot ``k``, clear of footprints and frame.
-
-    The label sits beside the road, at either side of the vehicle, possibly shifted along the
-    road by up to ``max_shift_m``. Costs, compared in order: coming closer to a placed label
-    than ``_LABEL_GAP`` of its height; crossing the other vehicle's path; being on the side
-    of the road nearer the other path (sides within ``_SIDE_TOL_M`` of each other count as
-    equally far); the shift; and last, being on the side nearer the other vehicle's start
-    (where it comes from). Places that come within ``_LABEL_PAD_M`` of a footprint or of the
-    axes' frame are not candidates.
-    """
+def _label_box(run: RunRecord, who: str, k: int, size: tuple[float, float], side: int,
+               shift: float) -> tuple[_Box, float]:
+    """The box [m] of ``who``'s label for snapshot ``k`` beside its road, on ``side`` (+1 left,
+    -1 right of the direction of travel), shifted ``shift`` along the road, and its position
+    along the path [m]."""
     veh = run.config.vehicle
     centre = np.array(_vehicle_xy(run, who, k), dtype=float)
     along, left = _heading(run, who, k)
@@ -270,35 +302,71 @@ def _candidates(run: RunRecord, who: str, k: int, size: tuple[float, float],
     half_across = abs(left[0]) * w / 2 + abs(left[1]) * h / 2
     # Just outside the road, clear of the crossing lines drawn across it.
     gap = max(veh.width_m, veh.lane_width_m) / 2 + 0.3 + half_across
+    cx, cy = centre + side * gap * left + shift * along
+    s = float(run.states[k, 0 if who == "av" else 2])
+    return (cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2), s + shift
+
+
+def _crosses_circle(box: _Box, circle: tuple[float, float, float]) -> bool:
+    """Whether the circle's outline passes through the box."""
+    cx, cy, r = circle
+    near = np.hypot(max(box[0] - cx, 0.0, cx - box[2]), max(box[1] - cy, 0.0, cy - box[3]))
+    far = max(np.hypot(x - cx, y - cy) for x in (box[0], box[2]) for y in (box[1], box[3]))
+    return near <= r <= far
+
+
+def _preferred_side(run: RunRecord, who: str, idx: np.ndarray, sizes: list, scene: _Scene) -> int:
+    """The side of its road where all of ``who``'s labels go (so that they read in order):
+    the one with more snapshots whose label fits there unshifted; then the one farther on
+    average from the other vehicle's path; then the one away from where the other vehicle
+    comes from."""
     other = scene.paths[_OTHER[who]]
-    other_start = other[:1]
+    score = {}
+    for side in (1, -1):
+        boxes = [_label_box(run, who, int(k), size, side, 0.0)[0] for k, size in zip(idx, sizes)]
+        fits = sum(_clear(box, scene) for box in boxes)
+        far = float(np.mean([min(_distance(box, other), 10.0) for box in boxes]))
+        score[side] = (fits, far, _distance(boxes[0], other[:1]))
+    return max((1, -1), key=lambda side: score[side])
+
+
+def _clear(box: _Box, scene: _Scene) -> bool:
+    """Inside the axes and clear of every footprint and drawn line (the labels aside)."""
+    x0, y0, x1, y1 = _grow(scene.limits, -_LABEL_PAD_M)
+    if box[0] < x0 or box[1] < y0 or box[2] > x1 or box[3] > y1:
+        return False
+    padded = _grow(box, _LABEL_PAD_M)
+    if any(_overlap(padded, f) > 0 for f in scene.footprints):
+        return False
+    return _distance(box, scene.lines) >= scene.line_pad
+
+
+def _candidates(run: RunRecord, who: str, i: int, k: int, size: tuple[float, float],
+                side: int, scene: _Scene, max_shift_m: float) -> list[_Candidate]:
+    """Places for the time label of ``who``'s snapshot ``k`` (the ``i``-th), on ``side``.
+
+    The label sits beside the road, possibly shifted along it by up to ``max_shift_m``. A place
+    must be inside the axes, clear of every footprint and drawn line by ``_LABEL_PAD_M``,
+    clear of every placed label by ``_LABEL_GAP`` of its height, and keep the vehicle's labels
+    in time order along its path. Costs, compared in order: crossing the safety circle's
+    outline; the shift.
+    """
     n_steps = int(max_shift_m / _SHIFT_STEP_M)
     shifts = _SHIFT_STEP_M * np.r_[0, np.repeat(np.arange(1, n_steps + 1), 2)
                                    * np.tile([1, -1], n_steps)]
-
-    def box_at(side: int, shift: float) -> _Box:
-        cx, cy = centre + side * gap * left + shift * along
-        return cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2
-
-    sides = (1, -1)
-    far = {side: _distance(box_at(side, 0.0), other) for side in sides}
-    side_rank = {side: int(far[side] < max(far.values()) - _SIDE_TOL_M) for side in sides}
-    away = sorted(sides, key=lambda side: -_distance(box_at(side, 0.0), other_start))
-    x0, y0, x1, y1 = _grow(scene.limits, -_LABEL_PAD_M)
+    placed = scene.placed[who]
+    before = max((a for j, a in placed.items() if j < i), default=-np.inf)
+    after = min((a for j, a in placed.items() if j > i), default=np.inf)
     found = []
-    for side in sides:
-        for shift in shifts:
-            box = box_at(side, float(shift))
-            if box[0] < x0 or box[1] < y0 or box[2] > x1 or box[3] > y1:
-                continue
-            padded = _grow(box, _LABEL_PAD_M)
-            if any(_overlap(padded, f) > 0 for f in scene.footprints):
-                continue
-            spaced = _grow(box, _LABEL_GAP * h)
-            on_label = any(_overlap(spaced, b) > 0 for b in scene.labels)
-            on_path = _distance(box, other) < _LABEL_PAD_M
-            cost = (on_label, on_path, side_rank[side], abs(float(shift)), away.index(side))
-            found.append(_Candidate(cost, box, on_label or on_path))
+    for shift in shifts:
+        box, along = _label_box(run, who, k, size, side, float(shift))
+        if not before < along < after or not _clear(box, scene):
+            continue
+        spaced = _grow(box, _LABEL_GAP * size[1])
+        if any(_overlap(spaced, b) > 0 for b in scene.labels):
+            continue
+        found.append(_Candidate((_crosses_circle(box, scene.circle), abs(float(shift))), box,
+                                along))
     return found
 
 
@@ -309,43 +377,46 @@ def _label_size(ax: Axes, text: Any, renderer: RendererBase) -> tuple[float, flo
 
 
 def _draw_time_labels(ax: Axes, run: RunRecord, idx: np.ndarray, footprints: list[_Box]) -> None:
-    """Label the snapshots with their times, beside their roads and clear of every footprint.
+    """Label the snapshots with their times, beside their roads, in order, touching nothing.
 
-    Each label goes to the best of :func:`_candidates`; text extents come from the renderer,
-    so the figure must be laid out. The first and last label of each vehicle are placed
-    first and may shift further along the road to find a free place. A later label that
-    would overlap another label wherever it goes is left out (the snapshots are evenly
-    spaced in time, so its neighbours date it); so is a label with no place clear of the
-    footprints and inside the axes.
+    Each vehicle's labels go on one side of its road (:func:`_preferred_side`), each to the
+    best of :func:`_candidates`: inside the axes, clear of every footprint, every drawn line
+    (paths, crossing and yield lines, the conflict point) and every other label, in time order
+    along the path. Text extents come from the renderer, so the figure must be laid out. The
+    first and last label of each vehicle are placed first and may shift further along the
+    road. A label with no such place is left out (the snapshots are evenly spaced in time, so
+    its neighbours date it).
     """
     renderer = ax.figure.canvas.get_renderer()
     (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
-    scene = _Scene((x0, y0, x1, y1), footprints,
-                   {who: _path_points(run, who) for who in ("hv", "av")}, [])
+    scene_ = _scenario(run)
+    cx, cy = scene_.av.xy(0.0)
+    lines, half_width = _line_points(ax)
+    scene = _Scene((x0, y0, x1, y1), footprints, lines, _LINE_PAD_M + half_width,
+                   {who: _path_points(run, who) for who in ("hv", "av")},
+                   (float(cx), float(cy), scene_.min_dist_m), [], {"hv": {}, "av": {}})
     length = run.config.vehicle.length_m
-    pt_per_m = ax.get_window_extent().width * 72.0 / ax.figure.dpi / (x1 - x0)
-    backing_pad = 0.5 * _LABEL_PAD_M * pt_per_m / _FONT["note"]  # in font sizes
     # The artists are made in time order (the figure lists them so), then placed by priority.
     texts = {(i, who): ax.text(0.0, 0.0, f"{k * _dt(run):g} s", ha="center", va="center",
                                color=_COLORS[who], fontsize=_FONT["note"], zorder=4,
                                gid=f"{who}-time-label")
              for i, k in enumerate(idx) for who in ("hv", "av")}
+    sizes = {key: _label_size(ax, text, renderer) for key, text in texts.items()}
+    sides = {who: _preferred_side(run, who, idx, [sizes[i, who] for i in range(idx.size)], scene)
+             for who in ("hv", "av")}
     ends = {0, idx.size - 1}
     for i, who in sorted(texts, key=lambda key: key[0] not in ends):
         text, k = texts[i, who], int(idx[i])
-        size = _label_size(ax, text, renderer)
-        options = _candidates(run, who, k, size, scene, length / 2)
-        if i in ends and (not options or min(options).cost[0]):
-            options += _candidates(run, who, k, size, scene, 3 * length)
+        options = _candidates(run, who, i, k, sizes[i, who], sides[who], scene, length / 2)
+        if i in ends and not options:
+            options = _candidates(run, who, i, k, sizes[i, who], sides[who], scene, 3 * length)
         best = min(options, default=None)
-        if best is None or (best.cost[0] and i not in ends):
+        if best is None:
             text.remove()
             continue
         scene.labels.append(best.box)
+        scene.placed[who][i] = best.along
         text.set_position(((best.box[0] + best.box[2]) / 2, (best.box[1] + best.box[3]) / 2))
-        if best.crowded:
-            # A backing half as wide as the clearance, so that it covers no footprint.
-            text.set_bbox(dict(fc="white", ec="none", alpha=0.75, pad=backing_pad))
 
 
 # -- figures ------------------------------------------------------------------------------------
@@ -368,7 +439,7 @@ def _topview(runs: Sequence[RunRecord], width_in: float, height_in: float,
         ax.set_xlabel("x [m]", fontsize=_FONT["label"])
         _style(ax, grid=False)
     axes[0].set_ylabel("y [m]", fontsize=_FONT["label"])
-    fig.legend(handles=_vehicle_handles() + _scene_handles(runs[0]), loc="outside lower center",
+    fig.legend(handles=_vehicle_handles(runs) + _scene_handles(runs[0]), loc="outside lower center",
                ncols=2 if len(runs) == 1 else 4, frameon=False, fontsize=_FONT["legend"])
     fig.draw_without_rendering()  # the label placement needs the final axes scale
     for ax, run, (idx, boxes) in zip(axes, runs, snapshots):
@@ -395,12 +466,12 @@ def topview_figure(lfg_run: RunRecord, mpc_run: RunRecord, every_s: float = 1.0)
         ``lane_width_m`` wide, the crossing lines at ``s = -stop_distance_m``, and the dotted
         safety circle of radius ``min_dist_m``. Each vehicle's centre path is a thin line in
         its colour; its footprint (``length_m`` x ``width_m``, along its path) is drawn every
-        ``every_s``,
-        older snapshots fainter, with the time beside it: outside its road, on the side away
-        from the other vehicle's path, never over a footprint and inside the axes (shifted
-        along the road where needed; a label that would collide with other labels wherever
-        it goes is left out, except the first and last). Both panels share one window; the
-        facts both runs share form the subtitle.
+        ``every_s``, older snapshots fainter, with the time beside it: outside its road, all of
+        a vehicle's times on one side of it (mostly the one away from the other vehicle's
+        path), in order along it, never over a footprint, a drawn line or another time, and
+        inside the axes (shifted along the road where needed; a time with no such place is
+        left out). Both panels share one window; the facts both runs share form the
+        subtitle.
     """
     return _topview((lfg_run, mpc_run), DOUBLE_COLUMN_IN, 4.0, every_s)
 

@@ -14,7 +14,8 @@ both loops:
 
 AV kinds: ``persuasive`` (the paper's branch MPC; alias ``mpc``), ``passive``, ``cv``,
 ``lfg``, ``yield``. Human kinds: ``lfg``, ``stubborn``, ``noisy``, ``idm``, ``aggressive``,
-``replay``. Each module's docstring states the kind's definition and parameters.
+``replay``, and the humans that test the safety shield, ``adversary``, ``deceptive``,
+``random`` (:mod:`.adversarial`). Each module's docstring states the kind's definition and parameters.
 """
 
 from __future__ import annotations
@@ -83,6 +84,8 @@ def policy_params(config: Config, side: int) -> np.ndarray:
     if spec.kind == kd.REPLAY:
         accel = load_replay(config).accel_mps2
         return np.concatenate([[float(accel.size)], accel])
+    if spec.kind == kd.RANDOM:
+        return np.array([config.hv.random.hold_min_s, config.hv.random.hold_max_s])
     return np.zeros(1)
 
 
@@ -103,6 +106,8 @@ def load_replay(config: Config) -> Recording:
 
     path = Path(config.hv.replay.file)
     who = config.hv.replay.vehicle
+    if not path.exists():
+        raise ConfigError(f"hv.replay.file = {str(path)!r} cannot be read: no such file")
     try:
         frame = pd.read_csv(path) if path.suffix.lower() == ".csv" else pd.read_parquet(path)
     except (OSError, ValueError) as exc:
@@ -198,7 +203,7 @@ class CompiledPolicy:
         return int(policy_role(self.spec.kind, self.state))
 
     def act(self, observation: Observation) -> float:
-        from ..planner import check_state
+        from ..kinematics import check_state
         from .step import policy_step_buffers
 
         ctx = self.context

@@ -12,14 +12,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 # Kind ids (compile-time constants in the dispatcher).
-LFG, STUBBORN, NOISY, IDM, AGGRESSIVE, REPLAY, PERSUASIVE, PASSIVE, CV, YIELD = range(10)
+(LFG, STUBBORN, NOISY, IDM, AGGRESSIVE, REPLAY, PERSUASIVE, PASSIVE, CV, YIELD, ADVERSARY,
+ DECEPTIVE, RANDOM) = range(13)
 
 #: The vehicle a policy drives.
 AV, HV = 0, 1
 
 #: Size of every policy's state vector and log row.
-STATE_SIZE = 8
-LOG_SIZE = 16
+STATE_SIZE = 16
+LOG_SIZE = 20
 
 LFG_LOG = ("role", "next_role", "trajectory", "plausible_leader", "pi_ll", "pi_lf", "pi_fl",
            "pi_ff", "draw", "belief_other_leader", "belief_other_follower")
@@ -27,11 +28,15 @@ NOISY_LOG = LFG_LOG + ("choice_draw", "choice_probability")
 MPC_LOG = ("trajectory", "feasible", "n_feasible", "p_safe_min", "p_safe_max",
            "expected_reward", "belief_hv_leader_used", "belief_hv_leader",
            "belief_hv_follower", "tie_role", "human_belief_av_leader",
-           "human_plausible_leader", "branch_p_ll", "branch_p_lf", "branch_p_fl", "branch_p_ff")
-CV_LOG = ("trajectory", "feasible", "n_feasible", "p_safe_min", "expected_reward")
+           "human_plausible_leader", "branch_p_ll", "branch_p_lf", "branch_p_fl", "branch_p_ff",
+           "model_confidence", "n_allowed")
+CV_LOG = ("trajectory", "feasible", "n_feasible", "p_safe_min", "expected_reward", "n_allowed")
 YIELD_LOG = ("trajectory", "released", "n_admissible")
 IDM_LOG = ("go", "committed", "waiting_s", "gap_s", "time_to_conflict_s",
            "other_time_to_conflict_s")
+ADVERSARY_LOG = ("target_time_s", "lurking")
+DECEPTIVE_LOG = ("committed",)
+RANDOM_LOG = ("hold_left_s",)
 NO_LOG: tuple[str, ...] = ()
 
 
@@ -56,6 +61,9 @@ KINDS: dict[str, KindSpec] = {s.name: s for s in (
     KindSpec("idm", IDM, (HV,), 0, False, False, IDM_LOG),
     KindSpec("aggressive", AGGRESSIVE, (HV,), 0, False, False, NO_LOG),
     KindSpec("replay", REPLAY, (HV,), 0, False, False, NO_LOG),
+    KindSpec("adversary", ADVERSARY, (HV,), 0, False, False, ADVERSARY_LOG),
+    KindSpec("deceptive", DECEPTIVE, (HV,), 0, False, False, DECEPTIVE_LOG),
+    KindSpec("random", RANDOM, (HV,), 2, False, False, RANDOM_LOG),
     KindSpec("persuasive", PERSUASIVE, (AV,), 0, True, True, MPC_LOG),
     KindSpec("passive", PASSIVE, (AV,), 0, True, True, MPC_LOG),
     KindSpec("cv", CV, (AV,), 0, False, True, CV_LOG),
@@ -67,8 +75,8 @@ BY_ID: dict[int, KindSpec] = {s.kind: s for s in KINDS.values()}
 #: Log columns whose values are roles (written as "leader"/"follower").
 ROLE_COLUMNS = ("role", "next_role", "tie_role")
 #: Log columns whose values are integers or flags.
-INT_COLUMNS = ("trajectory", "n_feasible", "n_admissible")
-BOOL_COLUMNS = ("feasible", "released", "go", "committed")
+INT_COLUMNS = ("trajectory", "n_feasible", "n_admissible", "n_allowed")
+BOOL_COLUMNS = ("feasible", "released", "go", "committed", "lurking")
 
 
 def spec(name: str) -> KindSpec:

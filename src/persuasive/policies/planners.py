@@ -10,6 +10,16 @@
 
 The persuasive and passive planners hold the belief ``q`` on the human's role and the stored
 one-step prediction of the human per role (§6 step 6).
+
+**Knowing the shield** (docs/method.md §12.3; only with ``av.shield`` on): with
+``mpc.shield_aware``, a candidate whose first acceleration the shield would reject is not
+feasible, so the planner does not persuade itself into a corner the shield then brakes it out
+of. The MPC planners also track their confidence in the human model
+(``persuasive.safety.confidence``); below ``mpc.confidence_threshold`` they stop trying to
+persuade: only candidates that stand before the conflict at their end (yield smoothly) or
+that the worst-case shield certifies to cross whatever the human does remain (when none does,
+the shield-admitted ones). With the ``responsive`` shield, which trusts the human to brake in
+time, this is what protects the AV from a human the model does not explain.
 """
 
 from __future__ import annotations
@@ -18,15 +28,22 @@ import numpy as np
 from numba import njit
 
 from .. import packing as slot
-from ..game import EGO_FOLLOWER, EGO_LEADER
+from ..game import EGO_FOLLOWER, EGO_LEADER, OTHER_FOLLOWER, OTHER_LEADER
 from ..library import Lib
 from ..mpc import (D_BELIEF_L, D_EXPECTED, D_MAX_SAFE, D_MIN_SAFE, D_P_LL, D_PLAUSIBLE_L,
                    decide, decide_cv)
 from ..roles import FOLLOWER, LEADER, bayes_update
+from ..safety.confidence import confidence_update, plausible_of, role_prediction
+from ..safety.shield import (C_KIND, N_CONFLICT, admissible, conflict_vector, go_certified,
+                             human_window, yields_before)
 
 #: Slots of the MPC's state: belief q = (P(HV = L), P(HV = F)), the stored prediction of the
-#: HV's next state per HV role, and whether it has been initialised.
-BELIEF_L, BELIEF_F, PRED_L_S, PRED_L_V, PRED_F_S, PRED_F_V, READY = range(7)
+#: HV's next state per HV role, whether it has been initialised; then the confidence filter
+#: (persuasion.safety.confidence): the confidence in the human model, the model's predicted
+#: P(HV = L) for the human's pending action, the model human's belief about the AV, its
+#: stored prediction of the AV per AV role, and its plausible role at the last step.
+(BELIEF_L, BELIEF_F, PRED_L_S, PRED_L_V, PRED_F_S, PRED_F_V, READY, CONFIDENCE, ROLE_PRED_L,
+ HB_L, HB_F, HP_L_S, HP_L_V, HP_F_S, HP_F_V, PLAUSIBLE_PREV) = range(16)
 #: Slots of its parameter vector: the AV's estimate of p_a; quirk Q3 (belief ties read a given
 #: human role); whether that role is the simulated human's own (p_a_hat == p_a); the human's
 #: initial role (the Q3 fallback).
@@ -35,16 +52,59 @@ PRM_P_A_HAT, PRM_TIE_GIVEN, PRM_MODEL_IS_HUMAN, PRM_HUMAN_ROLE = range(4)
 # Log columns (``persuasive.policies.kinds.MPC_LOG``; the cv planner's are its own).
 (COL_TRAJ, COL_FEASIBLE, COL_N_FEASIBLE, COL_PSAFE_MIN, COL_PSAFE_MAX, COL_EXPECTED,
  COL_BELIEF_USED, COL_BELIEF_L, COL_BELIEF_F, COL_TIE, COL_HUMAN_BELIEF_L, COL_HUMAN_PLAUSIBLE,
- COL_P_LL, COL_P_LF, COL_P_FL, COL_P_FF) = range(16)
-CV_COL_TRAJ, CV_COL_FEASIBLE, CV_COL_N_FEASIBLE, CV_COL_PSAFE_MIN, CV_COL_EXPECTED = range(5)
+ COL_P_LL, COL_P_LF, COL_P_FL, COL_P_FF, COL_CONFIDENCE, COL_N_ALLOWED) = range(18)
+(CV_COL_TRAJ, CV_COL_FEASIBLE, CV_COL_N_FEASIBLE, CV_COL_PSAFE_MIN, CV_COL_EXPECTED,
+ CV_COL_N_ALLOWED) = range(6)
 
 
 @njit(cache=True)
 def mpc_init(st: np.ndarray, prior_l: float) -> None:
-    """A fresh MPC state in ``st``: belief ``(prior_l, 1 - prior_l)``, no prediction yet."""
+    """A fresh MPC state in ``st``: belief ``(prior_l, 1 - prior_l)``, no prediction yet, full
+    confidence in the model."""
     st[:] = 0.0
     st[BELIEF_L] = prior_l
     st[BELIEF_F] = 1.0 - prior_l
+    st[CONFIDENCE] = 1.0
+    st[ROLE_PRED_L] = prior_l
+    st[HB_L] = prior_l
+    st[HB_F] = 1.0 - prior_l
+
+
+@njit(cache=True)
+def shield_allowed(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib,
+                   P_av: np.ndarray, P_hv: np.ndarray, robust: bool,
+                   allowed: np.ndarray) -> int:
+    """Which candidates may count as feasible, into ``allowed`` (docs/method.md §12.3); returns
+    how many. Without the shield (or with ``mpc.shield_aware`` off) all of them; otherwise those
+    whose first acceleration the shield admits; ``robust`` (the model does not explain the
+    human): only those that stand before the conflict at their end or that the worst-case
+    shield certifies to cross now, whatever the shield's own kind (if none, as before)."""
+    n_traj = allowed.shape[0]
+    if P_av[slot.SHIELD] == slot.SHIELD_OFF or P_av[slot.SHIELD_AWARE] == 0.0:
+        allowed[:] = True
+        return n_traj
+    C = np.empty(N_CONFLICT)
+    conflict_vector(P_av, P_hv, C)
+    dt = P_av[slot.SAMPLE_DT]
+    n = lib_r.S.shape[0]
+    count = 0
+    if robust:  # a human the model does not explain is planned for as the worst case
+        kind = C[C_KIND]
+        C[C_KIND] = slot.SHIELD_WORST_CASE
+        t_in, t_out, past = human_window(s_H, v_H, C)
+        for c in range(n_traj):
+            a = lib_r.A[0, c]
+            allowed[c] = (yields_before(lib_r.S[n - 1, c], lib_r.V[n - 1, c], C)
+                          or go_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in, t_out, past))
+            count += allowed[c]
+        C[C_KIND] = kind
+        if count > 0:
+            return count
+    t_in, t_out, past = human_window(s_H, v_H, C)
+    for c in range(n_traj):
+        allowed[c] = admissible(s_R, v_R, lib_r.A[0, c], dt, s_H, v_H, C, t_in, t_out, past)
+        count += allowed[c]
+    return count
 
 
 @njit(cache=True)
@@ -71,19 +131,44 @@ def mpc_step(st: np.ndarray, prm: np.ndarray, persuade: bool, s_R: float, v_R: f
     initial role; without Q3, the most likely HV role under ``q`` (ties: L). ``diag``, ``log``,
     ``lib_h1a``, ``lib_h1b``, ``ahead``: see :func:`persuasive.mpc.decide`.
     """
+    tracking = (P_av[slot.SHIELD] != slot.SHIELD_OFF and P_av[slot.CONF_THRESHOLD] > 0.0)
+    p_model = prm[PRM_P_A_HAT] if persuade else 0.0  # the passive model: roles never change
     if st[READY] == 0.0:
         st[PRED_L_S], st[PRED_L_V] = s_H, v_H
         st[PRED_F_S], st[PRED_F_V] = s_H, v_H
+        st[HP_L_S], st[HP_L_V] = s_R, v_R
+        st[HP_F_S], st[HP_F_V] = s_R, v_R
         st[READY] = 1.0
+    elif tracking:  # the human's last action against the model's prediction of it
+        dt = P_av[slot.SAMPLE_DT]
+        conf, alpha_l = confidence_update(
+            st[CONFIDENCE], st[ROLE_PRED_L], (v_H - st[PRED_L_V]) / dt,
+            (v_H - st[PRED_F_V]) / dt, P_av[slot.CONF_STD], P_av[slot.CONF_SWITCH],
+            P_hv[slot.U_MAX] - P_hv[slot.U_MIN])
+        st[CONFIDENCE] = conf
+        st[ROLE_PRED_L] = role_prediction(alpha_l, st[PLAUSIBLE_PREV], p_model)
     q_l, q_f = st[BELIEF_L], st[BELIEF_F]
     if prm[PRM_TIE_GIVEN] != 0.0:  # Q3
         tie = human_role if (prm[PRM_MODEL_IS_HUMAN] != 0.0 and human_role >= 0) \
             else int(prm[PRM_HUMAN_ROLE])
     else:
         tie = LEADER if q_l >= q_f else FOLLOWER
+    allowed = np.empty(lib_r.S.shape[1], np.bool_)
+    robust = tracking and st[CONFIDENCE] < P_av[slot.CONF_THRESHOLD]
+    n_allowed = shield_allowed(s_R, v_R, s_H, v_H, lib_r, P_av, P_hv, robust, allowed)
     c, feasible = decide(s_R, v_R, s_H, v_H, lib_h, lib_r, idx, q_l, q_f, tie == LEADER,
                          prm[PRM_P_A_HAT], persuade, P_av, P_hv, disc, diag, lib_h1a, lib_h1b,
-                         ahead, work)
+                         ahead, work, allowed)
+    if tracking:  # the model human's own step: plausible role, then its belief about the AV
+        st[PLAUSIBLE_PREV] = plausible_of(st[HB_L], st[HB_F])
+        st[HB_L], st[HB_F] = bayes_update(
+            st[HB_L], st[HB_F],
+            abs(s_R - st[HP_L_S]), abs(v_R - st[HP_L_V]),
+            abs(s_R - st[HP_F_S]), abs(v_R - st[HP_F_V]),
+            P_av[slot.W_S], P_av[slot.W_V])
+        a_l, a_f = idx[OTHER_LEADER], idx[OTHER_FOLLOWER]
+        st[HP_L_S], st[HP_L_V] = lib_r.S[0, a_l], lib_r.V[0, a_l]
+        st[HP_F_S], st[HP_F_V] = lib_r.S[0, a_f], lib_r.V[0, a_f]
     # 6. update q against the stored prediction, then store the new one
     b_l, b_f = bayes_update(
         q_l, q_f,
@@ -108,17 +193,22 @@ def mpc_step(st: np.ndarray, prm: np.ndarray, persuade: bool, s_R: float, v_R: f
     log[COL_HUMAN_PLAUSIBLE] = diag[c, D_PLAUSIBLE_L]
     for b in range(4):
         log[COL_P_LL + b] = diag[c, D_P_LL + b]
+    log[COL_CONFIDENCE] = st[CONFIDENCE] if tracking else np.nan
+    log[COL_N_ALLOWED] = n_allowed
     return lib_r.A[0, c]
 
 
 @njit(cache=True)
-def cv_step(s_H: float, v_H: float, lib_r: Lib, P_av: np.ndarray, P_hv: np.ndarray,
-            diag: np.ndarray, log: np.ndarray, work: np.ndarray) -> float:
+def cv_step(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib, P_av: np.ndarray,
+            P_hv: np.ndarray, diag: np.ndarray, log: np.ndarray, work: np.ndarray) -> float:
     """One step of the constant-velocity planner; returns the acceleration."""
-    c, feasible = decide_cv(s_H, v_H, lib_r, P_av, P_hv, diag, work)
+    allowed = np.empty(lib_r.S.shape[1], np.bool_)
+    n_allowed = shield_allowed(s_R, v_R, s_H, v_H, lib_r, P_av, P_hv, False, allowed)
+    c, feasible = decide_cv(s_H, v_H, lib_r, P_av, P_hv, diag, work, allowed)
     log[CV_COL_TRAJ] = c
     log[CV_COL_FEASIBLE] = 1.0 if feasible else 0.0
     log[CV_COL_N_FEASIBLE] = _n_feasible(diag, 1.0 - P_av[slot.EPSILON])
     log[CV_COL_PSAFE_MIN] = diag[c, D_MIN_SAFE]
     log[CV_COL_EXPECTED] = diag[c, D_EXPECTED]
+    log[CV_COL_N_ALLOWED] = n_allowed
     return lib_r.A[0, c]

@@ -17,6 +17,7 @@ from numba import njit
 from .. import packing as slot
 from ..library import Lib, as_lib
 from . import kinds as kd
+from .adversarial import adversary_step, deceptive_step, random_step
 from .idm import idm_step
 from .lfg import PRM_ROLE, ROLE, lfg_init, lfg_step
 from .planners import cv_step, mpc_init, mpc_step
@@ -76,7 +77,7 @@ def policy_step(kind: int, me: int, prm: np.ndarray, st: np.ndarray, k: int, s_a
                         lib_h, lib_r, idx, P_av, P_hv, disc, diag, log, lib_h1a, lib_h1b,
                         ahead, work)
     if kind == kd.CV:
-        return cv_step(s_hv, v_hv, lib_r, P_av, P_hv, diag, log, work)
+        return cv_step(s_av, v_av, s_hv, v_hv, lib_r, P_av, P_hv, diag, log, work)
     if kind == kd.YIELD:
         return yield_step(st, s_hv, lib_r, P_av, P_hv, log)
     if kind == kd.IDM:
@@ -87,6 +88,12 @@ def policy_step(kind: int, me: int, prm: np.ndarray, st: np.ndarray, k: int, s_a
         return aggressive_step(P_hv if me == kd.HV else P_av)
     if kind == kd.REPLAY:
         return replay_step(prm, k)
+    if kind == kd.ADVERSARY:
+        return adversary_step(s_hv, v_hv, s_av, v_av, dt, P_hv, P_av, log)
+    if kind == kd.DECEPTIVE:
+        return deceptive_step(st, s_hv, v_hv, s_av, v_av, dt, P_hv, P_av, log)
+    if kind == kd.RANDOM:
+        return random_step(st, prm, draws, dt, P_hv, log)
     raise ValueError("unknown policy kind")
 
 

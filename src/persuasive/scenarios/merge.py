@@ -19,7 +19,7 @@ from dataclasses import replace
 
 from .. import packing as slot
 from ..config import Config
-from ..geometry import Path, unit, zone_interval
+from ..geometry import Path, occupancy_interval, unit, zone_interval
 from .base import Scenario, pair_min_dist, shape
 
 DEFAULT_ANGLE_DEG = 30.0
@@ -39,6 +39,14 @@ def build(config: Config) -> Scenario:
         zone = zone_interval(path, other, min_dist)
         paths[who] = replace(path, yield_s=zone[0], first_s=0.0, clear_s=min_dist,
                              zone=(zone[0], math.inf))
+    # Occupancy (docs/method.md §12.1): the AV's ramp footprint reaches into the main lane
+    # from ``av_lo`` on; up to the merge point that is the side zone, past it both share the
+    # lane (a car-following conflict). The HV's side zone: where its footprint can touch the
+    # AV's anywhere on the side zone.
+    av_lo = occupancy_interval(paths["av"], paths["hv"])[0]
+    hv_side = occupancy_interval(paths["hv"], paths["av"], other_range=(av_lo, 0.0))
+    paths["av"] = replace(paths["av"], occupancy=(av_lo, 0.0))
+    paths["hv"] = replace(paths["hv"], occupancy=hv_side)
     scenario = Scenario("merge", config, paths["av"], paths["hv"], slot.CONFLICT_EUCLIDEAN,
                         min_dist, config.vehicle.lane_width_m, lane_shared=True)
     scenario.check_starts()

@@ -8,12 +8,18 @@ seed. The runs go through the sweep runner (``persuasive.sweep``: Dask, Parquet 
 resumable); the comparison's folder is a sweep folder plus ``summary.json`` and
 ``summary.md``.
 
-Per pair the summary gives shares of who reached their line first, collisions, runs where the
-chance constraint failed, mean delays, the 5th percentile of the minimum distance and the AV's
-decision time, with 95 % bootstrap confidence intervals (``scipy.stats.bootstrap``,
-percentile method, a fixed random seed so that the same runs give the same intervals), and
-for each human kind the paired differences of every other AV against ``persuasive`` over the
-seeds both finished (bootstrap over seeds of the per-seed differences).
+A third axis puts the safety shield on and off (``shields``, e.g. ``("off", "worst-case")``;
+docs/method.md §12): a row per (AV, shield, human).
+
+Per row the summary gives shares of who reached their line first, collisions (all of them, and
+those caused by the AV), runs where the chance constraint failed, mean delays, the 5th
+percentile of the minimum distance and the AV's decision time, with 95 % bootstrap confidence
+intervals (``scipy.stats.bootstrap``, percentile method, a fixed random seed so that the same
+runs give the same intervals); the surrogate safety measures (shield interventions, footprint
+gap, time to collision, post-encroachment time, rear-ends by the human) and the AV's comfort
+(strongest braking, RMS jerk); and the paired differences over the seeds both finished
+(bootstrap over seeds of the per-seed differences): for each shield setting and human, every
+other AV against ``persuasive``, and for each AV and human, each shield against ``off``.
 
 The decision time is measured separately, in this process and not in the workers, on the
 first ``timing_seeds`` seeds of each pair (``simulate(..., timed=True)``): it is the median
@@ -31,7 +37,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from .._files import atomic_write
 from ..config import AV_KINDS, SIMULATED_HV_KINDS, Config, ConfigError
 
@@ -40,9 +46,13 @@ DEFAULT_HV_KINDS = tuple(k for k in SIMULATED_HV_KINDS if k != "replay")
 #: The reference AV of the paired differences.
 REFERENCE_AV = "persuasive"
 #: Keys of each row of ``--json`` (and of ``summary.json``'s rows, which hold more).
-JSON_KEYS = ("av", "hv", "runs", "av_first_pct", "hv_first_pct", "neither_pct", "collisions",
-             "cc_fail_runs", "av_delay_s_mean", "hv_delay_s_mean", "min_distance_m_p05",
-             "av_decision_ms_median")
+JSON_KEYS = ("av", "shield", "hv", "runs", "av_first_pct", "hv_first_pct", "neither_pct",
+             "collisions", "collisions_caused_by_av", "rear_ends_by_human", "cc_fail_runs",
+             "av_delay_s_mean", "hv_delay_s_mean", "min_distance_m_p05",
+             "shield_interventions_mean", "min_gap_m_p05", "min_ttc_s_p05", "pet_s_p05",
+             "av_max_brake_mps2_mean", "av_rms_jerk_mps3_mean", "av_decision_ms_median")
+#: The shield setting every other is paired against.
+REFERENCE_SHIELD = "off"
 #: Resamples of the bootstrap and its seed.
 N_RESAMPLES = 2000
 BOOTSTRAP_SEED = 12345
@@ -71,15 +81,33 @@ def parse_kinds(text: str | Sequence[str] | None, allowed: Sequence[str], name: 
 
 
 def comparison_grid(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str],
-                    seeds: int):
-    """The sweep grid of a comparison: ``av.kind`` x ``hv.kind`` x seeds ``1..seeds``."""
+                    seeds: int, shields: Sequence[str] | None = None):
+    """The sweep grid of a comparison: ``av.kind`` x ``av.shield`` (when ``shields`` is given)
+    x ``hv.kind`` x seeds ``1..seeds``, at most ``persuasive.experiments.MAX_RUNS`` runs (they
+    are summarised in memory)."""
+    from ..experiments import check_seeds
     from ..sweep import Grid
 
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ConfigError(f"seeds = {seeds!r} is out of range; allowed: integer >= 1")
+    check_seeds(seeds, max(1, len(av_kinds) * len(hv_kinds) * len(shields or (None,))),
+                rows="pairs")
+    av_axes: dict[str, Any] = {"kind": list(av_kinds)}
+    if shields:
+        av_axes["shield"] = list(shields)
     data = {"seeds": seeds, "base": base.to_dict(),
-            "axes": {"av": {"kind": list(av_kinds)}, "hv": {"kind": list(hv_kinds)}}}
+            "axes": {"av": av_axes, "hv": {"kind": list(hv_kinds)}}}
     return Grid.from_dict(data)
+
+
+def shield_settings(base: Config, shields: Sequence[str] | None) -> tuple[str, ...]:
+    """The shield settings of a comparison: the axis when given, else the base's own."""
+    return tuple(shields) if shields else (base.shield,)
+
+
+def _select(runs, av: str, shield: str, hv: str, shields_axis: bool):
+    mask = (runs["av.kind"] == av) & (runs["hv.kind"] == hv)
+    if shields_axis:
+        mask &= runs["av.shield"] == shield
+    return runs[mask]
 
 
 def comparison_base(config: Config) -> Config:
@@ -102,18 +130,21 @@ class Comparison:
 def run_comparison(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str],
                    seeds: int = 200, out: str | Path | None = None, workers: int | None = None,
                    force: bool = False, timing_seeds: int = 3,
-                   progress: Callable[[int, int], None] | None = None) -> Comparison:
+                   progress: Callable[[int, int], None] | None = None,
+                   shields: Sequence[str] | None = None) -> Comparison:
     """Run and summarise a comparison (see the module docstring); returns a
-    :class:`Comparison`. ``out`` defaults to ``results/compare-<grid digest>``."""
+    :class:`Comparison`. ``out`` defaults to ``results/compare-<grid digest>``; ``shields``:
+    the shield settings to compare (default: the base configuration's only)."""
     from .. import sweep
 
     base = comparison_base(base)
-    grid = comparison_grid(base, av_kinds, hv_kinds, seeds)
+    grid = comparison_grid(base, av_kinds, hv_kinds, seeds, shields)
     folder = Path(out) if out is not None else Path("results") / f"compare-{grid.digest[:10]}"
-    result = sweep.run(grid, folder, workers=workers, force=force, progress=progress)
+    result = sweep.run(grid, folder, workers=workers, force=force, progress=progress,
+                       what="comparison folder")
     runs = sweep.load(folder)
-    timing = decision_times(base, av_kinds, hv_kinds, min(timing_seeds, seeds))
-    summary = summarize(runs, base, av_kinds, hv_kinds, seeds, timing)
+    timing = decision_times(base, av_kinds, hv_kinds, min(timing_seeds, seeds), shields)
+    summary = summarize(runs, base, av_kinds, hv_kinds, seeds, timing, shields)
     summary["failures"] = len(result.failures)
     atomic_write(folder / "summary.json",
                  lambda p: p.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8"))
@@ -123,19 +154,22 @@ def run_comparison(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str
 
 
 def decision_times(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str],
-                   n_seeds: int) -> dict[tuple[str, str], float]:
-    """Median decision time [ms] of each AV kind against each human, over the steps of seeds
-    ``1..n_seeds``, measured in this process."""
+                   n_seeds: int, shields: Sequence[str] | None = None
+                   ) -> dict[tuple[str, str, str], float]:
+    """Median decision time [ms] (the shield included) of each AV kind and shield setting
+    against each human, over the steps of seeds ``1..n_seeds``, measured in this process."""
     from ..simulation import simulate
 
     out = {}
     for av in av_kinds:
-        for hv in hv_kinds:
-            config = base.with_overrides({"av.kind": av, "hv.kind": hv})
-            simulate(config, 1, timed=True)  # load the code
-            times = [simulate(config, seed, timed=True).av_decision_ms
-                     for seed in range(1, n_seeds + 1)]
-            out[(av, hv)] = float(np.median(np.concatenate(times)))
+        for shield in shield_settings(base, shields):
+            for hv in hv_kinds:
+                config = base.with_overrides({"av.kind": av, "av.shield": shield,
+                                              "hv.kind": hv})
+                simulate(config, 1, timed=True)  # load the code
+                times = [simulate(config, seed, timed=True).av_decision_ms
+                         for seed in range(1, n_seeds + 1)]
+                out[(av, shield, hv)] = float(np.median(np.concatenate(times)))
     return out
 
 
@@ -169,23 +203,29 @@ def _mean(x: np.ndarray) -> float | None:
     return float(np.mean(x)) if x.size else None
 
 
-def _p05(x: np.ndarray) -> float:
-    return float(np.percentile(x, 5))
+def _p05(x: np.ndarray) -> float | None:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    return float(np.percentile(x, 5)) if x.size else None
 
 
 def _column(frame, name: str) -> np.ndarray:
     return frame[name].to_numpy(dtype=float, na_value=np.nan)
 
 
-def pair_row(frame, av: str, hv: str, timing: float | None) -> dict[str, Any]:
-    """The summary of one (AV, human) pair's runs."""
+def pair_row(frame, av: str, hv: str, timing: float | None,
+             shield: str = "off") -> dict[str, Any]:
+    """The summary of one (AV, shield, human) combination's runs."""
     first = frame["first_at_line"].to_numpy()
     av_first, hv_first = (first == 1).astype(float), (first == 2).astype(float)
     neither = (first == 0).astype(float)
     av_delay, hv_delay = _column(frame, "av_delay_s"), _column(frame, "hv_delay_s")
     min_d = _column(frame, "min_distance_m")
+    caused = frame["collision_caused_by_av"].to_numpy(float)
+    brake = _column(frame, "av_max_brake_mps2")
     return {
         "av": av,
+        "shield": shield,
         "hv": hv,
         "runs": int(len(frame)),
         "av_first_pct": _pct(av_first),
@@ -196,6 +236,9 @@ def pair_row(frame, av: str, hv: str, timing: float | None) -> dict[str, Any]:
         "neither_pct": _pct(neither),
         "collisions": int(frame["collision"].sum()),
         "collision_pct_ci": [100 * v for v in _bootstrap_ci(frame["collision"].to_numpy(float))],
+        "collisions_caused_by_av": int(caused.sum()),
+        "collision_caused_by_av_pct_ci": [100 * v for v in _bootstrap_ci(caused)],
+        "rear_ends_by_human": int(frame["rear_end_by_human"].sum()),
         "cc_fail_runs": int((frame["infeasible_steps"] > 0).sum()),
         "cc_fail_steps": int(frame["infeasible_steps"].sum()),
         "av_delay_s_mean": _mean(av_delay),
@@ -208,6 +251,13 @@ def pair_row(frame, av: str, hv: str, timing: float | None) -> dict[str, Any]:
         "min_distance_m_p05_ci": _bootstrap_ci(min_d, _p05),
         "av_rms_jerk_mps3_mean": _mean(_column(frame, "av_rms_jerk_mps3")),
         "hv_rms_jerk_mps3_mean": _mean(_column(frame, "hv_rms_jerk_mps3")),
+        "shield_interventions_mean": _mean(_column(frame, "shield_interventions")),
+        "shield_intervention_runs": int((frame["shield_interventions"] > 0).sum()),
+        "min_gap_m_p05": _p05(_column(frame, "min_gap_m")),
+        "min_ttc_s_p05": _p05(_column(frame, "min_ttc_s")),
+        "pet_s_p05": _p05(_column(frame, "pet_s")),
+        "av_max_brake_mps2_mean": _mean(brake),
+        "av_max_brake_mps2_max": float(np.nanmax(brake)) if np.isfinite(brake).any() else None,
         "av_decision_ms_median": timing,
     }
 
@@ -224,41 +274,72 @@ def _paired(ref, other, column: str, scale: float = 1.0) -> dict[str, Any]:
             "seeds": int(diff.size)}
 
 
-def paired_differences(runs, av_kinds: Sequence[str], hv_kinds: Sequence[str]) -> list[dict]:
-    """For each human, every other AV minus ``persuasive``, paired by seed."""
+def _paired_entry(ref, other) -> dict[str, Any]:
+    ref, other = ref.copy(), other.copy()
+    for frame in (ref, other):
+        frame["av_first"] = (frame["first_at_line"] == 1).astype(float)
+        frame["collided"] = frame["collision_caused_by_av"].astype(float)
+    return {
+        "av_first_pct": _paired(ref, other, "av_first", 100.0),
+        "collision_pct": _paired(ref, other, "collided", 100.0),
+        "av_delay_s": _paired(ref, other, "av_delay_s"),
+        "hv_delay_s": _paired(ref, other, "hv_delay_s"),
+        "min_distance_m": _paired(ref, other, "min_distance_m"),
+    }
+
+
+def paired_differences(runs, av_kinds: Sequence[str], hv_kinds: Sequence[str],
+                       shields: Sequence[str] = ("off",),
+                       shields_axis: bool = False) -> list[dict]:
+    """For each shield setting and human, every other AV minus ``persuasive``, paired by
+    seed (collisions: those caused by the AV)."""
     if REFERENCE_AV not in av_kinds:
         return []
     out = []
-    for hv in hv_kinds:
-        ref = runs[(runs["av.kind"] == REFERENCE_AV) & (runs["hv.kind"] == hv)].copy()
-        ref["av_first"] = (ref["first_at_line"] == 1).astype(float)
-        ref["collided"] = ref["collision"].astype(float)
-        for av in av_kinds:
-            if av == REFERENCE_AV:
-                continue
-            other = runs[(runs["av.kind"] == av) & (runs["hv.kind"] == hv)].copy()
-            other["av_first"] = (other["first_at_line"] == 1).astype(float)
-            other["collided"] = other["collision"].astype(float)
-            out.append({
-                "hv": hv, "av": av, "against": REFERENCE_AV,
-                "av_first_pct": _paired(ref, other, "av_first", 100.0),
-                "collision_pct": _paired(ref, other, "collided", 100.0),
-                "av_delay_s": _paired(ref, other, "av_delay_s"),
-                "hv_delay_s": _paired(ref, other, "hv_delay_s"),
-                "min_distance_m": _paired(ref, other, "min_distance_m"),
-            })
+    for shield in shields:
+        for hv in hv_kinds:
+            ref = _select(runs, REFERENCE_AV, shield, hv, shields_axis)
+            for av in av_kinds:
+                if av == REFERENCE_AV:
+                    continue
+                other = _select(runs, av, shield, hv, shields_axis)
+                out.append({"hv": hv, "av": av, "shield": shield, "against": REFERENCE_AV,
+                            **_paired_entry(ref, other)})
+    return out
+
+
+def shield_differences(runs, av_kinds: Sequence[str], hv_kinds: Sequence[str],
+                       shields: Sequence[str]) -> list[dict]:
+    """For each AV and human, every shield setting minus ``off`` (when both ran), paired by
+    seed."""
+    if REFERENCE_SHIELD not in shields or len(shields) < 2:
+        return []
+    out = []
+    for av in av_kinds:
+        for hv in hv_kinds:
+            ref = _select(runs, av, REFERENCE_SHIELD, hv, True)
+            for shield in shields:
+                if shield != REFERENCE_SHIELD:
+                    other = _select(runs, av, shield, hv, True)
+                    out.append({"av": av, "hv": hv, "shield": shield,
+                                "against": REFERENCE_SHIELD, **_paired_entry(ref, other)})
     return out
 
 
 def summarize(runs, base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str],
-              seeds: int, timing: dict[tuple[str, str], float] | None = None) -> dict[str, Any]:
+              seeds: int, timing: dict[tuple[str, str, str], float] | None = None,
+              shields: Sequence[str] | None = None) -> dict[str, Any]:
     """The comparison's summary from its runs (the sweep's dataset)."""
+    axis = bool(shields)
+    settings = shield_settings(base, shields)
     rows = []
     for av in av_kinds:
-        for hv in hv_kinds:
-            mine = runs[(runs["av.kind"] == av) & (runs["hv.kind"] == hv)]
-            if len(mine):
-                rows.append(pair_row(mine, av, hv, (timing or {}).get((av, hv))))
+        for shield in settings:
+            for hv in hv_kinds:
+                mine = _select(runs, av, shield, hv, axis)
+                if len(mine):
+                    rows.append(pair_row(mine, av, hv, (timing or {}).get((av, shield, hv)),
+                                         shield))
     return {
         "study": "compare",
         "mode": base.mode,
@@ -268,8 +349,10 @@ def summarize(runs, base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[st
         "seed_range": [1, seeds],
         "av_kinds": list(av_kinds),
         "hv_kinds": list(hv_kinds),
+        "shields": list(settings),
         "rows": rows,
-        "paired": paired_differences(runs, av_kinds, hv_kinds),
+        "paired": paired_differences(runs, av_kinds, hv_kinds, settings, axis),
+        "paired_shield": shield_differences(runs, av_kinds, hv_kinds, settings) if axis else [],
         "config_hash": base.digest(),
         "config_toml": base.to_toml(),
         "version": __version__,
@@ -296,41 +379,81 @@ def _ci(ci: list, digits: int = 1) -> str:
     return f" [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]"
 
 
+def _diff_cells(p: dict[str, Any]) -> list[str]:
+    cells = []
+    for key, digits in (("av_first_pct", 1), ("collision_pct", 1), ("av_delay_s", 2),
+                        ("hv_delay_s", 2), ("min_distance_m", 2)):
+        d = p[key]
+        cells.append(("n/a" if d["mean"] is None else f"{d['mean']:+.{digits}f}")
+                     + _ci(d["ci"], digits))
+    return cells
+
+
 def to_markdown(summary: dict[str, Any]) -> str:
-    """The comparison as Markdown tables: one row per pair, then the paired differences."""
-    head = ["AV", "human", "runs", "AV first % [95 % CI]", "HV first %", "neither %",
-            "collisions", "runs with cc failed", "runs cleared AV / HV", "AV delay s [95 % CI]",
-            "HV delay s [95 % CI]", "min distance p05 m", "AV decision ms"]
+    """The comparison as Markdown tables: outcomes per row, safety and comfort per row, then
+    the paired differences."""
+    shields = summary.get("shields", ["off"])
+    show_shield = len(shields) > 1 or shields != ["off"]
+
+    def key(r):
+        return [r["av"]] + ([r.get("shield", "off")] if show_shield else []) + [r["hv"]]
+
+    name = ["AV"] + (["shield"] if show_shield else []) + ["human"]
+    head = name + ["runs", "AV first % [95 % CI]", "HV first %", "neither %",
+                   "collisions (by AV)", "runs with cc failed", "runs cleared AV / HV",
+                   "AV delay s [95 % CI]", "HV delay s [95 % CI]", "min distance p05 m",
+                   "AV decision ms"]
     lines = [f"**compare**, {summary['scenario']}, {summary['mode']} mode, "
              f"{summary['streams']} streams, seeds 1..{summary['seeds']}", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in summary["rows"]:
-        lines.append("| " + " | ".join([
-            r["av"], r["hv"], str(r["runs"]),
+        lines.append("| " + " | ".join(key(r) + [
+            str(r["runs"]),
             _fmt(r["av_first_pct"]) + _ci(r["av_first_pct_ci"]), _fmt(r["hv_first_pct"]),
-            _fmt(r["neither_pct"]), str(r["collisions"]), str(r["cc_fail_runs"]),
+            _fmt(r["neither_pct"]), f"{r['collisions']} ({r['collisions_caused_by_av']})",
+            str(r["cc_fail_runs"]),
             f"{r['runs'] - r['av_not_cleared']} / {r['runs'] - r['hv_not_cleared']}",
             _fmt(r["av_delay_s_mean"], 2) + _ci(r["av_delay_s_mean_ci"], 2),
             _fmt(r["hv_delay_s_mean"], 2) + _ci(r["hv_delay_s_mean_ci"], 2),
             _fmt(r["min_distance_m_p05"], 2), _fmt(r["av_decision_ms_median"], 3),
         ]) + " |")
     lines += ["", "Delays are means over the runs in which that vehicle cleared the conflict "
-              "before the run ended (\"runs cleared\"); n/a: it never did."]
+              "before the run ended (\"runs cleared\"); n/a: it never did. Collisions: runs "
+              "with a footprint overlap (in brackets, those caused by the AV: all but "
+              "rear-ends by the human in a shared lane)."]
+    head = name + ["shield interventions / run (runs)", "rear-ends by human",
+                   "min footprint gap p05 m", "min TTC p05 s", "PET p05 s",
+                   "AV strongest braking m/s^2 mean (max)", "AV RMS jerk m/s^3"]
+    lines += ["", "Safety and comfort (surrogate measures, docs/method.md §12.6; percentiles "
+              "over the runs where the measure is defined):", "",
+              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in summary["rows"]:
+        lines.append("| " + " | ".join(key(r) + [
+            f"{_fmt(r['shield_interventions_mean'], 2)} ({r['shield_intervention_runs']})",
+            str(r["rear_ends_by_human"]), _fmt(r["min_gap_m_p05"], 2),
+            _fmt(r["min_ttc_s_p05"], 2), _fmt(r["pet_s_p05"], 2),
+            f"{_fmt(r['av_max_brake_mps2_mean'], 2)} ({_fmt(r['av_max_brake_mps2_max'], 2)})",
+            _fmt(r["av_rms_jerk_mps3_mean"], 2),
+        ]) + " |")
+    diff_head = ["AV first % diff", "AV collision % diff", "AV delay s diff", "HV delay s diff",
+                 "min distance m diff"]
     if summary["paired"]:
-        head = ["human", "AV", "AV first % diff", "collision % diff", "AV delay s diff",
-                "HV delay s diff", "min distance m diff"]
+        head = ["human", "AV"] + (["shield"] if show_shield else []) + diff_head
         lines += ["", f"Paired differences against {REFERENCE_AV} (other minus "
                   f"{REFERENCE_AV}, same seeds, mean [95 % CI]; delays over the seeds where "
                   "that vehicle cleared in both runs):", "",
                   "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for p in summary["paired"]:
-            cells = [p["hv"], p["av"]]
-            for key, digits in (("av_first_pct", 1), ("collision_pct", 1), ("av_delay_s", 2),
-                                ("hv_delay_s", 2), ("min_distance_m", 2)):
-                d = p[key]
-                cells.append(("n/a" if d["mean"] is None else f"{d['mean']:+.{digits}f}")
-                             + _ci(d["ci"], digits))
-            lines.append("| " + " | ".join(cells) + " |")
+            cells = [p["hv"], p["av"]] + ([p.get("shield", "off")] if show_shield else [])
+            lines.append("| " + " | ".join(cells + _diff_cells(p)) + " |")
+    if summary.get("paired_shield"):
+        head = ["AV", "human", "shield"] + diff_head
+        lines += ["", f"Paired differences against the unshielded planner (shield minus "
+                  f"{REFERENCE_SHIELD}, same seeds, mean [95 % CI]):", "",
+                  "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for p in summary["paired_shield"]:
+            lines.append("| " + " | ".join([p["av"], p["hv"], p["shield"]] + _diff_cells(p))
+                         + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -10,7 +10,6 @@
   with a bounded number of chunks in flight.
 - :mod:`~persuasive.sweep.metrics`: :func:`metric_grid`, a metric over one or two axes with
   95 % intervals (drawn by :func:`persuasive.plots.sweep.sweep_figure`).
-- :mod:`~persuasive.sweep.bench`: :func:`bench_sweep`, the sweep against the process pool.
 
 From Python::
 
@@ -20,16 +19,16 @@ From Python::
     summary = sweep.run(grid, "results/my-sweep", workers=2)   # or scheduler="tcp://..."
     frame = sweep.load("results/my-sweep")                     # one row per run
 
-This package does not import matplotlib, and imports Dask only when a sweep runs.
+This package does not import matplotlib, and imports Dask only when a sweep runs. The sweep
+against the process pool of ``reproduce`` (``persuasive bench --sweep``) is
+:func:`persuasive.bench_sweep.bench_sweep`, above both.
 """
 
-from .bench import bench_sweep
 from .grid import Grid
 from .metrics import METRICS, MetricGrid, metric_grid
 from .records import flatten, unflatten
 from .runner import SweepSummary, run
 from .store import load, load_failures, read_manifest, summary_columns
 
-__all__ = ["METRICS", "Grid", "MetricGrid", "SweepSummary", "bench_sweep", "flatten", "load",
-           "load_failures", "metric_grid", "read_manifest", "run", "summary_columns",
-           "unflatten"]
+__all__ = ["METRICS", "Grid", "MetricGrid", "SweepSummary", "flatten", "load", "load_failures",
+           "metric_grid", "read_manifest", "run", "summary_columns", "unflatten"]

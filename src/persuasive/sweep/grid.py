@@ -31,8 +31,10 @@ slowest, the seeds fastest. Run ``r`` is the combination ``r // n_seeds`` (row-m
 axes) with seed ``start + r % n_seeds``.
 
 The whole grid is validated when it is built: every combination of axis values must give a
-valid :class:`Config`. Every problem raises :class:`ConfigError` with a one-line message that
-names the key.
+valid :class:`Config` (at most :data:`MAX_COMBINATIONS` of them), and the seeds lie in
+``[0, 2^32 - 1]``. Every problem raises :class:`ConfigError` with a one-line message that
+names the key. Nothing holds a list of the runs: :meth:`Grid.run` and :meth:`Grid.runs` compute
+them from their index, so a grid of billions of runs costs no more memory than a small one.
 """
 
 from __future__ import annotations
@@ -53,6 +55,11 @@ CASE = "case"
 RESERVED_COLUMNS = ("run", "seed", "config_hash")
 #: Largest seed :func:`persuasive.simulation.simulate` accepts.
 SEED_MAX = 2**32 - 1
+#: Most combinations of the axes a grid may have: each is built and validated before
+#: anything runs (about 0.1 ms each).
+MAX_COMBINATIONS = 100_000
+#: Combinations whose configurations a grid keeps built (the latest built ones).
+_CONFIG_CACHE = 256
 
 _SCALARS = (bool, int, float, str)
 _TYPE_NAMES = {bool: "boolean", int: "integer", float: "number", str: "string"}
@@ -142,6 +149,13 @@ class Grid:
             tuple(axes)
         self.seed_start = seed_start
         self.seed_stop = seed_stop
+        for name, value in (("seeds.start", seed_start), ("seeds.stop", seed_stop)):
+            if not _is_int(value) or not 0 <= value <= SEED_MAX:
+                raise ConfigError(f"grid: {name} = {value!r} is out of range; allowed: "
+                                  f"integer in [0, {SEED_MAX}]")
+        if seed_stop < seed_start:
+            raise ConfigError(f"grid: seeds.stop = {seed_stop} is out of range; allowed: >= "
+                              f"seeds.start = {seed_start} (both inclusive)")
         self._configs: dict[int, tuple[Config, str]] = {}
         self._digest: str | None = None
         if _validate:
@@ -150,9 +164,26 @@ class Grid:
     # -- building ------------------------------------------------------------------------------
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> Grid:
-        """Read a grid file; a file that cannot be read or parsed is a one-line error."""
+    def from_toml(cls, path: str | Path, base_overrides: Mapping[str, Any] | None = None
+                  ) -> Grid:
+        """Read a grid file; a file that cannot be read or parsed is a one-line error.
+
+        ``base_overrides``: dotted fields set in ``[base]`` on top of the file (a command's
+        explicit options, e.g. ``persuasive sweep --shield``), refused for a field the grid
+        varies."""
         data = read_toml(path, "grid file")
+        if base_overrides:
+            data = dict(data)
+            base = Config.from_dict(data.get("base", {})) if isinstance(
+                data.get("base", {}), Mapping) else None
+            if base is not None:
+                axes = dict(_flat_axes(data.get("axes", {}))) if isinstance(
+                    data.get("axes", {}), Mapping) else {}
+                for name in base_overrides:
+                    if name in axes:
+                        raise ConfigError(f"grid: {name} is an axis of {str(path)!r}; an option "
+                                          "cannot set it too")
+                data["base"] = base.with_overrides(dict(base_overrides)).to_dict()
         return cls.from_dict(data)
 
     @classmethod
@@ -228,7 +259,13 @@ class Grid:
 
     def validate(self) -> None:
         """Build every combination's configuration; :class:`ConfigError` names the first bad
-        one. Called when the grid is built."""
+        one, or says that there are more than :data:`MAX_COMBINATIONS`. Called when the grid
+        is built."""
+        if self.n_combinations > MAX_COMBINATIONS:
+            sizes = " x ".join(str(len(values)) for _, values in self.axes)
+            raise ConfigError(f"grid: the axes give {self.n_combinations} combinations "
+                              f"({sizes}); allowed: at most {MAX_COMBINATIONS}, each is "
+                              "validated before anything runs")
         names = self.names
         for i in range(self.n_combinations):
             try:
@@ -282,6 +319,8 @@ class Grid:
             if self.cases:
                 overrides = {**self.cases[overrides.pop(CASE)], **overrides}
             config = self.base.with_overrides(overrides)
+            if len(self._configs) >= _CONFIG_CACHE:  # bounded: drop the oldest
+                del self._configs[next(iter(self._configs))]
             cached = self._configs[index] = (config, config.digest())
         return cached
 
@@ -368,4 +407,4 @@ class Grid:
         self._digest = None
 
 
-__all__ = ["GRID_KEYS", "Grid", "RESERVED_COLUMNS", "SEED_MAX"]
+__all__ = ["GRID_KEYS", "Grid", "MAX_COMBINATIONS", "RESERVED_COLUMNS", "SEED_MAX"]

@@ -1,11 +1,12 @@
 """Running a sweep on Dask: a local cluster of worker processes, or any Dask scheduler.
 
-The client (this process) validates the grid, opens the folder (:class:`SweepStore`), then
-keeps a bounded number of chunks in flight (twice the cluster's threads): each finished chunk
-comes back as the bytes of its Parquet part plus its failure records, is written at once and
-dropped, and the next chunk is submitted (``distributed.as_completed``). The client never
-holds more than those few chunks, whatever the number of runs, and the workers need no shared
-file system: only the client writes.
+The client (this process) validates the grid, checks the folder (:class:`SweepStore`), starts
+or reaches the cluster, and only then writes into the folder (a sweep that cannot start leaves
+nothing behind). It keeps a bounded number of chunks in flight (twice the cluster's threads):
+each finished chunk comes back as the bytes of its Parquet part plus its failure records, is
+written at once and dropped, and the next chunk is submitted (``distributed.as_completed``).
+The client never holds more than those few chunks, whatever the number of runs, and the
+workers need no shared file system: only the client writes.
 
 By default a :class:`distributed.LocalCluster` is started with ``workers`` processes of one
 thread each (the compiled kernels hold the GIL, so threads would not run in parallel), on
@@ -31,7 +32,7 @@ from typing import Any, Callable, Iterator
 from ..config import ConfigError
 from .grid import Grid
 from .records import _error_line, failure_record, run_pickled_chunk
-from .store import Chunk, SweepStore, iter_failures
+from .store import Chunk, SweepStore, iter_failures, n_chunks
 
 #: Chunks in flight per worker thread: one running, one queued, so no worker waits on the
 #: client between chunks.
@@ -118,7 +119,7 @@ def start_method() -> str:
 def _warm_up(grid: Grid) -> None:
     """Load the compiled kernels here (compiling them once if they are not cached) so that
     forked workers inherit them, and so that workers never compile at the same time."""
-    from ..experiments import warm_up
+    from .._compile import warm_up
     from ..simulation import simulate
 
     warm_up()
@@ -169,7 +170,7 @@ def _threads(client: Any) -> int:
     return sum(client.nthreads().values())
 
 
-def _execute(client: Any, grid: Grid, store: SweepStore, pending: list[Chunk],
+def _execute(client: Any, grid: Grid, store: SweepStore, pending: Iterator[Chunk],
              progress: Callable[[int, int], None] | None, done: int) -> None:
     """Run ``pending`` on ``client``, writing each chunk as it finishes."""
     import pickle
@@ -217,7 +218,8 @@ def _execute(client: Any, grid: Grid, store: SweepStore, pending: list[Chunk],
 def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
         scheduler: str | None = None, client: Any = None, chunk: int | None = None,
         force: bool = False,
-        progress: Callable[[int, int], None] | None = None) -> SweepSummary:
+        progress: Callable[[int, int], None] | None = None,
+        what: str = "sweep folder") -> SweepSummary:
     """Run every run of ``grid`` not yet in the sweep folder ``out``; see the module docstring.
 
     Parameters
@@ -241,6 +243,8 @@ def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
         Replace a folder holding another sweep (or other files) instead of refusing.
     progress : callable, optional
         ``progress(done_runs, total_runs)``, called once at the start and after every chunk.
+    what : str
+        How the caller names the folder in its messages (``"comparison folder"``, ...).
 
     Returns
     -------
@@ -264,28 +268,28 @@ def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
     if len(given) > 1:
         raise ConfigError(f"{' and '.join(given)} exclude each other: workers sizes the local "
                           "cluster, scheduler or client name another one")
-    store = SweepStore.open(out, grid, chunk, force)
-    pending = store.pending()
-    todo = sum(c.size for c in pending)
+    store = SweepStore.open(out, grid, chunk, force, what)  # checks only, writes nothing
+    todo, pending = store.pending()
     done = len(grid) - todo
     if progress is not None:
         progress(done, len(grid))
     threads = 0
-    if pending:
+    if todo:
         with _quiet_logs():
             if client is not None:
                 context = contextlib.nullcontext(client)
             elif scheduler is not None:
                 context = remote_client(scheduler)
             else:
-                n = min(workers or os.cpu_count() or 1, len(pending))
+                n = min(workers or os.cpu_count() or 1, n_chunks(todo, store.chunk))
                 _warm_up(grid)
                 context = local_client(n)
-            with context as active:
+            with context as active:  # connected: only now is anything written
+                store.start()
                 threads = _threads(active)
                 _execute(active, grid, store, pending, progress, done)
     return SweepSummary(folder=store.folder, grid_digest=grid.digest, runs=len(grid),
-                        chunks=len(store.chunks), chunk=store.chunk, skipped=done, ran=todo,
+                        chunks=store.n_chunks, chunk=store.chunk, skipped=done, ran=todo,
                         failures=tuple(iter_failures(store.folder)), workers=threads,
                         wall_time_s=time.perf_counter() - t0)
 

@@ -7,9 +7,13 @@ Layout of ``DIR``::
     DIR/failed/failed-<k>-<hash>.json      the runs of chunk k that raised (if any)
 
 ``<k>`` is the chunk's index (zero-padded, so that names sort in run order) and ``<hash>`` a
-hash of the grid's digest and the chunk's run range: the chunk id. ``DIR/runs`` holds only the
-parts, so ``pandas.read_parquet(DIR / "runs")`` reads the dataset; :func:`load` does the same
-in run order and tolerates parts whose columns differ.
+hash of the grid's digest and the chunk's run range: the chunk id (:func:`chunk_id`).
+``DIR/runs`` holds only the parts, so ``pandas.read_parquet(DIR / "runs")`` reads the dataset;
+:func:`load` does the same in run order and tolerates parts whose columns differ.
+
+The chunks are planned lazily: chunk ``k`` is computed from its index when it is needed, and
+the manifest holds their size and number, not a list, so a sweep of billions of runs takes no
+more memory or manifest than a small one.
 
 Every file is written through a temporary sibling, fsynced and renamed
 (:func:`persuasive._files.atomic_write`), the manifest first. A chunk is finished when its
@@ -23,15 +27,22 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, NamedTuple
 
-from .. import __version__
+from .._version import __version__
 from .._files import OutputError, atomic_write, check_output_folder
 from ..config import ConfigError
 from .grid import Grid
+
+#: Names of the manifest's temporary files (:func:`persuasive._files.atomic_write`).
+_MANIFEST_TMP = re.compile(r"\.manifest\..*\.tmp\.json")
+#: What a study calls its sweep, by the name of its folder (for messages).
+_KINDS = {"sweep folder": "sweep", "comparison folder": "comparison",
+          "results folder": "reproduction"}
 
 #: Format tag of ``manifest.json``.
 FORMAT = "persuasive-sweep-1"
@@ -57,12 +68,33 @@ def default_chunk(n_runs: int) -> int:
     return max(1, min(250, -(-n_runs // 32)))
 
 
+def n_chunks(n_runs: int, chunk: int) -> int:
+    """The number of chunks of ``chunk`` consecutive runs (the last may be short)."""
+    return -(-n_runs // chunk)
+
+
+def _id_width(count: int) -> int:
+    return max(6, len(str(count - 1)))
+
+
+def chunk_id(digest: str, k: int, lo: int, hi: int, count: int) -> str:
+    """``<k>-<hash>`` of chunk ``k`` of ``count`` (runs ``lo .. hi - 1``): its index and a hash
+    of the grid and its run range."""
+    return (f"{k:0{_id_width(count)}d}-"
+            + hashlib.sha256(f"{digest}:{lo}:{hi}".encode()).hexdigest()[:10])
+
+
 def chunk_ids(digest: str, ranges: list[tuple[int, int]]) -> list[str]:
-    """``<k>-<hash>`` of each chunk: its index and a hash of the grid and its run range."""
-    width = max(6, len(str(len(ranges) - 1)))
-    return [f"{k:0{width}d}-"
-            + hashlib.sha256(f"{digest}:{lo}:{hi}".encode()).hexdigest()[:10]
-            for k, (lo, hi) in enumerate(ranges)]
+    """:func:`chunk_id` of each chunk of ``ranges``."""
+    return [chunk_id(digest, k, lo, hi, len(ranges)) for k, (lo, hi) in enumerate(ranges)]
+
+
+class Pending(NamedTuple):
+    """What is left of a sweep: the number of runs, and their chunks in order (an iterator,
+    planned as it is consumed)."""
+
+    runs: int
+    chunks: Iterator[Chunk]
 
 
 @dataclass(frozen=True)
@@ -123,14 +155,23 @@ def read_manifest(folder: str | Path) -> dict[str, Any]:
 class SweepStore:
     """The files of one sweep in its folder (see the module docstring)."""
 
-    def __init__(self, folder: Path, grid: Grid, chunk: int, manifest: dict[str, Any]):
+    def __init__(self, folder: Path, grid: Grid, chunk: int, manifest: dict[str, Any],
+                 what: str = "sweep folder", new: bool = False, replace: bool = False):
         self.folder = folder
         self.grid = grid
         self.chunk = chunk
         self.manifest = manifest
-        ranges = chunk_ranges(len(grid), chunk)
-        self.chunks = [Chunk(k, cid, lo, hi)
-                       for k, (cid, (lo, hi)) in enumerate(zip(manifest["chunk_ids"], ranges))]
+        self.what = what  #: how the command names the folder, for messages
+        self.n_runs = len(grid)
+        self.n_chunks = n_chunks(self.n_runs, chunk)
+        self._new = new  # the manifest is still to be written
+        self._replace = replace  # another sweep's files are still to be cleared
+
+    def chunk_at(self, k: int) -> Chunk:
+        """Chunk ``k`` of the sweep."""
+        lo = k * self.chunk
+        hi = min(lo + self.chunk, self.n_runs)
+        return Chunk(k, chunk_id(self.grid.digest, k, lo, hi, self.n_chunks), lo, hi)
 
     @property
     def runs_dir(self) -> Path:
@@ -142,7 +183,6 @@ class SweepStore:
 
     @staticmethod
     def manifest_for(grid: Grid, chunk: int) -> dict[str, Any]:
-        ranges = chunk_ranges(len(grid), chunk)
         return {
             "format": FORMAT,
             "version": __version__,
@@ -152,31 +192,31 @@ class SweepStore:
             "seeds": [grid.seed_start, grid.seed_stop],
             "runs": len(grid),
             "chunk": chunk,
-            "chunks": len(ranges),
-            "chunk_ids": chunk_ids(grid.digest, ranges),
+            "chunks": n_chunks(len(grid), chunk),
         }
 
     @classmethod
     def open(cls, folder: str | Path, grid: Grid, chunk: int | None = None,
-             force: bool = False) -> SweepStore:
-        """Start or resume the sweep of ``grid`` in ``folder``; nothing runs here.
+             force: bool = False, what: str = "sweep folder") -> SweepStore:
+        """The sweep of ``grid`` in ``folder``, new or resumed; checks only, nothing is
+        written here (:meth:`start` does, once the work can start).
 
         A folder holding the same sweep (same grid, package version and chunk size) is
         resumed; ``chunk=None`` then takes the folder's chunk size. A folder holding another
-        sweep, or other files, is refused with :class:`OutputError` unless ``force``, which
-        removes its manifest, parts and failure files first.
+        sweep, or other files, is refused with :class:`OutputError` unless ``force``: then
+        :meth:`start` removes its manifest, parts and failure files first. ``what`` names the
+        folder in messages (``"comparison folder"``, ...).
         """
-        folder = check_output_folder(Path(folder), "sweep folder")
+        folder = check_output_folder(Path(folder), what)
         old = None
-        if folder.is_dir():  # a manifest being written when a process was killed
-            for tmp in folder.glob(".manifest.*.tmp.json"):
-                tmp.unlink(missing_ok=True)
-        if folder.is_dir() and any(folder.iterdir()):
+        replace = False
+        # a manifest being written when a process was killed does not count
+        if folder.is_dir() and any(not _MANIFEST_TMP.fullmatch(p.name) for p in folder.iterdir()):
             try:
                 old = read_manifest(folder)
             except ConfigError:
                 if not force:
-                    raise OutputError(f"sweep folder {str(folder)!r} holds other files; choose "
+                    raise OutputError(f"{what} {str(folder)!r} holds other files; choose "
                                       "another --out or pass --force to write into it") \
                         from None
             if old is not None:
@@ -184,55 +224,94 @@ class SweepStore:
                         and old.get("version") == __version__
                         and (chunk is None or old.get("chunk") == chunk))
                 if same:
-                    return cls(folder, grid, old["chunk"], old)
+                    return cls(folder, grid, old["chunk"], old, what)
                 if not force:
-                    raise OutputError(cls._difference(folder, old, grid, chunk))
-            cls._clear(folder)
+                    raise OutputError(cls._difference(folder, old, grid, chunk, what))
+            replace = True
         chunk = default_chunk(len(grid)) if chunk is None else chunk
-        manifest = cls.manifest_for(grid, chunk)
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise OutputError(f"sweep folder {str(folder)!r} cannot be written: "
-                              f"{(exc.strerror or str(exc)).lower()}") from None
-        _write_bytes(folder / MANIFEST, _dump(manifest))
-        return cls(folder, grid, chunk, manifest)
+        return cls(folder, grid, chunk, cls.manifest_for(grid, chunk), what, new=True,
+                   replace=replace)
+
+    def start(self) -> None:
+        """Make the folder ready for the runs: clear what :meth:`open` found to replace,
+        write the manifest of a new sweep, make ``runs/`` and ``failed/``, remove the
+        temporary files a killed process left."""
+        folder = self.folder
+        if folder.is_dir():
+            for tmp in folder.iterdir():
+                if _MANIFEST_TMP.fullmatch(tmp.name):
+                    tmp.unlink(missing_ok=True)
+        if self._replace:
+            self._clear(folder, self.what)
+            self._replace = False
+        if self._new:
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise OutputError(f"{self.what} {str(folder)!r} cannot be written: "
+                                  f"{(exc.strerror or str(exc)).lower()}") from None
+            _write_bytes(folder / MANIFEST, _dump(self.manifest))
+            self._new = False
+        for d in (self.runs_dir, self.failed_dir):
+            d.mkdir(exist_ok=True)
+            _remove_temporaries(d)
 
     @staticmethod
-    def _difference(folder: Path, old: dict[str, Any], grid: Grid, chunk: int | None) -> str:
-        where = f"sweep folder {str(folder)!r} holds"
+    def _difference(folder: Path, old: dict[str, Any], grid: Grid, chunk: int | None,
+                    what: str) -> str:
+        where = f"{what} {str(folder)!r} holds"
+        kind = _KINDS.get(what, "sweep")
         tail = "; choose another --out or pass --force to replace it"
         if old.get("grid_digest") != grid.digest:
-            return (f"{where} another sweep (grid {old.get('grid_digest')}, {old.get('runs')} "
+            return (f"{where} another {kind} (grid {old.get('grid_digest')}, {old.get('runs')} "
                     f"runs; this grid is {grid.digest}, {len(grid)} runs){tail}")
         if old.get("version") != __version__:
-            return (f"{where} this sweep made with persuasive {old.get('version')} (this is "
+            return (f"{where} this {kind} made with persuasive {old.get('version')} (this is "
                     f"{__version__}){tail}")
-        return (f"{where} this sweep in chunks of {old.get('chunk')} runs (--chunk {chunk} "
+        return (f"{where} this {kind} in chunks of {old.get('chunk')} runs (--chunk {chunk} "
                 f"asked; leave --chunk out to resume){tail}")
 
     @staticmethod
-    def _clear(folder: Path) -> None:
+    def _clear(folder: Path, what: str = "sweep folder") -> None:
         try:
             (folder / MANIFEST).unlink(missing_ok=True)
             for name in (RUNS, FAILED):
                 if (folder / name).is_dir():
                     shutil.rmtree(folder / name)
         except OSError as exc:
-            raise OutputError(f"sweep folder {str(folder)!r} cannot be cleared: "
+            raise OutputError(f"{what} {str(folder)!r} cannot be cleared: "
                               f"{(exc.strerror or str(exc)).lower()}") from None
 
     # -- progress of the sweep -----------------------------------------------------------------
 
-    def pending(self) -> list[Chunk]:
-        """Chunks to run: no part yet, or a failure file (retried). Cleans temporaries."""
-        for d in (self.runs_dir, self.failed_dir):
-            d.mkdir(exist_ok=True)
-            _remove_temporaries(d)
-        parts = {p.name for p in self.runs_dir.iterdir()}
-        failed = {p.name for p in self.failed_dir.iterdir()}
-        return [c for c in self.chunks
-                if c.part_name not in parts or c.failed_name in failed]
+    def _indices(self, folder: Path, prefix: str, suffix: str) -> set[int]:
+        """The chunks of this sweep that have a file ``<prefix><chunk id><suffix>`` in
+        ``folder`` (other names are not its chunks' and are ignored)."""
+        found: set[int] = set()
+        if not folder.is_dir():
+            return found
+        for path in folder.iterdir():
+            name = path.name
+            if not (name.startswith(prefix) and name.endswith(suffix)):
+                continue
+            cid = name[len(prefix):len(name) - len(suffix)]
+            head = cid.partition("-")[0]
+            if head.isdigit() and int(head) < self.n_chunks and \
+                    self.chunk_at(int(head)).id == cid:
+                found.add(int(head))
+        return found
+
+    def pending(self) -> Pending:
+        """What is left to run: chunks with no part yet, or with a failure file (retried).
+        Reads the folder, writes nothing. Memory and time grow with the files in the folder,
+        not with the chunks of the grid."""
+        finished: set[int] = set()
+        if not self._replace:
+            finished = self._indices(self.runs_dir, "part-", ".parquet") - \
+                self._indices(self.failed_dir, "failed-", ".json")
+        done = sum(self.chunk_at(k).size for k in finished)
+        return Pending(self.n_runs - done, (self.chunk_at(k) for k in range(self.n_chunks)
+                                            if k not in finished))
 
     def record(self, chunk: Chunk, part: bytes | None, failures: list[dict[str, Any]]) -> None:
         """Write a finished chunk: failure file first, then the part; a clean retry removes
@@ -308,6 +387,6 @@ def summary_columns(folder: str | Path) -> list[str]:
     return out
 
 
-__all__ = ["Chunk", "FAILED", "FORMAT", "MANIFEST", "RUNS", "SweepStore", "chunk_ids",
-           "chunk_ranges", "default_chunk", "iter_failures", "load", "load_failures", "part_paths",
-           "read_manifest", "summary_columns"]
+__all__ = ["Chunk", "FAILED", "FORMAT", "MANIFEST", "Pending", "RUNS", "SweepStore", "chunk_id",
+           "chunk_ids", "chunk_ranges", "default_chunk", "iter_failures", "load", "load_failures",
+           "n_chunks", "part_paths", "read_manifest", "summary_columns"]

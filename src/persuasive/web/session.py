@@ -206,7 +206,7 @@ class Trial:
     def save(self, complete: bool) -> dict[str, Any]:
         """Write the trial (``-partial`` when not ``complete``); returns its summary entry.
         Nothing is written for a trial that took no step. Runs in a worker thread."""
-        from ..simulation import ARRIVAL_LABELS, OUTCOME_FIELDS
+        from ..record import ARRIVAL_LABELS, OUTCOME_FIELDS
 
         entry: dict[str, Any] = {
             "index": self.index, "condition": self.condition.name,
@@ -593,7 +593,7 @@ class Session:
 
 
 def _version() -> str:
-    from .. import __version__
+    from .._version import __version__
 
     return __version__
 

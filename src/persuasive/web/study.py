@@ -116,13 +116,25 @@ class Study:
         """The same study with another base seed (``persuasive drive --seed``)."""
         from dataclasses import replace
 
-        from ..simulation import check_seed
+        from ..record import check_seed
 
         check_seed(seed)
         check_seed(seed + len(self.conditions))
         practice = replace(self.practice, seed=seed) if self.practice else None
         conditions = tuple(replace(c, seed=seed + 1 + j) for j, c in enumerate(self.conditions))
         return replace(self, seed=seed, practice=practice, conditions=conditions)
+
+    def with_shield(self, shield: str) -> Study:
+        """The same study with the AV's safety shield set in every condition and in the
+        practice trial (``persuasive drive --shield``; docs/method.md §12)."""
+        from dataclasses import replace
+
+        def shielded(c: Condition) -> Condition:
+            return replace(c, overrides={**c.overrides, "av.shield": shield},
+                           config=c.config.with_overrides({"av.shield": shield}))
+
+        return replace(self, practice=shielded(self.practice) if self.practice else None,
+                       conditions=tuple(shielded(c) for c in self.conditions))
 
 
 # -- counterbalancing ----------------------------------------------------------------------------
@@ -191,7 +203,7 @@ def flatten(table: Any, where: str, prefix: str = "") -> dict[str, Any]:
 
 
 def _condition_config(base: dict[str, Any], overrides: dict[str, Any], where: str) -> Config:
-    from ..simulation import static_setup
+    from ..record import static_setup
 
     merged = {**base, **overrides}
     if merged.get("hv.kind", "lfg") == "replay":

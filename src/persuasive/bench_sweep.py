@@ -23,8 +23,8 @@ import threading
 import time
 from typing import Any
 
-from .grid import Grid
-from .records import flatten
+from .sweep.grid import Grid
+from .sweep.records import flatten
 
 #: Outcome columns compared between the two paths.
 _COMPARED = ("seed", "first_at_line", "first_at_conflict_point", "collision",
@@ -35,8 +35,8 @@ _COMPARED = ("seed", "first_at_line", "first_at_conflict_point", "collision",
 def table1_grid(seeds: int) -> Grid:
     """Table 1's rows as a grid: the first row's configuration as the base, and one axis per
     field in which the rows differ (the HV's initial role)."""
-    from ..config import Config
-    from ..experiments import PUBLISHED
+    from .config import Config
+    from .experiments import PUBLISHED
 
     configs = [row.config(Config()) for row in PUBLISHED["table1"]]
     flats = [flatten(c.to_dict()) for c in configs]
@@ -91,9 +91,10 @@ def bench_sweep(sizes: tuple[int, ...] = (2000, 8000), workers: int = 2,
     ``same_results`` (the two paths' outcomes agree run by run); and ``ratio``, the
     throughput ratio at the largest size.
     """
-    from ..experiments import run_tables, warm_up
-    from .runner import run
-    from .store import load
+    from ._compile import warm_up
+    from .experiments import run_tables
+    from .sweep.runner import run
+    from .sweep.store import load
 
     if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
         raise ValueError(f"repeats = {repeats!r} must be an integer >= 1")

@@ -1,0 +1,367 @@
+"""The planner against many outside vehicles: one adapter for every outside simulator
+(docs/method.md §12.7).
+
+An outside simulator (highway-env, Eclipse SUMO, a vehicle stack) has many vehicles that the
+planner's two-vehicle method never modelled. The simulator's own adapter projects each one
+onto its conflict with the ego's path and hands this module a list of :class:`Conflict`:
+both vehicles' positions relative to the conflict (negative before it), the other's speed
+and limits, and the occupancy intervals of the conflict (where each footprint can touch the
+other's path: outside them no overlap is possible). This module does the rest, the same way
+for every simulator (:class:`ExternalPlanner`):
+
+- **one planner per conflicting vehicle**, kept while the vehicle conflicts (each holds its
+  own belief about that driver's role and its stored prediction of it; a single planner
+  switching between vehicles would mix them up), planning against that vehicle while neither
+  has cleared the conflict;
+- **the most cautious answer**: the lowest of their accelerations, and an IDM gap to a vehicle
+  ahead in the ego's own lane (``config.hv.idm``, the ego's ``v_max`` as desired speed);
+  without a conflict, full throttle up to ``v_max``;
+- **the shield over all of them** (``persuasion.safety.shield.shield_step_many``): the
+  acceleration is admitted only if one fallback (brake or go) stays certified against every
+  conflicting vehicle and every vehicle ahead in the lane at once, otherwise that fallback is
+  applied. A vehicle ahead in the lane is a *follow* conflict: the ego is already in the
+  shared lane, so only a leader matters, and the ego keeps the gap of a follower that brakes
+  after the step.
+
+Coordinates of a conflict: the ego's ``s`` along its path and the other's along its own, both
+zero at the conflict point; for a shared lane (a merge, or a leader), past zero both measure
+the same lane, so their difference is the gap between the centres.
+
+For simulators that give each vehicle's route as a centre line (SUMO's lane shapes),
+:func:`route_conflict` builds the conflict of two routes once (kind, conflict point,
+conservative occupancy intervals; :class:`Polyline`, :class:`RouteConflict`), and
+:meth:`RouteConflict.conflict` turns the two vehicles' arc lengths into a :class:`Conflict`
+each step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Hashable, Sequence
+
+import numpy as np
+
+from ..config import Config
+from ..packing import SHIELD_KIND_IDS
+from ..safety import shield as sh
+
+#: Kinds of conflict: the paths cross once; the other joins the ego's lane (a merge); the
+#: other is ahead in the ego's lane (follow).
+CROSSING, MERGE, FOLLOW = "crossing", "merge", "follow"
+
+
+@dataclass(frozen=True)
+class Limits:
+    """A vehicle's size and actuation limits."""
+
+    length_m: float
+    width_m: float
+    u_min_mps2: float
+    u_max_mps2: float
+    v_min_mps: float
+    v_max_mps: float
+
+    @classmethod
+    def of(cls, config: Config, who: str) -> Limits:
+        v = config.vehicle_of(who)
+        return cls(v.length_m, v.width_m, v.u_min_mps2, v.u_max_mps2, v.v_min_mps, v.v_max_mps)
+
+
+@dataclass(frozen=True)
+class Conflict:
+    """One outside vehicle on its conflict with the ego's path (module docstring)."""
+
+    key: Hashable  #: the vehicle's identity in the simulator
+    kind: str  #: :data:`CROSSING`, :data:`MERGE` or :data:`FOLLOW`
+    ego_s_m: float  #: the ego's position relative to the conflict point, along its path [m]
+    other_s_m: float  #: the other's, along its own path [m]
+    other_v_mps: float  #: the other's speed [m/s]
+    #: where the ego's footprint can touch the other's path [m] (a merge: up to the merge
+    #: point, 0; follow: unused)
+    ego_occupancy: tuple[float, float] = (-math.inf, math.inf)
+    #: where the other's footprint can touch the ego's path [m] (a merge: its side zone)
+    other_occupancy: tuple[float, float] = (-math.inf, math.inf)
+    other: Limits | None = None  #: its limits (default: the configuration's human vehicle)
+    extra: dict = field(default_factory=dict, compare=False)  #: the adapter's own data
+
+
+def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The shield's inputs for several conflicts: ``(s_R, s_H, v_H, C)`` with ``C`` of shape
+    ``(n, N_CONFLICT)`` (``persuasive.safety.shield.conflict_vector``'s layout)."""
+    human = Limits.of(config, "hv")
+    # the slots every conflict shares: the shield's kind and the ego's limits
+    base = [0.0] * sh.N_CONFLICT
+    base[sh.C_KIND] = SHIELD_KIND_IDS[config.shield]
+    base[sh.C_RHO] = config.av.shield_response_s
+    base[sh.C_R_UMIN], base[sh.C_R_UMAX] = ego.u_min_mps2, ego.u_max_mps2
+    base[sh.C_R_VMIN], base[sh.C_R_VMAX] = ego.v_min_mps, ego.v_max_mps
+    s_R, s_H, v_H, rows = [], [], [], []
+    for c in conflicts:
+        o = c.other if c.other is not None else human
+        s_R.append(c.ego_s_m)
+        s_H.append(c.other_s_m)
+        v_H.append(min(max(c.other_v_mps, o.v_min_mps), o.v_max_mps))
+        row = base[:]
+        if c.kind == FOLLOW:  # the ego is in the lane already: only a leader matters
+            row[sh.C_R_LO] = row[sh.C_R_HI] = -math.inf
+            row[sh.C_H_LO] = row[sh.C_H_HI] = -math.inf
+        else:
+            row[sh.C_R_LO], row[sh.C_R_HI] = c.ego_occupancy
+            row[sh.C_H_LO], row[sh.C_H_HI] = c.other_occupancy
+        row[sh.C_SHARED] = 0.0 if c.kind == CROSSING else 1.0
+        row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m)
+        row[sh.C_H_UMIN], row[sh.C_H_UMAX] = o.u_min_mps2, o.u_max_mps2
+        row[sh.C_H_VMIN], row[sh.C_H_VMAX] = o.v_min_mps, o.v_max_mps
+        rows.append(row)
+    C = np.array(rows, float).reshape(len(rows), sh.N_CONFLICT)
+    return (np.array(s_R, float), np.array(s_H, float), np.array(v_H, float), C)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One decision of :class:`ExternalPlanner`."""
+
+    accel_mps2: float  #: to apply [m/s^2]
+    proposed_mps2: float  #: before the shield [m/s^2]
+    verdict: str | None  #: the shield's (None when off)
+    targets: int  #: vehicles planned against
+    conflicts: int  #: vehicles the shield checked
+
+
+class ExternalPlanner:
+    """The ego's planner against many outside vehicles (module docstring).
+
+    ``config``: the planner's configuration (its AV kind, shield and the vehicles' limits);
+    ``seed``: the base seed of the per-vehicle planners (vehicle ``i`` met gets ``seed *
+    1000 + i``, as the lfg kind draws). ``plan_horizon_s`` (optional): a vehicle gets a game
+    only while it could reach its occupancy interval within this time at full throttle (the
+    planner's prediction horizon, ``library.n_samples * library.sample_dt_s``, is the natural
+    value: a vehicle further away cannot be told from no vehicle by the game); the shield
+    still checks every vehicle. ``None`` (the default): every conflicting vehicle gets one.
+    """
+
+    def __init__(self, config: Config, seed: int = 0, plan_horizon_s: float | None = None):
+        self.config = config
+        self.seed = seed
+        self.plan_horizon_s = plan_horizon_s
+        self.ego = Limits.of(config, "av")
+        self._human = Limits.of(config, "hv")
+        self._planners: dict[Hashable, Any] = {}
+        self._made = 0
+        # the per-vehicle planners do not shield: the shield runs once, over all vehicles
+        self._planner_config = config.with_overrides({"av.shield": "off"})
+        from ..record import static_setup
+
+        self._clear_m = float(static_setup(config)[0].hv.clear_s)
+
+    def planner_for(self, key: Hashable):
+        """The planner kept for vehicle ``key`` (made when first needed)."""
+        planner = self._planners.get(key)
+        if planner is None:
+            from ..planner import Planner
+
+            planner = self._planners[key] = Planner(self._planner_config,
+                                                    seed=self.seed * 1000 + self._made)
+            self._made += 1
+        return planner
+
+    def act(self, ego_v_mps: float, conflicts: Sequence[Conflict], dt_s: float,
+            shield_lead_m: float = 0.0) -> Decision:
+        """The ego's acceleration at speed ``ego_v_mps`` among ``conflicts``.
+
+        ``shield_lead_m``: the shield takes the ego this much further along its path than the
+        conflicts say (a simulator whose integration lets a braking vehicle roll further than
+        the exact step: highway-env's Euler step, :mod:`persuasive.envs.highway`).
+        """
+        ego, clear, human, horizon = self.ego, self._clear_m, self._human, self.plan_horizon_s
+        v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
+        accels, live = [], set()
+        leader = None
+        for c in conflicts:
+            if c.kind == FOLLOW:
+                gap = c.other_s_m - c.ego_s_m - 0.5 * (ego.length_m + (
+                    c.other or human).length_m)
+                if c.other_s_m > c.ego_s_m and (leader is None or gap < leader[0]):
+                    leader = (gap, c.other_v_mps)
+                continue
+            if not (c.other_s_m < clear and c.ego_s_m < clear):
+                continue
+            o = c.other if c.other is not None else human
+            if horizon is not None and sh.reach_time(
+                    c.other_s_m, min(max(c.other_v_mps, o.v_min_mps), o.v_max_mps),
+                    o.u_max_mps2, c.other_occupancy[0], o.v_min_mps, o.v_max_mps) > horizon:
+                continue
+            live.add(c.key)
+            # the planner's model of the human has the configuration's limits (the states
+            # are finite and the speeds clamped: Planner.accel, without the Plan)
+            accels.append(self.planner_for(c.key).accel(
+                (c.ego_s_m, v), (c.other_s_m, min(max(c.other_v_mps, human.v_min_mps),
+                                                  human.v_max_mps))))
+        if len(live) != len(self._planners):
+            for key in [k for k in self._planners if k not in live]:
+                del self._planners[key]
+        a = min(accels) if accels else ego.u_max_mps2
+        if leader is not None:
+            a = min(a, idm_follow(self.config, v, leader))
+        a = min(max(a, ego.u_min_mps2), ego.u_max_mps2)
+        proposed, verdict = a, None
+        if self.config.shield != "off":
+            a, verdict = self.shield(v, proposed, conflicts, dt_s, shield_lead_m)
+        return Decision(float(a), float(proposed), verdict, len(accels), len(conflicts))
+
+    def shield(self, ego_v_mps: float, proposed_mps2: float, conflicts: Sequence[Conflict],
+               dt_s: float, shield_lead_m: float = 0.0) -> tuple[float, str]:
+        """The shield alone (no planning): ``(acceleration to apply [m/s^2], verdict)`` for
+        the proposal ``proposed_mps2`` at speed ``ego_v_mps`` among ``conflicts``, as
+        :meth:`act` applies it (``shield_lead_m``: as there)."""
+        ego = self.ego
+        v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
+        s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
+        a, code = sh.shield_step_many(v, float(proposed_mps2), dt_s, s_R + shield_lead_m, s_H,
+                                      v_H, C)
+        return float(a), sh.VERDICTS[code]
+
+
+def idm_follow(config: Config, v: float, leader: tuple[float, float]) -> float:
+    """IDM acceleration [m/s^2] behind a leader ``(bumper gap [m], speed [m/s])`` with the
+    parameters of ``config.hv.idm`` and the ego's ``v_max`` as desired speed."""
+    p = config.hv.idm
+    v0 = config.vehicle_of("av").v_max_mps
+    gap, v_lead = leader
+    s_star = p.jam_gap_m + max(0.0, v * p.time_gap_s + v * (v - v_lead) / (
+        2.0 * math.sqrt(p.max_accel_mps2 * p.comfort_decel_mps2)))
+    return p.max_accel_mps2 * (1.0 - (v / v0) ** p.delta - (s_star / max(gap, 0.1)) ** 2)
+
+
+# -- projecting a route onto the ego's: conflicts from centre lines ---------------------------
+
+
+@dataclass(frozen=True)
+class Polyline:
+    """A route's centre line: vertices ``xy`` (n, 2) [m] and their arc length ``arc`` (n,)
+    [m] from the first vertex."""
+
+    xy: np.ndarray
+    arc: np.ndarray
+
+    @classmethod
+    def of(cls, points) -> Polyline:
+        """From vertices; repeated consecutive vertices are dropped."""
+        pts = np.asarray(points, float).reshape(-1, 2)
+        keep = np.ones(len(pts), bool)
+        keep[1:] = np.any(np.diff(pts, axis=0) != 0.0, axis=1)
+        pts = pts[keep]
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+        return cls(pts, arc)
+
+    @property
+    def length_m(self) -> float:
+        return float(self.arc[-1])
+
+    def at(self, s) -> np.ndarray:
+        """Points (…, 2) at arc lengths ``s`` [m] (clamped to the line)."""
+        s = np.asarray(s, float)
+        return np.stack([np.interp(s, self.arc, self.xy[:, 0]),
+                         np.interp(s, self.arc, self.xy[:, 1])], axis=-1)
+
+    def samples(self, lo: float, hi: float, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Arc lengths in ``[lo, hi]`` (clamped to the line) at most ``step_m`` apart, ends
+        included, and their points."""
+        lo, hi = max(lo, 0.0), min(hi, self.length_m)
+        n = max(2, int(math.ceil((hi - lo) / step_m)) + 1)
+        s = np.linspace(lo, hi, n)
+        return s, self.at(s)
+
+
+@dataclass(frozen=True)
+class RouteConflict:
+    """The conflict of another route with the ego's, in each route's arc length: the kind,
+    the conflict point on each route (``ego_at_m``, ``other_at_m``) and the occupancy
+    intervals relative to it (what :class:`Conflict` takes)."""
+
+    kind: str
+    ego_at_m: float
+    other_at_m: float
+    ego_occupancy: tuple[float, float]
+    other_occupancy: tuple[float, float]
+
+    def conflict(self, key: Hashable, ego_arc_m: float, other_arc_m: float, other_v_mps: float,
+                 other: Limits | None = None, extra: dict | None = None,
+                 ego_occupancy: tuple[float, float] | None = None) -> Conflict:
+        """The :class:`Conflict` of vehicles whose centres are at these arc lengths of their
+        routes. A merge the ego has passed (it is in the shared lane) with the other ahead
+        is a :data:`FOLLOW` conflict. ``ego_occupancy``: the ego's interval to hand on in
+        place of :attr:`ego_occupancy` (e.g. widened for a simulator's integration; a
+        follow conflict keeps its own)."""
+        s_R, s_H = ego_arc_m - self.ego_at_m, other_arc_m - self.other_at_m
+        kind = self.kind
+        occupancy = self.ego_occupancy if ego_occupancy is None else ego_occupancy
+        if kind == MERGE and s_R >= self.ego_occupancy[1] and s_H > s_R:
+            kind, occupancy = FOLLOW, self.ego_occupancy
+        return Conflict(key, kind, float(s_R), float(s_H), float(other_v_mps),
+                        occupancy, self.other_occupancy, other,
+                        extra if extra is not None else {})
+
+
+def route_conflict(ego: Polyline, other: Polyline, ego_size: tuple[float, float],
+                   other_size: tuple[float, float], lateral_margin_m: float = 0.5,
+                   long_margin_m: float = 0.05, merge_at: tuple[float, float] | None = None,
+                   step_m: float = 0.1) -> RouteConflict | None:
+    """The conflict of a vehicle on ``other`` with the ego on ``ego`` (``None``: the routes
+    never come close enough for the footprints to touch).
+
+    ``ego_size``, ``other_size``: ``(length, width)`` [m]. A footprint whose centre is at arc
+    length ``s`` lies within ``w / 2 + lateral_margin_m`` of the centre line's piece
+    ``[s - l / 2, s + l / 2]`` (the margin covers the simulator's lateral tracking and the
+    chord of a rectangle on a curve), so two footprints can touch only where two such pieces
+    come within ``W = (w_ego + w_other) / 2 + lateral_margin_m``. Both lines are sampled every
+    ``step_m``; the pairs of samples within ``W + step_m`` contain every touching pair; the
+    occupancy intervals are the hulls of their arc lengths widened by ``l / 2 + step_m / 2 +
+    long_margin_m`` (conservative: every overlap lies inside the rectangle they span).
+
+    ``merge_at``: ``(ego arc, other arc)`` of the start of a lane both routes share after
+    arriving on different lanes (a merge, :data:`MERGE`: the conflict point is that start;
+    the ego's interval ends there, the other's is its side zone, where its footprint can
+    touch the ego's anywhere before the merge point). Otherwise a :data:`CROSSING` whose
+    conflict point is the closest approach of the two centre lines.
+    """
+    (l_e, w_e), (l_o, w_o) = ego_size, other_size
+    reach = 0.5 * (w_e + w_o) + lateral_margin_m + step_m
+    widen_e = 0.5 * l_e + 0.5 * step_m + long_margin_m
+    widen_o = 0.5 * l_o + 0.5 * step_m + long_margin_m
+    if merge_at is not None:
+        a0, b0 = merge_at
+        s_e, p_e = ego.samples(0.0, a0 + 0.5 * l_e + step_m, step_m)
+        s_o, p_o = other.samples(0.0, b0 + 0.5 * l_e + reach + step_m, step_m)
+    else:
+        s_e, p_e = ego.samples(0.0, ego.length_m, step_m)
+        s_o, p_o = other.samples(0.0, other.length_m, step_m)
+    from scipy.spatial import cKDTree
+
+    near = cKDTree(p_o).query_ball_point(p_e, reach)
+    counts = np.fromiter((len(n) for n in near), np.int64, len(near))
+    if counts.sum() == 0:
+        return None
+    i = np.repeat(np.arange(len(s_e)), counts)
+    j = np.concatenate([np.asarray(n, np.int64) for n in near if n])
+    a, b = s_e[i], s_o[j]
+    if merge_at is not None:
+        a0, b0 = merge_at
+        lo_e = float(a[a <= a0].min()) if np.any(a <= a0) else a0
+        ego_occ = (lo_e - widen_e - a0, 0.0)
+        side = a <= a0 + 0.5 * l_e + 0.5 * step_m
+        other_occ = (float(b[side].min()) - widen_o - b0, float(b[side].max()) + widen_o - b0)
+        return RouteConflict(MERGE, float(a0), float(b0), ego_occ, other_occ)
+    d = np.hypot(*(p_e[i] - p_o[j]).T)
+    k = int(np.argmin(d))
+    a0, b0 = float(a[k]), float(b[k])
+    return RouteConflict(CROSSING, a0, b0,
+                         (float(a.min()) - widen_e - a0, float(a.max()) + widen_e - a0),
+                         (float(b.min()) - widen_o - b0, float(b.max()) + widen_o - b0))
+
+
+
+__all__ = ["CROSSING", "FOLLOW", "MERGE", "Conflict", "Decision", "ExternalPlanner", "Limits",
+           "Polyline", "RouteConflict", "conflict_arrays", "idm_follow", "route_conflict"]

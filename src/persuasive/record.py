@@ -1,0 +1,420 @@
+"""A run's setup and its record (docs/method.md §7): what both loops share around a run.
+
+- :func:`setup` gives a run its scenario, both vehicles' parameter vectors, its random streams
+  (``persuasive.streams.draw_streams``) and its initial state (:class:`Setup`);
+- :func:`make_record` turns a finished loop's states and logs (either loop: the compiled
+  ``persuasive.world.run_loop`` or the Python ``persuasive.world.PythonWorld``) into a
+  :class:`RunRecord`: the configuration, the seed, the states, the per-step log and the
+  outcome (:class:`RunOutcome`, computed by :func:`outcome`);
+- :meth:`RunRecord.save` and :func:`load_record` keep a run as Parquet.
+
+States are indexed ``x_0 .. x_N`` (``N = n_steps``): step ``k`` decides at ``x_k`` and advances
+to ``x_{k+1}``; collision and arrival are tested on ``x_{k+1}``. ``idx_end`` is the first step
+after which a vehicle is at its first-arrival line (the last step if none is), and the "up to
+the line" minimum distance runs over ``x_0 .. x_{idx_end + 1}``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from ._version import __version__
+from .config import Config, ConfigError
+from .kinematics import saturated_step
+from .packing import CONFLICT_ALONG_PATHS, CONFLICT_EUCLIDEAN, WORK_NAMES, discounts, pack
+from .policies import kinds as kd
+from .policies import kind_of, load_replay
+from .roles import LEADER
+from .safety import measures
+from .scenarios import Scenario, build_scenario, first_arrival
+from .streams import draw_streams
+
+#: Labels of ``first_at_line`` / ``first_at_conflict_point``.
+ARRIVAL_LABELS = {0: "neither", 1: "AV", 2: "HV", 3: "same step"}
+#: How a scenario's conflict measures the distance between the vehicles (docs/method.md §10.2).
+DISTANCE_MEASURED = {CONFLICT_ALONG_PATHS: "along the paths",
+                     CONFLICT_EUCLIDEAN: "between the centres"}
+
+
+# Columns of the world's own per-step log: the measurements, the applied accelerations, the
+# AV policy's proposal and the shield's verdict (-1: no shield; persuasive.safety.shield).
+WORLD_LOG = ("av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m", "hv_meas_v_mps", "av_accel_mps2",
+             "hv_accel_mps2", "av_proposed_accel_mps2", "shield_verdict")
+(W_AV_S, W_AV_V, W_HV_S, W_HV_V, W_AV_A, W_HV_A, W_AV_PROPOSED, W_SHIELD) = range(len(WORLD_LOG))
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """Per-run metrics (docs/method.md §7-8, §11). Times are NaN when the event never happens."""
+
+    first_at_line: int  #: 1 AV, 2 HV, 3 same step, 0 neither
+    first_at_conflict_point: int  #: same labels, for ``s >= 0``
+    collision: bool  #: footprints overlapped at some step
+    min_distance_to_line_m: float  #: min distance over ``x_0 .. x_{idx_end + 1}`` [m]
+    #: min distance over the whole run [m] (along the paths in the intersection and the left
+    #: turn: ``RunRecord.summary()["distance_measured"]``)
+    min_distance_m: float
+    idx_end: int  #: first step after which a vehicle is at its line (last step if none)
+    infeasible_steps: int  #: AV steps where no candidate met the chance constraint
+    hv_role_changes: int  #: role changes of a role-holding human
+    av_role_changes: int  #: role changes of an LFG AV (0 otherwise)
+    av_time_to_line_s: float  #: time when the AV reached its first-arrival line [s]
+    hv_time_to_line_s: float
+    av_time_to_clear_s: float  #: time when the AV left the conflict zone [s]
+    hv_time_to_clear_s: float
+    av_delay_s: float  #: time to clear minus the free-flow time (u_max up to v_max) [s]
+    hv_delay_s: float
+    av_rms_accel_mps2: float  #: RMS of the applied accelerations [m/s^2]
+    hv_rms_accel_mps2: float
+    av_rms_jerk_mps3: float  #: RMS of the acceleration differences over dt [m/s^3]
+    hv_rms_jerk_mps3: float
+    # safety outside the model (docs/method.md §12.6)
+    collision_caused_by_av: bool  #: an overlap that is not a rear-end by the human
+    rear_end_by_human: bool  #: the human drove into the AV from behind in a shared lane
+    min_gap_m: float  #: smallest distance between the two footprints [m] (0: they touched)
+    pet_s: float  #: post-encroachment time at the conflict [s]
+    min_ttc_s: float  #: minimum time to collision along the paths [s]
+    shield_interventions: int  #: steps where the shield overrode the AV's policy
+    av_max_brake_mps2: float  #: the AV's strongest braking [m/s^2] (0: it never braked)
+
+
+#: Outcome fields that are times or distances (floats), for tables.
+OUTCOME_FIELDS = tuple(RunOutcome.__dataclass_fields__)
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One closed-loop run: configuration, seed, per-step log and outcome."""
+
+    config: Config
+    seed: int
+    av_initial_state: tuple[float, float]  #: ``(s [m], v [m/s])``
+    hv_initial_state: tuple[float, float]
+    states: np.ndarray = field(repr=False)  #: ``(n_steps + 1, 4)``: s_AV, v_AV, s_HV, v_HV
+    log: dict[str, np.ndarray] = field(repr=False)  #: per-step columns, ``n_steps`` rows
+    outcome: RunOutcome
+    scenario: Scenario = field(repr=False, compare=False)
+    streams: str = "legacy"  #: the random-stream layout used
+    #: the AV's decision time per step [ms] (prediction, library and its own step); not part
+    #: of the deterministic record
+    av_decision_ms: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: the kernels' work counters of the run (``persuasive.packing.WORK_NAMES``)
+    work: dict[str, int] | None = field(default=None, repr=False, compare=False)
+    version: str = __version__
+
+    @property
+    def mode(self) -> str:
+        return self.config.mode
+
+    def summary(self) -> dict[str, Any]:
+        """The run's identity and metrics as plain JSON values (deterministic: no timings).
+
+        Beside the outcome, ``safety_distance_m`` is the pair's safety threshold (7.5 m by
+        default) that ``min_distance_m`` and ``min_distance_to_line_m`` are compared with,
+        and ``distance_measured`` says how those distances are measured: ``"along the
+        paths"`` (the intersection, where it is the distance between the centres, and the
+        left turn, where it is not) or ``"between the centres"`` (crossing, merge)."""
+        c, o = self.config, self.outcome
+        out = {
+            "mode": c.mode,
+            "scenario": c.scenario.kind,
+            "av": c.av.kind,
+            "hv": c.hv.kind,
+            "hv_role": c.hv.role,
+            "pa": c.roles.p_a,
+            "pa_hat": c.p_a_hat,
+            "seed": self.seed,
+            "streams": self.streams,
+            "hv_initial_state": [float(x) for x in self.hv_initial_state],
+            "av_initial_state": [float(x) for x in self.av_initial_state],
+        }
+        for name in OUTCOME_FIELDS:
+            value = getattr(o, name)
+            out[name] = None if isinstance(value, float) and math.isnan(value) else value
+        scene = self.scenario
+        out["safety_distance_m"] = scene.min_dist_m if scene is not None else None
+        out["distance_measured"] = None if scene is None else DISTANCE_MEASURED[scene.conflict]
+        out["quirks"] = dict(vars(c.effective_quirks))
+        out["config_hash"] = c.digest()
+        out["version"] = self.version
+        return out
+
+    def timing(self) -> dict[str, float]:
+        """The AV's decision time: median and 99th percentile over the steps [ms]."""
+        t = self.av_decision_ms
+        if t is None or t.size == 0:
+            return {}
+        return {"av_decision_ms_median": float(np.median(t)),
+                "av_decision_ms_p99": float(np.percentile(t, 99))}
+
+    def frame(self):
+        """The per-step log as a pandas DataFrame (one row per step)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.log)
+
+    def save(self, path) -> None:
+        """Write the per-step log as Parquet, atomically, with what :func:`load_record` needs
+        to rebuild the record in the file's metadata: the configuration (TOML), the seed, the
+        random-stream layout, the last state and the package version."""
+        import json
+
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        from ._files import atomic_write
+
+        table = pa.Table.from_pandas(self.frame(), preserve_index=False)
+        meta = {"config_toml": self.config.to_toml(), "seed": self.seed,
+                "streams": self.streams, "final_state": [float(x) for x in self.states[-1]],
+                "version": self.version}
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                               RECORD_METADATA: json.dumps(meta)})
+        atomic_write(path, lambda p: pq.write_table(table, p))
+
+
+#: Key of a saved run's metadata in its Parquet schema.
+RECORD_METADATA = b"persuasive.run"
+
+
+def load_record(path) -> RunRecord:
+    """The :class:`RunRecord` saved by :meth:`RunRecord.save` (``simulate --out x.parquet``, a
+    recorded trial of the browser page): states, log, outcome and configuration."""
+    import json
+    import tomllib
+    from pathlib import Path
+
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as exc:
+        reason = (exc.strerror or "no such file or directory").lower()
+        raise ConfigError(f"run file {str(path)!r} cannot be read: {reason}") from None
+    if head != b"PAR1":  # Parquet's magic bytes
+        raise ConfigError(f"run file {str(path)!r} is not a Parquet file: only the .parquet "
+                          "logs of 'simulate --out' and the trials of 'drive' are read back "
+                          "(a .csv log holds no configuration)")
+    try:
+        table = pq.read_table(path)
+    except OSError as exc:
+        reason = (exc.strerror or "no such file or directory").lower()
+        raise ConfigError(f"run file {str(path)!r} cannot be read: {reason}") from None
+    except ValueError as exc:
+        raise ConfigError(f"run file {str(path)!r} cannot be read: "
+                          f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") \
+            from None
+    raw = (table.schema.metadata or {}).get(RECORD_METADATA)
+    if raw is None:
+        raise ConfigError(f"run file {str(path)!r} holds no run record (write it with "
+                          "'persuasive simulate --out FILE.parquet' or the browser page)")
+    meta = json.loads(raw)
+    config = Config.from_dict(tomllib.loads(meta["config_toml"]))
+    frame = table.to_pandas()
+    log = {name: frame[name].to_numpy() for name in frame.columns}
+    states = np.vstack([frame[["av_s_m", "av_v_mps", "hv_s_m", "hv_v_mps"]].to_numpy(float),
+                        np.asarray(meta["final_state"], float)[None, :]])
+    scenario = static_setup(config)[0]
+    return RunRecord(config, int(meta["seed"]), (float(states[0, 0]), float(states[0, 1])),
+                     (float(states[0, 2]), float(states[0, 3])), states, log,
+                     outcome(scenario, states, log), scenario, meta.get("streams", "legacy"),
+                     version=meta.get("version", __version__))
+
+
+def check_seed(seed: Any) -> int:
+    """The seed as an int, or :class:`ConfigError` if it is not an integer in [0, 2^32 - 1]."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
+        raise ConfigError(f"seed = {seed!r} is out of range; allowed: integer in [0, 2^32 - 1]")
+    return int(seed)
+
+
+@dataclass
+class Setup:
+    """Everything a loop needs for one run, shared by the compiled and the Python loop."""
+
+    config: Config
+    seed: int
+    scenario: Scenario
+    P_av: np.ndarray
+    P_hv: np.ndarray
+    disc: np.ndarray
+    streams: Any  #: :class:`persuasive.streams.Streams`
+    x0: np.ndarray
+
+
+@functools.lru_cache(maxsize=32)
+def static_setup(config: Config) -> tuple[Scenario, np.ndarray, np.ndarray, np.ndarray]:
+    """The scenario, both parameter vectors and the discounts of ``config`` (they depend on
+    the configuration only; kept for the last few configurations, since building a scenario
+    can take milliseconds). The arrays are shared by every run of the configuration: do not
+    change them (they are not marked read-only, which would give the kernels another type
+    to compile for)."""
+    scenario = build_scenario(config)
+    P_av, P_hv = pack(config, scenario)
+    return scenario, P_av, P_hv, discounts(config)
+
+
+def setup(config: Config, seed: int, k_av: int | None = None,
+          k_hv: int | None = None) -> Setup:
+    """The scenario, parameter vectors, random streams and initial state of a run.
+
+    ``k_av``, ``k_hv``: uniforms per step of each policy (default: the configured kinds').
+    A ``replay`` human starts from its recorded initial state.
+    """
+    seed = check_seed(seed)
+    scenario, P_av, P_hv, disc = static_setup(config)
+    k_av = kind_of(config, kd.AV).draws if k_av is None else k_av
+    k_hv = kind_of(config, kd.HV).draws if k_hv is None else k_hv
+    streams = draw_streams(config, seed, scenario, k_av, k_hv)
+    x_hv = streams.x_hv
+    if config.hv.kind == "replay":
+        rec = load_replay(config)
+        x_hv = (rec.s0_m, rec.v0_mps)
+    x0 = np.array([*streams.x_av, *x_hv], dtype=np.float64)
+    return Setup(config, seed, scenario, P_av, P_hv, disc, streams, x0)
+
+
+def make_record(s: Setup, states: np.ndarray, world_log: np.ndarray, av_log: np.ndarray,
+                hv_log: np.ndarray, av_decision_ms: np.ndarray | None,
+                av_columns: tuple[str, ...] | None = None,
+                hv_columns: tuple[str, ...] | None = None,
+                work: np.ndarray | None = None) -> RunRecord:
+    """The :class:`RunRecord` of a finished loop (either loop)."""
+    config = s.config
+    av_columns = kind_of(config, kd.AV).log if av_columns is None else av_columns
+    hv_columns = kind_of(config, kd.HV).log if hv_columns is None else hv_columns
+    log = _columns(s, states, world_log, av_log, hv_log, av_columns, hv_columns)
+    x_av, x_hv = (float(states[0, 0]), float(states[0, 1])), (float(states[0, 2]),
+                                                                float(states[0, 3]))
+    return RunRecord(config, s.seed, x_av, x_hv, states, log, outcome(s.scenario, states, log),
+                     s.scenario, s.streams.layout, av_decision_ms,
+                     None if work is None else dict(zip(WORK_NAMES, (int(w) for w in work))))
+
+
+def _columns(s: Setup, states, world_log, av_log, hv_log, av_columns, hv_columns):
+    config, scenario = s.config, s.scenario
+    n = world_log.shape[0]
+    log: dict[str, np.ndarray] = {
+        "step": np.arange(n, dtype=np.int64),
+        "t_s": np.arange(n) * config.simulation.dt_s,
+        "av_s_m": states[:-1, 0],
+        "av_v_mps": states[:-1, 1],
+        "hv_s_m": states[:-1, 2],
+        "hv_v_mps": states[:-1, 3],
+        "distance_m": scenario.distance(states[:-1, 0], states[:-1, 2]),
+    }
+    for who, j in (("av", 0), ("hv", 2)):
+        x, y, heading = scenario.positions(who, states[:-1, j])
+        log[f"{who}_x_m"], log[f"{who}_y_m"], log[f"{who}_heading_rad"] = x, y, heading
+    log.update({name: world_log[:, j] for j, name in enumerate(WORLD_LOG)})
+    log["shield_verdict"] = log["shield_verdict"].astype(np.int64)
+    for who, names, raw in (("hv", hv_columns, hv_log), ("av", av_columns, av_log)):
+        for j, name in enumerate(names):
+            col = raw[:, j]
+            if name in kd.ROLE_COLUMNS:
+                col = np.where(col == LEADER, "leader", "follower")
+            elif name in kd.INT_COLUMNS:
+                col = col.astype(np.int64)
+            elif name in kd.BOOL_COLUMNS:
+                col = col != 0.0
+            log[f"{who}_{name}"] = col
+    return log
+
+
+@njit(cache=True, _nrt=False)
+def free_flow_time(s0: float, v0: float, target_s: float, dt: float, u_max: float,
+                   v_min: float, v_max: float, limit: int = 100_000) -> float:
+    """Time [s] to reach ``target_s`` from ``(s0, v0)`` at full throttle up to ``v_max``, on
+    the loop's time grid (the first step after which ``s >= target_s``); NaN beyond
+    ``limit`` steps."""
+    s, v = s0, v0
+    for k in range(limit):
+        if s >= target_s:
+            return k * dt
+        s, v = saturated_step(s, v, u_max, dt, v_min, v_max)
+    return math.nan
+
+
+def _first_time(hit: np.ndarray, dt: float) -> float:
+    k = np.flatnonzero(hit)
+    return float((k[0] + 1) * dt) if k.size else math.nan
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if x.size else math.nan
+
+
+def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) -> RunOutcome:
+    """The metrics of a run from its states and log."""
+    config = scenario.config
+    dt = config.simulation.dt_s
+    after = states[1:]
+    line, idx_line = first_arrival(scenario.at_line("av", after[:, 0]),
+                                   scenario.at_line("hv", after[:, 2]))
+    conflict, _ = first_arrival(scenario.at_conflict_point(after[:, 0]),
+                                scenario.at_conflict_point(after[:, 2]))
+    d = scenario.distance(states[:, 0], states[:, 2])
+    idx_end = idx_line if idx_line is not None else after.shape[0] - 1
+    changes = {
+        who: int(np.sum(log[f"{who}_next_role"] != log[f"{who}_role"]))
+        if f"{who}_role" in log else 0
+        for who in ("hv", "av")
+    }
+    infeasible = int(np.sum(~log["av_feasible"])) if "av_feasible" in log else 0
+    times: dict[str, float] = {}
+    for who, j in (("av", 0), ("hv", 2)):
+        path = getattr(scenario, who)
+        times[f"{who}_time_to_line_s"] = _first_time(scenario.at_line(who, after[:, j]), dt)
+        clear = _first_time(scenario.cleared(who, after[:, j]), dt)
+        times[f"{who}_time_to_clear_s"] = clear
+        veh = path.vehicle
+        if math.isnan(clear):
+            times[f"{who}_delay_s"] = math.nan
+        else:
+            free = free_flow_time(float(states[0, j]), float(states[0, j + 1]), path.clear_s,
+                                  dt, veh.u_max_mps2, veh.v_min_mps, veh.v_max_mps)
+            times[f"{who}_delay_s"] = clear - free
+        accel = log[f"{who}_accel_mps2"]
+        times[f"{who}_rms_accel_mps2"] = _rms(accel)
+        times[f"{who}_rms_jerk_mps3"] = _rms(np.diff(accel) / dt)
+    overlap = scenario.collides(after[:, 0], after[:, 2])
+    caused = measures.caused_by_av(overlap, measures.rear_end_mask(scenario, after[:, 0],
+                                                                   after[:, 2]))
+    occ_av, occ_hv = scenario.av.occupancy, scenario.hv.occupancy
+    verdicts = log.get("shield_verdict")
+    accel = log["av_accel_mps2"]
+    return RunOutcome(
+        first_at_line=line,
+        first_at_conflict_point=conflict,
+        collision=bool(np.any(overlap)),
+        min_distance_to_line_m=float(d[: idx_end + 2].min()),
+        min_distance_m=float(d.min()),
+        idx_end=int(idx_end),
+        infeasible_steps=infeasible,
+        hv_role_changes=changes["hv"],
+        av_role_changes=changes["av"],
+        **times,
+        collision_caused_by_av=bool(np.any(caused)),
+        rear_end_by_human=bool(np.any(overlap & ~caused)),
+        min_gap_m=float(measures.min_gap(scenario, states[:, 0], states[:, 2]).min()),
+        pet_s=float(measures.pet(states[:, 0], states[:, 2], occ_av, occ_hv, dt)),
+        min_ttc_s=float(measures.min_ttc(states[:, 0], states[:, 1], states[:, 2], states[:, 3],
+                                         *occ_av, *occ_hv, scenario.lane_shared,
+                                         0.5 * (scenario.av.vehicle.length_m
+                                                + scenario.hv.vehicle.length_m))),
+        shield_interventions=int(np.sum(verdicts > 0)) if verdicts is not None else 0,
+        av_max_brake_mps2=float(max(0.0, -np.min(accel))) if len(accel) else 0.0,
+    )
+
+
+__all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA",
+           "WORLD_LOG", "RunOutcome", "RunRecord", "Setup", "check_seed", "load_record",
+           "make_record", "outcome", "setup", "static_setup"]

@@ -1,0 +1,202 @@
+"""Surrogate safety measures of a run (docs/method.md §12.6), from its states.
+
+The conflict is described by each vehicle's occupancy interval (``Path.occupancy``: outside
+it the vehicle's footprint cannot touch the other's; in a merge, the side zone up to the merge
+point, after which the lane is shared).
+
+- **PET** (post-encroachment time) [s]: the time from the moment the first vehicle leaves its
+  occupancy interval to the moment the second enters its own (crossing times interpolated
+  linearly between the loop's states); 0 when both were inside at once; undefined (NaN) when
+  one never enters or the first never leaves.
+- **minimum TTC** (time to collision along the paths) [s]: at every state, both vehicles
+  extrapolated at constant speed; on a crossing, the time at which both would be inside their
+  occupancy intervals together (if their time windows meet); in a shared lane past the merge
+  point, the gap over the closing speed of the follower. The minimum over the run; NaN if the
+  two were never on a collision course.
+- **minimum footprint gap** [m]: the smallest distance between the two oriented rectangles
+  over the run (0 when they overlap): physical, in every scenario.
+- **collisions by fault**: a collision (a run of overlapping states) is a *rear-end by the
+  human* when it starts with the lane shared, the AV past the merge point and ahead of the
+  human; every other collision is *caused by the AV* (the shield's target is none of those).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+def crossing_times(s: np.ndarray, target: float, dt: float) -> float:
+    """First time [s] at which the positions ``s`` (states ``0..N`` at ``k dt``, non-
+    decreasing) reach ``target``, interpolated linearly between states; 0 if the first does,
+    NaN if none does."""
+    if not math.isfinite(target):
+        return 0.0 if target < 0 else math.nan
+    hit = np.flatnonzero(s >= target)
+    if hit.size == 0:
+        return math.nan
+    k = int(hit[0])
+    if k == 0:
+        return 0.0
+    ds = float(s[k] - s[k - 1])
+    frac = (target - float(s[k - 1])) / ds if ds > 0 else 1.0
+    return (k - 1 + frac) * dt
+
+
+def pet(s_av: np.ndarray, s_hv: np.ndarray, occ_av: tuple[float, float],
+        occ_hv: tuple[float, float], dt: float) -> float:
+    """Post-encroachment time [s] (module docstring)."""
+    in_a, out_a = crossing_times(s_av, occ_av[0], dt), crossing_times(s_av, occ_av[1], dt)
+    in_h, out_h = crossing_times(s_hv, occ_hv[0], dt), crossing_times(s_hv, occ_hv[1], dt)
+    if math.isnan(in_a) or math.isnan(in_h):
+        return math.nan  # one never came
+    if in_a <= in_h:
+        first_out, second_in = out_a, in_h
+    else:
+        first_out, second_in = out_h, in_a
+    if math.isnan(first_out):
+        return 0.0  # the first was still inside when the second came in
+    return max(second_in - first_out, 0.0)
+
+
+@njit(cache=True)
+def min_ttc(s_av: np.ndarray, v_av: np.ndarray, s_hv: np.ndarray, v_hv: np.ndarray,
+            r_lo: float, r_hi: float, h_lo: float, h_hi: float, shared: bool,
+            gap_m: float) -> float:
+    """Minimum time to collision along the paths [s] (module docstring); NaN if never on a
+    collision course."""
+    best = math.inf
+    for k in range(s_av.shape[0]):
+        sr, vr, sh, vh = s_av[k], v_av[k], s_hv[k], v_hv[k]
+        if shared and sr >= r_hi:  # in the lane: the follower closing on the leader
+            if sh > sr:
+                gap, closing = sh - sr - gap_m, vr - vh
+            else:
+                gap, closing = sr - sh - gap_m, vh - vr
+            ttc = 0.0 if gap <= 0.0 else (gap / closing if closing > 0.0 else math.inf)
+        else:
+            ttc = math.inf
+            a_in, a_out = _window(sr, vr, r_lo, r_hi)
+            h_in, h_out = _window(sh, vh, h_lo, h_hi)
+            if a_in < math.inf and h_in < math.inf:
+                lo, hi = max(a_in, h_in), min(a_out, h_out)
+                if lo <= hi:
+                    ttc = lo
+        if ttc < best:
+            best = ttc
+    return best if best < math.inf else math.nan
+
+
+@njit(cache=True, inline="always")
+def _window(s: float, v: float, lo: float, hi: float) -> tuple[float, float]:
+    """The time window a vehicle at constant speed spends in ``[lo, hi]``."""
+    if s > hi:
+        return math.inf, math.inf
+    if s >= lo:
+        t_in = 0.0
+    elif v > 0.0:
+        t_in = (lo - s) / v
+    else:
+        return math.inf, math.inf
+    t_out = (hi - s) / v if v > 0.0 else math.inf
+    return t_in, t_out
+
+
+@njit(cache=True)
+def footprint_gaps(xa, ya, uax, uay, la, wa, xb, yb, ubx, uby, lb, wb, out) -> None:
+    """Distance [m] between two oriented rectangles (0 when they overlap), elementwise:
+    rectangle A centred at ``(xa, ya)``, length ``la`` along the unit ``(uax, uay)``, width
+    ``wa``; likewise B. Outside each other, the distance of two convex polygons is the
+    smallest distance from a corner of one to an edge of the other."""
+    ca = np.empty((4, 2))
+    cb = np.empty((4, 2))
+    for i in range(out.size):
+        _corners(xa[i], ya[i], uax[i], uay[i], la, wa, ca)
+        _corners(xb[i], yb[i], ubx[i], uby[i], lb, wb, cb)
+        if _overlap(ca, cb):
+            out[i] = 0.0
+            continue
+        d = math.inf
+        for p in range(4):
+            for e in range(4):
+                d = min(d, _point_segment(ca[p], cb[e], cb[(e + 1) % 4]))
+                d = min(d, _point_segment(cb[p], ca[e], ca[(e + 1) % 4]))
+        out[i] = d
+
+
+@njit(cache=True, inline="always")
+def _corners(x, y, ux, uy, length, width, out) -> None:
+    hl, hw = length / 2, width / 2
+    nx, ny = -uy, ux
+    out[0, 0], out[0, 1] = x + hl * ux + hw * nx, y + hl * uy + hw * ny
+    out[1, 0], out[1, 1] = x - hl * ux + hw * nx, y - hl * uy + hw * ny
+    out[2, 0], out[2, 1] = x - hl * ux - hw * nx, y - hl * uy - hw * ny
+    out[3, 0], out[3, 1] = x + hl * ux - hw * nx, y + hl * uy - hw * ny
+
+
+@njit(cache=True, inline="always")
+def _overlap(ca, cb) -> bool:
+    """Separating-axis test of two rectangles given by their corners (touching overlaps)."""
+    for poly in (ca, cb):
+        for e in range(2):
+            ax = poly[e + 1, 1] - poly[e, 1]
+            ay = poly[e, 0] - poly[e + 1, 0]
+            lo_a, hi_a, lo_b, hi_b = math.inf, -math.inf, math.inf, -math.inf
+            for p in range(4):
+                pa = ca[p, 0] * ax + ca[p, 1] * ay
+                pb = cb[p, 0] * ax + cb[p, 1] * ay
+                lo_a, hi_a = min(lo_a, pa), max(hi_a, pa)
+                lo_b, hi_b = min(lo_b, pb), max(hi_b, pb)
+            if hi_a < lo_b or hi_b < lo_a:
+                return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _point_segment(p, a, b) -> float:
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    den = dx * dx + dy * dy
+    t = 0.0 if den == 0.0 else min(max(((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / den, 0.0),
+                                   1.0)
+    ex, ey = p[0] - (a[0] + t * dx), p[1] - (a[1] + t * dy)
+    return math.sqrt(ex * ex + ey * ey)
+
+
+def min_gap(scenario, s_av: np.ndarray, s_hv: np.ndarray) -> np.ndarray:
+    """The footprint gap [m] at every pair of positions (module docstring)."""
+    s_av, s_hv = np.ascontiguousarray(s_av, float), np.ascontiguousarray(s_hv, float)
+    xa, ya = scenario.av.xy(s_av)
+    xb, yb = scenario.hv.xy(s_hv)
+    (uax, uay), (ubx, uby) = scenario.av.direction(s_av), scenario.hv.direction(s_hv)
+    va, vb = scenario.av.vehicle, scenario.hv.vehicle
+    out = np.empty(s_av.shape)
+    footprint_gaps(xa, ya, np.ascontiguousarray(uax), np.ascontiguousarray(uay), va.length_m,
+                   va.width_m, xb, yb, np.ascontiguousarray(ubx), np.ascontiguousarray(uby),
+                   vb.length_m, vb.width_m, out)
+    return out
+
+
+def caused_by_av(overlap: np.ndarray, rear: np.ndarray) -> np.ndarray:
+    """Per state: the overlap there belongs to a collision the AV caused. A collision is a run of
+    consecutive overlapping states, and its cause is its first state: a rear-end by the human
+    stays one while the vehicles go on overlapping (the simulation has no contact forces: a
+    human that drives into the AV from behind passes through it, and its later overlaps ahead
+    of the AV are the same collision)."""
+    overlap, rear = np.asarray(overlap, bool), np.asarray(rear, bool)
+    start = overlap & ~np.r_[False, overlap[:-1]]
+    cause = np.cumsum(start)  # the collision each state belongs to (0: none yet)
+    first_rear = np.r_[False, rear[start]]  # per collision number: did it start as a rear-end
+    return overlap & ~first_rear[cause]
+
+
+def rear_end_mask(scenario, s_av: np.ndarray, s_hv: np.ndarray) -> np.ndarray:
+    """Per state: an overlap there would be a rear-end by the human (the lane is shared, the AV
+    is past the merge point and ahead of the human)."""
+    if not scenario.lane_shared:
+        return np.zeros(np.shape(s_av), dtype=bool)
+    return (np.asarray(s_av) >= scenario.av.occupancy[1]) & (np.asarray(s_av) > np.asarray(s_hv))
+
+
+__all__ = ["caused_by_av", "footprint_gaps", "min_gap", "min_ttc", "pet", "rear_end_mask"]

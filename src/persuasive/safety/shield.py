@@ -1,0 +1,417 @@
+"""The safety shield: a filter around any AV policy that no bounded human can defeat
+(docs/method.md §12.2).
+
+Notation: the AV at ``(s_R, v_R)`` on its path, the human at ``(s_H, v_H)`` on its own; each
+vehicle's **occupancy interval** ``[R_lo, R_hi]`` / ``[H_lo, H_hi]`` is the set of positions where
+its footprint can touch the other's (``persuasive.geometry.occupancy_interval``; outside it,
+no overlap is possible wherever the other is). A **human** is any acceleration sequence within
+its vehicle's limits ``u_min..u_max`` whose speed stays in ``v_min..v_max`` (the closed loop
+holds each acceleration for a step; the argument below allows any measurable sequence, so it
+covers those). Two **fallbacks** of the AV, each a constant acceleration held from some time
+on: ``BRAKE`` (``u_min``: stand before the human's path) and ``GO`` (``u_max``: clear it).
+
+**Propose, check, override.** At every step the policy proposes ``a``. The shield *admits*
+``a`` if the AV trajectory "``a`` for one step, then a fallback ``F`` for ever" is certified
+for ``F = BRAKE`` or ``F = GO``; otherwise it applies ``BRAKE`` if "``BRAKE`` for ever" is
+certified, else ``GO`` (``certify_*`` below). A trajectory is **certified** when no human
+makes an AV-caused overlap along it:
+
+- *crossings* (two paths meeting once): the AV occupies its interval during the time window
+  ``[t_in_R, t_out_R]`` (its position is monotone, so this is one window; ``t_in_R = inf`` when
+  it stops before ``R_lo``); every human together occupies ``[t_in_H, t_out_H)``, where
+  ``t_in_H`` is the earliest arrival at ``H_lo`` (full throttle) and ``t_out_H`` the time after
+  which even the slowest human (full braking) is past ``H_hi`` (``inf`` when it can stop before
+  it). Certified iff the AV never enters, or the windows are disjoint
+  (``t_out_R < t_in_H`` or ``t_out_H < t_in_R``). Every position between the slowest and the
+  fastest human is reachable at every time, so the test is exact for the human; the
+  occupancy rectangle ``[R_lo, R_hi] x [H_lo, H_hi]`` contains every overlapping pair of
+  positions (exactly the overlaps at the paper's intersection), so it is conservative there
+  and only there.
+- *shared lanes* (a merge; ``R_hi`` is the merge point, ``[H_lo, H_hi]`` the human's side
+  zone, ``L`` the mean length): before the merge point as a crossing, except that the AV may
+  end in the lane ahead of the human (merge ahead: it reaches the merge point before any human
+  reaches its side zone; a human that then drives into it from behind is a rear-end by the
+  human, not the AV's collision), or behind it (the human has surely passed its side zone
+  before the AV enters its own, and the AV then follows it); in the lane behind a human the
+  AV keeps the gap of a follower that brakes at ``u_min`` after the step against a leader
+  braking at its ``u_min`` from now: ``s_H(t) - s_R(t) > L`` for all ``t`` (checked on the
+  breakpoints and the stationary points of the piecewise-quadratic gap, exactly).
+
+**Invariant.** Let ``S`` be the joint states from which ``BRAKE`` or ``GO`` for ever is
+certified. If the state is in ``S``, the shield's output keeps it in ``S`` and no AV-caused
+overlap happens during the step. *Proof.* An admitted ``a`` comes with a fallback ``F`` such
+that "``a``, then ``F``" is certified from ``(x_R, x_H)``; after the step the AV is at the
+second piece's start and the human at some state it reached within its limits, and the
+humans from there are a subset of those from ``x_H``, so "``F`` for ever" is certified from
+the new state. An override applies the first step of a certified fallback, and the same
+argument holds with ``a = F``. Certification covers the step itself (the windows are in
+continuous time from now), so no overlap happens within it either. By induction, from an
+initial state in ``S`` no AV-caused overlap ever happens. The closed loop's initial states
+let each vehicle stop before its conflict zone, which contains its occupancy interval whenever
+the safety distance exceeds the two half-diagonals (the default sizes), so they are in ``S``. From states outside it the shield still answers (``UNCERTIFIED``: the
+fallback whose possible overlap starts latest, or is shortest), e.g. with measurement noise on, or when a vehicle appears out of nowhere in an outside simulator, where the guarantee does not
+hold.
+
+**Conservative, never optimistic.** Every time compared carries a margin of
+:data:`TIME_MARGIN_S` against the AV and every interval is widened by rounding margins when it
+is built (``persuasive.packing``), so floating-point rounding cannot turn an unsafe verdict into
+a safe one. The ``responsive`` kind is *not* a guarantee against every human: it assumes the
+human does anything for ``rho`` seconds and then brakes at its ``u_min`` (the frontier between
+safety and persuasion, docs/method.md §12.5).
+
+The kernels take a **conflict vector** ``C`` (``N_CONFLICT`` floats, :func:`conflict_vector`)
+so that the closed loop (one conflict, from the scenario) and the adapter for outside
+simulators (one per other vehicle: ``persuasive.envs.external``) share them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .. import packing as slot
+from ..kinematics import saturated_step
+
+# Conflict vector slots: the AV's and the human's occupancy intervals [m]; 1.0 for a shared
+# lane (``R_HI`` is then the merge point, ``H_LO..H_HI`` the human's side zone); the mean
+# length of the pair [m] (the gap of a follower); the shield kind and the responsive
+# human's response time [s]; the AV's and the human's limits.
+(C_R_LO, C_R_HI, C_H_LO, C_H_HI, C_SHARED, C_GAP, C_KIND, C_RHO, C_R_UMIN, C_R_UMAX, C_R_VMIN,
+ C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX) = range(16)
+N_CONFLICT = 16
+
+#: Verdicts of :func:`shield_step` (the world logs them per step).
+ADMITTED, BRAKE, GO, UNCERTIFIED = 0, 1, 2, 3
+VERDICTS = ("admitted", "brake", "go", "uncertified")
+
+#: Margin on every compared time, against the AV [s]: far below anything physical, far above
+#: the rounding of the closed forms.
+TIME_MARGIN_S = 1e-6
+#: Margin on a follower's gap, against the AV [m] (same reason).
+GAP_MARGIN_M = 1e-6
+
+_INF = math.inf
+
+
+@njit(cache=True, _nrt=False)
+def conflict_vector(P_av: np.ndarray, P_hv: np.ndarray, out: np.ndarray) -> None:
+    """The closed loop's conflict vector (``N_CONFLICT``,) from the two parameter vectors."""
+    out[C_R_LO], out[C_R_HI] = P_av[slot.OCC_LO], P_av[slot.OCC_HI]
+    out[C_H_LO], out[C_H_HI] = P_hv[slot.OCC_LO], P_hv[slot.OCC_HI]
+    out[C_SHARED] = P_av[slot.LANE_SHARED]
+    out[C_GAP] = 0.5 * (P_av[slot.LENGTH] + P_hv[slot.LENGTH])
+    out[C_KIND], out[C_RHO] = P_av[slot.SHIELD], P_av[slot.SHIELD_RESPONSE]
+    out[C_R_UMIN], out[C_R_UMAX] = P_av[slot.U_MIN], P_av[slot.U_MAX]
+    out[C_R_VMIN], out[C_R_VMAX] = P_av[slot.V_MIN], P_av[slot.V_MAX]
+    out[C_H_UMIN], out[C_H_UMAX] = P_hv[slot.U_MIN], P_hv[slot.U_MAX]
+    out[C_H_VMIN], out[C_H_VMAX] = P_hv[slot.V_MIN], P_hv[slot.V_MAX]
+
+
+# -- one vehicle under constant acceleration -----------------------------------------------
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def reach_time(s: float, v: float, a: float, target: float, v_min: float,
+               v_max: float) -> float:
+    """First time [s] at which a vehicle at ``(s, v)`` holding acceleration ``a`` (its speed
+    saturating at ``v_min``/``v_max``, as :func:`persuasive.kinematics.saturated_step`) is at
+    or past ``target``; 0 if it already is, ``inf`` if never."""
+    d = target - s
+    if d <= 0.0:
+        return 0.0
+    if a > 0.0:
+        v_lim = v_max
+        t_sat = (v_max - v) / a
+        d_sat = (v_max * v_max - v * v) / (2.0 * a)
+    elif a < 0.0:
+        v_lim = v_min
+        t_sat = (v_min - v) / a
+        d_sat = (v_min * v_min - v * v) / (2.0 * a)
+    else:
+        v_lim = v
+        t_sat = _INF
+        d_sat = _INF
+    if d <= d_sat:  # reached before the speed saturates
+        disc = max(v * v + 2.0 * a * d, 0.0)
+        den = v + math.sqrt(disc)
+        return 2.0 * d / den if den > 0.0 else _INF
+    if v_lim <= 0.0:
+        return _INF
+    return t_sat + (d - d_sat) / v_lim
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def profile_reach(s: float, v: float, a1: float, d1: float, a2: float, target: float,
+                  v_min: float, v_max: float) -> float:
+    """:func:`reach_time` of the profile "``a1`` for ``d1`` seconds, then ``a2`` for ever"."""
+    t = reach_time(s, v, a1, target, v_min, v_max)
+    if t <= d1:
+        return t
+    s1, v1 = saturated_step(s, v, a1, d1, v_min, v_max)
+    return d1 + reach_time(s1, v1, a2, target, v_min, v_max)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _profile_state(s: float, v: float, a1: float, d1: float, a2: float, t: float,
+                   v_min: float, v_max: float) -> tuple[float, float]:
+    if t <= d1:
+        return saturated_step(s, v, a1, t, v_min, v_max)
+    s1, v1 = saturated_step(s, v, a1, d1, v_min, v_max)
+    return saturated_step(s1, v1, a2, t - d1, v_min, v_max)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _saturation_time(v: float, a: float, v_min: float, v_max: float) -> float:
+    if a > 0.0:
+        return (v_max - v) / a
+    if a < 0.0:
+        return (v_min - v) / a
+    return _INF
+
+
+# -- the human's occupancy window ------------------------------------------------------------
+
+
+@njit(cache=True, _nrt=False)
+def human_window(s_H: float, v_H: float, C: np.ndarray) -> tuple[float, float, bool]:
+    """When any human in the shield's model may be inside ``[H_lo, H_hi]``: ``(t_in, t_out,
+    past)``. ``t_in``: earliest arrival at ``H_lo`` (``inf``: never; the ``responsive`` human
+    arrives only if it cannot stop before ``H_lo`` after its response time); ``t_out``: the
+    time after which every human is past ``H_hi`` (``inf`` if one can stop before it); ``past``:
+    the human is already past ``H_hi`` (it never occupies again)."""
+    lo, hi = C[C_H_LO], C[C_H_HI]
+    if s_H > hi:
+        return _INF, _INF, True
+    u_min, u_max, v_min, v_max = C[C_H_UMIN], C[C_H_UMAX], C[C_H_VMIN], C[C_H_VMAX]
+    if C[C_KIND] == slot.SHIELD_RESPONSIVE:  # the furthest it gets: u_max for rho, then brake
+        t_in = profile_reach(s_H, v_H, u_max, C[C_RHO], u_min, lo, v_min, v_max)
+    else:
+        t_in = reach_time(s_H, v_H, u_max, lo, v_min, v_max)
+    t_out = reach_time(s_H, v_H, u_min, hi, v_min, v_max)
+    return t_in, t_out, False
+
+
+# -- certification of one AV trajectory --------------------------------------------------------
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _held(a: float, v: float, v_min: float, v_max: float) -> float:
+    """The acceleration a vehicle at speed ``v`` commanded ``a`` actually has from now on."""
+    if (a > 0.0 and v >= v_max) or (a < 0.0 and v <= v_min):
+        return 0.0
+    return a
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _next_after(t: float, b0: float, b1: float, b2: float, b3: float) -> float:
+    """The smallest of the breakpoints ``b*`` after ``t`` (``inf`` if none)."""
+    out = _INF
+    if t < b0 < out:
+        out = b0
+    if t < b1 < out:
+        out = b1
+    if t < b2 < out:
+        out = b2
+    if t < b3 < out:
+        out = b3
+    return out
+
+
+@njit(cache=True, _nrt=False)
+def _gap_holds(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float,
+               v_H: float, C: np.ndarray) -> bool:
+    """A follower (the AV: ``a1`` for ``d1``, then ``a2``) never closes to within ``L`` of a
+    leader braking at its ``u_min`` from now: ``s_H(t) - s_R(t) > L`` for all ``t >= 0``.
+
+    Both positions are piecewise quadratic in ``t``; the gap's minimum lies at a breakpoint
+    (a change of acceleration or a saturation) or where the speeds are equal inside a piece,
+    and after the last breakpoint both speeds are constant."""
+    L = C[C_GAP] + GAP_MARGIN_M
+    rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
+    hu, hv_min, hv_max = C[C_H_UMIN], C[C_H_VMIN], C[C_H_VMAX]
+    # breakpoints: a saturation in the first piece, the switch, a saturation after it, the
+    # human's stop
+    b0 = _saturation_time(v_R, a1, rv_min, rv_max)
+    b0 = b0 if b0 < d1 else _INF
+    _, v1 = saturated_step(s_R, v_R, a1, d1, rv_min, rv_max)
+    b2 = d1 + _saturation_time(v1, a2, rv_min, rv_max)
+    b3 = _saturation_time(v_H, hu, hv_min, hv_max)
+    t = 0.0
+    while True:
+        sr, vr = _profile_state(s_R, v_R, a1, d1, a2, t, rv_min, rv_max)
+        sh, vh = saturated_step(s_H, v_H, hu, t, hv_min, hv_max)
+        if not sh - sr > L:
+            return False
+        t_next = _next_after(t, b0, d1, b2, b3)
+        # constant accelerations until t_next (0 once a speed limit is reached)
+        ar = _held(a1 if t < d1 else a2, vr, rv_min, rv_max)
+        ah = _held(hu, vh, hv_min, hv_max)
+        if ah != ar:  # the gap's stationary point inside the piece
+            t_star = t + (vr - vh) / (ah - ar)
+            if t < t_star < t_next:
+                srs, _ = _profile_state(s_R, v_R, a1, d1, a2, t_star, rv_min, rv_max)
+                shs, _ = saturated_step(s_H, v_H, hu, t_star, hv_min, hv_max)
+                if not shs - srs > L:
+                    return False
+        if t_next == _INF:
+            # the speeds the two keep for ever: a speed a rounding error short of its limit
+            # may leave no breakpoint of its own, so the limit is read off the acceleration
+            vr_end = rv_max if ar > 0.0 else (rv_min if ar < 0.0 else vr)
+            vh_end = hv_max if ah > 0.0 else (hv_min if ah < 0.0 else vh)
+            return not vh_end < vr_end
+        t = t_next
+
+
+@njit(cache=True, _nrt=False)
+def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float,
+              v_H: float, C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
+    """Whether the AV trajectory "``a1`` for ``d1`` seconds, then ``a2`` for ever" is
+    certified against every human of the model (module docstring); ``t_in_H, t_out_H,
+    past``: the human's :func:`human_window`."""
+    m = TIME_MARGIN_S
+    rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
+    r_lo, r_hi = C[C_R_LO], C[C_R_HI]
+    if C[C_SHARED] == 0.0:  # a crossing
+        if s_R > r_hi:
+            return True
+        t_in_R = profile_reach(s_R, v_R, a1, d1, a2, r_lo, rv_min, rv_max)
+        if t_in_R == _INF or t_in_H == _INF:
+            return True  # it stands before the human's path, or no human gets to its own
+        t_out_R = profile_reach(s_R, v_R, a1, d1, a2, r_hi, rv_min, rv_max)
+        return t_out_R + m < t_in_H - m or t_out_H + m < t_in_R - m
+    # a shared lane past r_hi (the merge point)
+    if s_R >= r_hi:
+        if s_H < s_R:
+            return True  # the human is behind: driving into the AV is its rear-end
+        return _gap_holds(s_R, v_R, a1, d1, a2, s_H, v_H, C)
+    t_in_R = profile_reach(s_R, v_R, a1, d1, a2, r_lo, rv_min, rv_max)
+    if t_in_R == _INF:
+        return True  # it stands before the side zone
+    t_0 = profile_reach(s_R, v_R, a1, d1, a2, r_hi, rv_min, rv_max)
+    if not past and (t_in_H == _INF or t_0 + m < t_in_H - m):
+        return True  # in the lane (or standing in its side zone) before any human gets near
+    if past or t_out_H + m < t_in_R - m:  # the human is surely ahead: follow it
+        return _gap_holds(s_R, v_R, a1, d1, a2, s_H, v_H, C)
+    return False
+
+
+@njit(cache=True, _nrt=False)
+def threat(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float, v_H: float,
+           C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> tuple[float, float]:
+    """How soon and for how long some human of the model could overlap the AV along "``a1``
+    for ``d1``, then ``a2``": ``(start, length)`` [s] of the first window in which both may be
+    inside their intervals (``(inf, 0)`` when certified; ``(0, inf)`` when the AV could not
+    follow a leader). Only used to pick the less bad fallback outside the invariant set."""
+    if certified(s_R, v_R, a1, d1, a2, s_H, v_H, C, t_in_H, t_out_H, past):
+        return _INF, 0.0
+    if C[C_SHARED] != 0.0 and (s_R >= C[C_R_HI] or past):
+        return 0.0, _INF
+    rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
+    t_in_R = profile_reach(s_R, v_R, a1, d1, a2, C[C_R_LO], rv_min, rv_max)
+    t_out_R = profile_reach(s_R, v_R, a1, d1, a2, C[C_R_HI], rv_min, rv_max)
+    start = max(t_in_R, t_in_H)
+    return start, max(min(t_out_R, t_out_H) - start, 0.0)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _worse(start_a: float, len_a: float, start_b: float, len_b: float) -> bool:
+    """Threat ``a`` is worse than ``b``: it starts sooner, or as soon and lasts longer."""
+    return start_a < start_b or (start_a == start_b and len_a > len_b)
+
+
+# -- the filter ---------------------------------------------------------------------------------
+
+
+@njit(cache=True, _nrt=False)
+def admissible(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
+               C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
+    """The shield admits ``a`` for one step: "``a``, then ``BRAKE``" or "``a``, then ``GO``"
+    is certified."""
+    return (certified(s_R, v_R, a, dt, C[C_R_UMIN], s_H, v_H, C, t_in_H, t_out_H, past)
+            or certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past))
+
+
+@njit(cache=True, _nrt=False)
+def go_certified(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
+                 C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
+    """"``a``, then ``GO``" is certified: the AV can cross now whatever the human does."""
+    return certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past)
+
+
+@njit(cache=True, _nrt=False)
+def yields_before(s: float, v: float, C: np.ndarray) -> bool:
+    """The AV at ``(s, v)`` can still stand before its occupancy interval by braking now."""
+    return reach_time(s, v, C[C_R_UMIN], C[C_R_LO], C[C_R_VMIN], C[C_R_VMAX]) == _INF
+
+
+@njit(cache=True, _nrt=False)
+def _fallback(s_R: float, v_R: float, dt: float, s_H: float, v_H: float, C: np.ndarray,
+              t_in_H: float, t_out_H: float, past: bool) -> tuple[float, int]:
+    u_min, u_max = C[C_R_UMIN], C[C_R_UMAX]
+    if certified(s_R, v_R, u_min, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past):
+        return u_min, BRAKE
+    if certified(s_R, v_R, u_max, dt, u_max, s_H, v_H, C, t_in_H, t_out_H, past):
+        return u_max, GO
+    # no certified fallback (a state outside the invariant set): the one whose possible
+    # overlap starts latest, or is shortest (ties: brake)
+    sb, lb = threat(s_R, v_R, u_min, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past)
+    sg, lg = threat(s_R, v_R, u_max, dt, u_max, s_H, v_H, C, t_in_H, t_out_H, past)
+    return (u_max if _worse(sb, lb, sg, lg) else u_min), UNCERTIFIED
+
+
+@njit(cache=True, _nrt=False)
+def shield_step(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
+                C: np.ndarray) -> tuple[float, int]:
+    """The shield around one proposed acceleration ``a``: ``(applied acceleration, verdict)``
+    (``ADMITTED``, ``BRAKE``, ``GO`` or ``UNCERTIFIED``; module docstring)."""
+    t_in_H, t_out_H, past = human_window(s_H, v_H, C)
+    if admissible(s_R, v_R, a, dt, s_H, v_H, C, t_in_H, t_out_H, past):
+        return a, ADMITTED
+    return _fallback(s_R, v_R, dt, s_H, v_H, C, t_in_H, t_out_H, past)
+
+
+@njit(cache=True)
+def shield_step_many(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: np.ndarray,
+                     v_H: np.ndarray, C: np.ndarray) -> tuple[float, int]:
+    """The shield against several other vehicles at once (one conflict each: ``s_R[j]`` the
+    AV's position in conflict ``j``'s coordinates, ``s_H[j], v_H[j]`` the other's, ``C[j]``
+    its conflict vector). A trajectory is certified only with one fallback against all of
+    them: ``a`` is admitted if "``a``, then ``F``" is certified against every vehicle for
+    ``F = BRAKE`` or for ``F = GO``; otherwise ``BRAKE`` or ``GO`` if certified against all."""
+    n = s_R.shape[0]
+    if n == 0:
+        return a, ADMITTED
+    t_in = np.empty(n)
+    t_out = np.empty(n)
+    past = np.empty(n, np.bool_)
+    for j in range(n):
+        t_in[j], t_out[j], past[j] = human_window(s_H[j], v_H[j], C[j])
+    u_min, u_max = C[0, C_R_UMIN], C[0, C_R_UMAX]
+    for first, fb, verdict in ((a, u_min, ADMITTED), (a, u_max, ADMITTED),
+                               (u_min, u_min, BRAKE), (u_max, u_max, GO)):
+        ok = True
+        for j in range(n):
+            if not certified(s_R[j], v_R, first, dt, fb, s_H[j], v_H[j], C[j], t_in[j],
+                             t_out[j], past[j]):
+                ok = False
+                break
+        if ok:
+            return first, verdict
+    # no fallback certified against all: the one whose first possible overlap, over all the
+    # vehicles, starts latest, or whose overlaps are shortest in all (ties: brake)
+    sb, lb, sg, lg = _INF, 0.0, _INF, 0.0
+    for j in range(n):
+        s, length = threat(s_R[j], v_R, u_min, dt, u_min, s_H[j], v_H[j], C[j], t_in[j],
+                           t_out[j], past[j])
+        sb, lb = min(sb, s), lb + length
+        s, length = threat(s_R[j], v_R, u_max, dt, u_max, s_H[j], v_H[j], C[j], t_in[j],
+                           t_out[j], past[j])
+        sg, lg = min(sg, s), lg + length
+    return (u_max if _worse(sb, lb, sg, lg) else u_min), UNCERTIFIED
+
+
+__all__ = ["ADMITTED", "BRAKE", "GO", "N_CONFLICT", "TIME_MARGIN_S", "UNCERTIFIED", "VERDICTS",
+           "admissible", "certified", "conflict_vector", "go_certified", "human_window",
+           "profile_reach", "reach_time", "shield_step", "shield_step_many", "yields_before"]
