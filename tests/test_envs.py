@@ -493,6 +493,31 @@ def test_euler_lead_is_the_surplus_of_an_euler_stop(v):
         assert euler_lead(v, b, dt) == 0.0
 
 
+@pytest.mark.parametrize("v, a", [(0.0, 1.0), (0.0, -5.0), (0.1, -5.0), (0.3, -5.0),
+                                  (2.0, 1.0), (2.0, 0.0), (4.37, -2.5), (9.95, 1.0)])
+def test_euler_shift_is_where_an_euler_stop_after_the_first_step_ends(v, a):
+    """One Euler step at ``a`` (the driver keeps the speed in [0, v_max]), then an Euler stop
+    at 5 m/s^2, ends ``euler_shift`` further than the exact step and the exact stop: from rest
+    one step at 1 m/s^2 rolls 0.004 m further (the lead the shield missed when it added
+    the current speed's lead only, and a stopped ego then had no fallback)."""
+    from persuasive.envs.highway import euler_shift
+
+    b, dt, v_max = 5.0, 0.1, 10.0
+    a1 = min(max(a, -v / dt), (v_max - v) / dt)
+    x, speed = v * dt, v + a1 * dt  # the Euler step
+    while speed > 0.0:
+        x += speed * dt
+        speed = max(speed - b * dt, 0.0)
+    v1 = min(max(v + a * dt, 0.0), v_max)
+    t = dt if a == 0.0 else min(dt, (v1 - v) / a)
+    exact = 0.5 * (v + v1) * t + v1 * (dt - t) + v1 * v1 / (2 * b)
+    assert euler_shift(v, a, b, dt, v_max) == pytest.approx(x - exact, abs=1e-12)
+    if v == 0.0 and a == 1.0:
+        assert euler_shift(v, a, b, dt, v_max) == pytest.approx(0.004)
+    if v == 0.0 and a < 0.0:
+        assert euler_shift(v, a, b, dt, v_max) == 0.0
+
+
 @pytest.mark.slow
 def test_the_shielded_planner_does_not_collide_where_the_unshielded_one_did():
     """Seed 1 of highway-env's intersection: the unshielded persuasive planner collides

@@ -37,6 +37,7 @@ each step.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Hashable, Sequence
 
@@ -168,12 +169,13 @@ class ExternalPlanner:
         return planner
 
     def act(self, ego_v_mps: float, conflicts: Sequence[Conflict], dt_s: float,
-            shield_lead_m: float = 0.0) -> Decision:
+            shield_lead_m: float | Callable[[float], float] = 0.0) -> Decision:
         """The ego's acceleration at speed ``ego_v_mps`` among ``conflicts``.
 
         ``shield_lead_m``: the shield takes the ego this much further along its path than the
-        conflicts say (a simulator whose integration lets a braking vehicle roll further than
-        the exact step: highway-env's Euler step, :mod:`persuasive.envs.highway`).
+        conflicts say [m], or a function of the first step's acceleration giving it (a
+        simulator whose integration lets a braking vehicle roll further than the exact step:
+        highway-env's Euler step, :func:`persuasive.envs.highway.euler_shift`).
         """
         ego, clear, human, horizon = self.ego, self._clear_m, self._human, self.plan_horizon_s
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
@@ -212,15 +214,18 @@ class ExternalPlanner:
         return Decision(float(a), float(proposed), verdict, len(accels), len(conflicts))
 
     def shield(self, ego_v_mps: float, proposed_mps2: float, conflicts: Sequence[Conflict],
-               dt_s: float, shield_lead_m: float = 0.0) -> tuple[float, str]:
+               dt_s: float, shield_lead_m: float | Callable[[float], float] = 0.0
+               ) -> tuple[float, str]:
         """The shield alone (no planning): ``(acceleration to apply [m/s^2], verdict)`` for
         the proposal ``proposed_mps2`` at speed ``ego_v_mps`` among ``conflicts``, as
         :meth:`act` applies it (``shield_lead_m``: as there)."""
         ego = self.ego
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
         s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
-        a, code = sh.shield_step_many(v, float(proposed_mps2), dt_s, s_R + shield_lead_m, s_H,
-                                      v_H, C)
+        a = float(proposed_mps2)
+        lead = shield_lead_m if callable(shield_lead_m) else (lambda _: float(shield_lead_m))
+        a, code = sh.shield_step_many(v, a, dt_s, s_R, s_H, v_H, C, lead(a),
+                                      lead(ego.u_min_mps2), lead(ego.u_max_mps2))
         return float(a), sh.VERDICTS[code]
 
 

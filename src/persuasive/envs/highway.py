@@ -38,9 +38,11 @@ ego's line), one in the ego's lane ahead of it is followed. Its limits are highw
 highway-env integrates positions with the speed of the step's start (Euler): a braking ego
 rolls further than the planner's exact step says, by ``v dt / 2`` from speed ``v`` plus at most
 ``b dt^2 / 8`` for the last, partial step of deceleration ``b`` (the speed is clipped at 0), and
-an accelerating one lags behind it. The shield therefore takes the ego
-that much further along than it is (:func:`euler_lead`: the exact Euler surplus of a stop at
-``u_min``, 0 at rest), and the far end of the ego's
+an accelerating one lags behind it. The shield therefore takes the ego, for each first step it
+checks, that much further along than the exact kinematics after that step
+(:func:`euler_shift`: the Euler step's own displacement against the exact one, plus
+:func:`euler_lead`, the exact Euler surplus of a stop at ``u_min`` from the new speed; 0 for
+an ego at rest that stays at rest), and the far end of the ego's
 occupancy is widened by ``v_max dt`` for the lag (at ``u_max = 1 m/s^2`` it stays below that
 for the 10 s it takes the ego to accelerate from rest to ``v_max``); the other vehicles' near
 ends by their ``v_max dt / 2`` (an Euler vehicle that stops, stops that much further). The acceleration is finally limited so
@@ -536,8 +538,12 @@ class PlannerDriver:
         ego = env.unwrapped.vehicle
         conflicts = projector.conflicts(ego, env.unwrapped.road.vehicles)
         dt = 1.0 / FREQUENCY_HZ
-        lead = euler_lead(float(ego.speed), abs(av.u_min_mps2), dt)
-        decision = self.planner.act(float(ego.speed), conflicts, dt, shield_lead_m=lead)
+        v = float(ego.speed)
+
+        def lead(a: float) -> float:  # the Euler step's lead after a first step at a
+            return euler_shift(v, a, abs(av.u_min_mps2), dt, av.v_max_mps)
+
+        decision = self.planner.act(v, conflicts, dt, shield_lead_m=lead)
         self.last_targets = decision.targets
         if decision.verdict not in (None, "admitted"):
             self.interventions += 1
@@ -561,6 +567,27 @@ def euler_lead(v_mps: float, brake_mps2: float, dt_s: float) -> float:
     m = math.ceil(v_mps / (brake_mps2 * dt_s)) - 1  # the last step with a positive start speed
     euler = dt_s * ((m + 1) * v_mps - brake_mps2 * dt_s * m * (m + 1) / 2.0)
     return max(euler - v_mps * v_mps / (2.0 * brake_mps2), 0.0)
+
+
+def euler_shift(v_mps: float, a_mps2: float, brake_mps2: float, dt_s: float,
+                v_max_mps: float) -> float:
+    """How much further highway-env's Euler steps take a vehicle at ``v_mps`` that applies
+    ``a_mps2`` for one step, then brakes at ``brake_mps2`` to rest, than the exact kinematics
+    the shield certifies with [m] (module docstring).
+
+    The Euler step moves ``v dt`` where the exact one moves the integral of the speed
+    (clipped to ``[0, v_max]``), and from the new speed ``v'`` the Euler stop rolls
+    :func:`euler_lead` ``(v')`` further. This is what the shield must add for the state after
+    the step it admits: a lead of the *current* speed alone is too small after an
+    acceleration from rest (0 at rest, but ``0.004 m`` after one step at 1 m/s^2), and a
+    stopped ego then finds no fallback one step later."""
+    v1 = min(max(v_mps + a_mps2 * dt_s, 0.0), v_max_mps)
+    if a_mps2 == 0.0 or v1 == v_mps + a_mps2 * dt_s:
+        exact = 0.5 * (v_mps + v1) * dt_s
+    else:  # the speed reaches its bound within the step, then holds it
+        t = (v1 - v_mps) / a_mps2
+        exact = 0.5 * (v_mps + v1) * t + v1 * (dt_s - t)
+    return v_mps * dt_s - exact + euler_lead(v1, brake_mps2, dt_s)
 
 
 def euler_margin(config: Config) -> float:

@@ -129,10 +129,8 @@ def reach_time(s: float, v: float, a: float, target: float, v_min: float,
         v_lim = v_min
         t_sat = (v_min - v) / a
         d_sat = (v_min * v_min - v * v) / (2.0 * a)
-    else:
-        v_lim = v
-        t_sat = _INF
-        d_sat = _INF
+    else:  # constant speed (not the root below: v * v underflows for a speed of 1e-160)
+        return d / v if v > 0.0 else _INF
     if d <= d_sat:  # reached before the speed saturates
         disc = max(v * v + 2.0 * a * d, 0.0)
         den = v + math.sqrt(disc)
@@ -374,12 +372,19 @@ def shield_step(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: fl
 
 @njit(cache=True)
 def shield_step_many(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: np.ndarray,
-                     v_H: np.ndarray, C: np.ndarray) -> tuple[float, int]:
+                     v_H: np.ndarray, C: np.ndarray, lead_a: float = 0.0,
+                     lead_brake: float = 0.0, lead_go: float = 0.0) -> tuple[float, int]:
     """The shield against several other vehicles at once (one conflict each: ``s_R[j]`` the
     AV's position in conflict ``j``'s coordinates, ``s_H[j], v_H[j]`` the other's, ``C[j]``
     its conflict vector). A trajectory is certified only with one fallback against all of
     them: ``a`` is admitted if "``a``, then ``F``" is certified against every vehicle for
-    ``F = BRAKE`` or for ``F = GO``; otherwise ``BRAKE`` or ``GO`` if certified against all."""
+    ``F = BRAKE`` or for ``F = GO``; otherwise ``BRAKE`` or ``GO`` if certified against all.
+
+    ``lead_a``, ``lead_brake``, ``lead_go`` [m]: how much further along its path the AV is
+    taken when its first step is ``a``, ``u_min`` or ``u_max`` (0: the exact kinematics). A
+    simulator that integrates differently from the exact step (highway-env's Euler step,
+    :func:`persuasive.envs.highway.euler_shift`) hands in how much further its vehicle rolls
+    to a stop after that first step than the exact kinematics say."""
     n = s_R.shape[0]
     if n == 0:
         return a, ADMITTED
@@ -389,11 +394,12 @@ def shield_step_many(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: np.n
     for j in range(n):
         t_in[j], t_out[j], past[j] = human_window(s_H[j], v_H[j], C[j])
     u_min, u_max = C[0, C_R_UMIN], C[0, C_R_UMAX]
-    for first, fb, verdict in ((a, u_min, ADMITTED), (a, u_max, ADMITTED),
-                               (u_min, u_min, BRAKE), (u_max, u_max, GO)):
+    for first, fb, verdict, lead in ((a, u_min, ADMITTED, lead_a), (a, u_max, ADMITTED, lead_a),
+                                     (u_min, u_min, BRAKE, lead_brake),
+                                     (u_max, u_max, GO, lead_go)):
         ok = True
         for j in range(n):
-            if not certified(s_R[j], v_R, first, dt, fb, s_H[j], v_H[j], C[j], t_in[j],
+            if not certified(s_R[j] + lead, v_R, first, dt, fb, s_H[j], v_H[j], C[j], t_in[j],
                              t_out[j], past[j]):
                 ok = False
                 break
@@ -403,11 +409,11 @@ def shield_step_many(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: np.n
     # vehicles, starts latest, or whose overlaps are shortest in all (ties: brake)
     sb, lb, sg, lg = _INF, 0.0, _INF, 0.0
     for j in range(n):
-        s, length = threat(s_R[j], v_R, u_min, dt, u_min, s_H[j], v_H[j], C[j], t_in[j],
-                           t_out[j], past[j])
+        s, length = threat(s_R[j] + lead_brake, v_R, u_min, dt, u_min, s_H[j], v_H[j], C[j],
+                           t_in[j], t_out[j], past[j])
         sb, lb = min(sb, s), lb + length
-        s, length = threat(s_R[j], v_R, u_max, dt, u_max, s_H[j], v_H[j], C[j], t_in[j],
-                           t_out[j], past[j])
+        s, length = threat(s_R[j] + lead_go, v_R, u_max, dt, u_max, s_H[j], v_H[j], C[j],
+                           t_in[j], t_out[j], past[j])
         sg, lg = min(sg, s), lg + length
     return (u_max if _worse(sb, lb, sg, lg) else u_min), UNCERTIFIED
 
