@@ -55,7 +55,7 @@ def policy_params(config: Config, side: int, p_a_prior: np.ndarray | None = None
 
     ``p_a_prior`` ``(mpc.p_a_grid,)``: for a persuasive AV with ``mpc.p_a_hat = "online"``,
     the prior masses over the grid in place of the Beta prior's (e.g. the posterior at the end
-    of an earlier interaction with the same human); normalised here."""
+    of an earlier interaction with the same human); only their ratios matter."""
     spec = kind_of(config, side)
     if spec.kind in (kd.LFG, kd.STUBBORN, kd.NOISY):
         from .lfg import PRM_ADAPT, PRM_BETA, PRM_P_A, PRM_ROLE
@@ -108,7 +108,7 @@ def _check_prior(prior, n: int) -> np.ndarray:
     if w.shape != (n,) or not np.all(np.isfinite(w)) or np.any(w < 0.0) or not w.sum() > 0.0:
         raise ConfigError(f"p_a_prior must be {n} finite masses >= 0 with a positive sum "
                           f"(one per point of mpc.p_a_grid = {n})")
-    return w / w.sum()
+    return w  # only ratios matter: the posterior is normalised at every step
 
 
 def state_size(prm: np.ndarray, kind: int) -> int:
