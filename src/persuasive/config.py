@@ -333,9 +333,14 @@ class SimulationParams:
     #: random streams: "legacy" (one MT19937 stream, the reference's order; paper mode) or
     #: "per-agent" (independent streams per agent and for the initial state; corrected mode)
     streams: StreamLayout | None = None
+    #: repeated interactions with one human per seed (docs/method.md §13.8): the same human,
+    #: fresh initial states, the AV's online posterior over p_a carried over; unset means 1
+    interactions: int | None = None
 
     def __post_init__(self) -> None:
         p = "simulation."
+        if self.interactions is not None:
+            _in_range(p + "interactions", self.interactions, 1, 1000, integer=True)
         _in_range(p + "dt_s", self.dt_s, 0.0, 10.0, lo_open=True)
         _in_range(p + "n_steps", self.n_steps, 1, 100_000, integer=True)
         _choice(p + "measurement_noise", self.measurement_noise, NOISE_KINDS)

@@ -82,7 +82,7 @@ def check_interaction(k) -> int:
     return int(k)
 
 
-def simulate_interactions(config: Config, seed: int, interactions: int,
+def simulate_interactions(config: Config, seed: int, interactions: int | None = None,
                           p_a_prior: np.ndarray | None = None) -> list[RunRecord]:
     """``interactions`` runs of the AV with one human (docs/method.md §13.8): the same human
     kind, ``p_a`` and initial-role setting; interaction ``k`` draws its initial state and
@@ -90,7 +90,10 @@ def simulate_interactions(config: Config, seed: int, interactions: int,
     is ``simulate(config, seed)``). With ``mpc.p_a_hat = "online"`` the AV's posterior over
     ``p_a`` at the end of each interaction is the next one's prior (the first's is
     ``p_a_prior``, default the Beta prior); every other AV starts each interaction afresh, as
-    the human does (its role belief and role start from the configuration)."""
+    the human does (its role belief and role start from the configuration).
+    ``interactions``: default ``simulation.interactions`` (unset: 1)."""
+    if interactions is None:
+        interactions = config.simulation.interactions or 1
     if isinstance(interactions, bool) or not isinstance(interactions, (int, np.integer)) \
             or not 1 <= interactions <= 10**6:
         raise ConfigError(f"interactions = {interactions!r} is out of range; allowed: "
@@ -105,5 +108,27 @@ def simulate_interactions(config: Config, seed: int, interactions: int,
     return out
 
 
-__all__ = ["ARRIVAL_LABELS", "RunOutcome", "RunRecord", "check_interaction", "check_seed",
+#: Per-interaction values of :func:`run_summary` (``by_interaction.<name>.<k>``).
+BY_INTERACTION = ("first_at_line", "infeasible_steps", "collision", "hv_role_changes",
+                  "pa_hat_final")
+
+
+def run_summary(config: Config, seed: int) -> dict:
+    """The summary of the run of ``seed`` (``RunRecord.summary``). With
+    ``simulation.interactions = K > 1``: the last interaction's summary, plus
+    ``interactions = K`` and ``by_interaction``, a list per :data:`BY_INTERACTION` value
+    (``pa_hat_final`` only online) over the K interactions (what the sweeps and ``compare``
+    store)."""
+    k = config.simulation.interactions or 1
+    if k == 1:
+        return simulate(config, seed).summary()
+    summaries = [r.summary() for r in simulate_interactions(config, seed, k)]
+    out = dict(summaries[-1])
+    out["interactions"] = k
+    out["by_interaction"] = {name: [s[name] for s in summaries] for name in BY_INTERACTION
+                             if name in summaries[0]}
+    return out
+
+
+__all__ = ["ARRIVAL_LABELS", "BY_INTERACTION", "run_summary", "RunOutcome", "RunRecord", "check_interaction", "check_seed",
            "load_record", "simulate", "simulate_interactions"]
