@@ -179,10 +179,20 @@ def online_step(st: np.ndarray, o: int, prm: np.ndarray, q: int, e_l: float, e_f
     return st[o]
 
 
+@njit(cache=True, _nrt=False)
+def online_replay(st: np.ndarray, o: int, prm: np.ndarray, q: int, obs: np.ndarray,
+                  sigma: float, pi0: float, means: np.ndarray) -> None:
+    """:func:`online_step` over a sequence ``obs`` ``(n, 3)`` of ``(e_l, e_f, plausible)``,
+    the mean after each into ``means`` ``(n,)`` (the bench times the update with it)."""
+    for k in range(obs.shape[0]):
+        means[k] = online_step(st, o, prm, q, obs[k, 0], obs[k, 1], sigma, obs[k, 2], pi0)
+
+
 def posterior_of(state: np.ndarray, o: int, n: int) -> np.ndarray:
     """A copy of the posterior over the grid ``(n,)`` held in a state at offset ``o``."""
     return np.array(state[o + 1 + 6 * n:o + 1 + 7 * n])
 
 
-__all__ = ["online_init", "online_mean", "online_params", "online_step", "params_size",
+__all__ = ["online_init", "online_mean", "online_params", "online_replay", "online_step",
+           "params_size",
            "posterior_of", "prior_masses", "state_size"]
