@@ -321,3 +321,58 @@ def test_cli_rejects_a_bad_p_a_hat_and_reports_online(capsys):
 def test_default_configuration_digest_unchanged():
     """The new fields are unset by default, so existing configurations keep their digests."""
     assert "p_a_prior" not in Config().to_toml() and "p_a_grid" not in Config().to_toml()
+
+
+# -- K interactions in the commands and the sweeps -------------------------------------------
+
+
+def test_simulate_command_runs_k_interactions(capsys):
+    import json
+
+    args = ["simulate", "--mode", "corrected", "--pa-hat", "online", "--set",
+            "mpc.p_a_prior=[30, 1]", "--seed", "3", "--interactions", "3"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    recs = simulate_interactions(corrected(**ONLINE, **{"mpc.p_a_prior": [30, 1]}), 3, 3)
+    for r in recs:
+        assert (f"interaction {r.interaction + 1}: first at the line: "
+                f"{['neither', 'AV', 'HV', 'same step'][r.outcome.first_at_line]}") in out
+        assert f"p_a_hat at the end {r.log['av_p_a_hat'][-1]:.4f}" in out
+    assert main(args + ["--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["interactions"] == 3
+    assert payload["by_interaction"]["pa_hat_final"] == [float(r.log["av_p_a_hat"][-1])
+                                                         for r in recs]
+    assert payload["first_at_line"] == recs[-1].outcome.first_at_line
+    assert main(args + ["--out", "x.parquet"]) == 2
+
+
+@pytest.mark.slow
+def test_compare_and_sweep_take_interactions(tmp_path):
+    """A sweep axis over simulation.interactions: each row holds every interaction's values,
+    equal to simulate_interactions; compare reports AV first % per interaction."""
+    from persuasive import sweep
+    from persuasive.studies import compare as cmp
+
+    base = corrected(**ONLINE, **{"mpc.p_a_prior": [30, 1]})
+    grid = sweep.Grid.from_dict({"seeds": 2, "base": base.to_dict(),
+                                 "axes": {"simulation.interactions": [1, 3]}})
+    sweep.run(grid, tmp_path / "s", workers=1)
+    frame = sweep.load(tmp_path / "s")
+    rows = frame[frame["simulation.interactions"] == 3]
+    assert len(rows) == 2
+    for _, row in rows.iterrows():
+        recs = simulate_interactions(base, int(row["seed"]), 3)
+        for k, r in enumerate(recs):
+            assert row[f"by_interaction.first_at_line.{k}"] == r.outcome.first_at_line
+            assert row[f"by_interaction.pa_hat_final.{k}"] == r.log["av_p_a_hat"][-1]
+    result = cmp.run_comparison(base.with_overrides({"simulation.interactions": 2}),
+                                ("persuasive",), ("lfg",), seeds=3, out=tmp_path / "c",
+                                workers=1, timing_seeds=1)
+    row = result.summary["rows"][0]
+    assert row["interactions"] == 2 and len(row["av_first_pct_by_interaction"]) == 2
+    firsts = [[r.outcome.first_at_line for r in simulate_interactions(
+        base.with_overrides({"simulation.streams": "per-agent"}), s, 2)] for s in (1, 2, 3)]
+    assert row["av_first_pct_by_interaction"] == pytest.approx(
+        [100 * np.mean([f[k] == 1 for f in firsts]) for k in range(2)])
+    assert "AV first % in interaction 2" in cmp.to_markdown(result.summary)
