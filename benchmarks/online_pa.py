@@ -1,5 +1,5 @@
 """The online posterior over p_a: its learning curve over repeated interactions with one human
-(docs/method.md §13.8; issue 19, item 3).
+(docs/method.md §13.9; issue 19, item 3).
 
 Corrected mode with its defaults (the worst-case shield, per-agent streams, epsilon = 0.02) at
 the intersection. Each human is a seed ``s`` in ``1..--humans``: the paper's human (LFG,

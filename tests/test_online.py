@@ -1,4 +1,4 @@
-"""The planner's online posterior over p_a (docs/method.md §13.8; persuasive.online): the
+"""The planner's online posterior over p_a (docs/method.md §13.9; persuasive.online): the
 compiled grid filter against a brute-force sum over role sequences, the planner's posterior
 against an independent forward pass over a simulated run's own residuals and plausible roles,
 a point-mass prior against the fixed-p_a_hat planner (bit for bit), the direction it learns

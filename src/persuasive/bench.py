@@ -17,7 +17,7 @@ code, as a user pays it):
   MPC then also checks its candidates against the shield and tracks its confidence in the
   human model, docs/method.md §12.3), replayed along the same states;
 - ``online_update_us_median`` / ``_p99``: the online posterior over ``p_a``
-  (``mpc.p_a_hat = "online"``, docs/method.md §13.8, 21 grid points) alone: one step of its
+  (``mpc.p_a_hat = "online"``, docs/method.md §13.9, 21 grid points) alone: one step of its
   filter and its posterior mean, timed as batches of 61 steps (one run each, compiled loop,
   residuals drawn ``N(0, 0.3^2)``) per step, microseconds; and
   ``online_decision_ms_median``: the planner's decision with it, replayed along the same

@@ -212,7 +212,7 @@ class MPCParams:
 
     epsilon: float = 0.02  #: chance-constraint level: P(safe) > 1 - epsilon at every sample [-]
     #: the AV's estimate of p_a [-]; None means equal to roles.p_a; "online": a posterior over
-    #: p_a on a grid, updated every step (docs/method.md §13.8)
+    #: p_a on a grid, updated every step (docs/method.md §13.9)
     p_a_hat: float | str | None = None
     #: online only: the Beta(a, b) prior over p_a [-], both > 0; unset means (7, 3), mean 0.7
     p_a_prior: tuple[float, float] | None = None
@@ -333,7 +333,7 @@ class SimulationParams:
     #: random streams: "legacy" (one MT19937 stream, the reference's order; paper mode) or
     #: "per-agent" (independent streams per agent and for the initial state; corrected mode)
     streams: StreamLayout | None = None
-    #: repeated interactions with one human per seed (docs/method.md §13.8): the same human,
+    #: repeated interactions with one human per seed (docs/method.md §13.9): the same human,
     #: fresh initial states, the AV's online posterior over p_a carried over; unset means 1
     interactions: int | None = None
 

@@ -1,4 +1,4 @@
-"""The planner's online posterior over the human's ``p_a`` (docs/method.md §13.8).
+"""The planner's online posterior over the human's ``p_a`` (docs/method.md §13.9).
 
 With ``mpc.p_a_hat = "online"`` the persuasive planner does not assume the human's willingness
 to change role: it keeps a posterior over ``p_a`` on a grid ``p_g = g / (G - 1)``,

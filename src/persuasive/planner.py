@@ -86,7 +86,7 @@ class Planner:
         :attr:`p_a_posterior` saved after earlier encounters with the same human.
 
     With ``mpc.p_a_hat = "online"`` the planner keeps a posterior over the human's ``p_a``
-    (docs/method.md §13.8) and plans with its mean (:attr:`p_a_hat`). :meth:`reset` starts a
+    (docs/method.md §13.9) and plans with its mean (:attr:`p_a_hat`). :meth:`reset` starts a
     new encounter; ``reset(keep_posterior=True)`` when it is with the same human carries the
     posterior over as the new encounter's prior (the role belief starts afresh).
     """

@@ -84,7 +84,7 @@ def check_interaction(k) -> int:
 
 def simulate_interactions(config: Config, seed: int, interactions: int | None = None,
                           p_a_prior: np.ndarray | None = None) -> list[RunRecord]:
-    """``interactions`` runs of the AV with one human (docs/method.md §13.8): the same human
+    """``interactions`` runs of the AV with one human (docs/method.md §13.9): the same human
     kind, ``p_a`` and initial-role setting; interaction ``k`` draws its initial state and
     every random number from ``persuasive.streams.interaction_seed(seed, k)`` (interaction 0
     is ``simulate(config, seed)``). With ``mpc.p_a_hat = "online"`` the AV's posterior over

@@ -109,7 +109,7 @@ PA_HAT = _PaHat()
 #: ``--interactions``: repeated interactions with one human per seed.
 INTERACTIONS_HELP = ("Repeated interactions with one human per seed (same human, fresh "
                      "initial states; an online AV carries its posterior over p_a; "
-                     "docs/method.md §13.8) [1].")
+                     "docs/method.md §13.9) [1].")
 
 
 def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable:
@@ -128,7 +128,7 @@ def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable
         click.option("--pa", type=float, default=None, help="Human's p_a in [0, 1] [1.0]."),
         click.option("--pa-hat", type=PA_HAT, default=None,
                      help="AV's estimate of p_a in [0, 1], or online (a posterior over p_a, "
-                          "docs/method.md §13.8) [equal to --pa]."),
+                          "docs/method.md §13.9) [equal to --pa]."),
         click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default=None,
                      help="Geometry [intersection]: intersection, crossing, left-turn, merge."),
         click.option("--seed", type=int, default=seed_default, show_default=True,

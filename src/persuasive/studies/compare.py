@@ -265,7 +265,7 @@ def pair_row(frame, av: str, hv: str, timing: float | None,
 
 def by_interaction(frame) -> dict[str, Any]:
     """With ``simulation.interactions = K > 1`` (repeated interactions with one human per
-    seed; docs/method.md §13.8): per interaction, the share of runs the AV was first, the runs
+    seed; docs/method.md §13.9): per interaction, the share of runs the AV was first, the runs
     and steps where the chance constraint failed and, online, the mean of the AV's final
     estimate of p_a. Empty without repeated interactions."""
     k = 0
@@ -466,7 +466,7 @@ def to_markdown(summary: dict[str, Any]) -> str:
         k = repeated[0]["interactions"]
         head = name + [f"AV first % in interaction {i + 1}" for i in range(k)]
         lines += ["", f"Repeated interactions with one human per seed ({k} each; docs/method.md "
-                  "§13.8): AV first % per interaction (in brackets, runs where the chance "
+                  "§13.9): AV first % per interaction (in brackets, runs where the chance "
                   "constraint failed):", "",
                   "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for r in repeated:
