@@ -376,3 +376,12 @@ def test_compare_and_sweep_take_interactions(tmp_path):
     assert row["av_first_pct_by_interaction"] == pytest.approx(
         [100 * np.mean([f[k] == 1 for f in firsts]) for k in range(2)])
     assert "AV first % in interaction 2" in cmp.to_markdown(result.summary)
+
+
+def test_a_prior_without_an_online_planner_is_refused():
+    with pytest.raises(ConfigError, match="p_a_prior"):
+        simulate(corrected(**{"mpc.p_a_hat": 0.7}), 1, p_a_prior=np.ones(21))
+    with pytest.raises(ConfigError, match="p_a_prior must be 21 finite masses"):
+        Planner(corrected(**ONLINE), p_a_prior=np.ones(5))
+    with pytest.raises(ConfigError, match="interaction = -1 is out of range"):
+        simulate(corrected(**ONLINE), 1, interaction=-1)

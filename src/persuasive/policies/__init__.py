@@ -57,6 +57,9 @@ def policy_params(config: Config, side: int, p_a_prior: np.ndarray | None = None
     the prior masses over the grid in place of the Beta prior's (e.g. the posterior at the end
     of an earlier interaction with the same human); only their ratios matter."""
     spec = kind_of(config, side)
+    if p_a_prior is not None and not (config.p_a_online and spec.kind == kd.PERSUASIVE):
+        raise ConfigError("p_a_prior is a prior over p_a for the persuasive planner with "
+                          'mpc.p_a_hat = "online"; this configuration keeps none')
     if spec.kind in (kd.LFG, kd.STUBBORN, kd.NOISY):
         from .lfg import PRM_ADAPT, PRM_BETA, PRM_P_A, PRM_ROLE
 
