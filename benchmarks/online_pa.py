@@ -50,7 +50,15 @@ SETTINGS = {
     "fixed 0.95": (1.0, {"mpc.p_a_hat": 0.95}),
     "online, p_a = 0.3": (0.3, {"mpc.p_a_hat": "online"}),
     "fixed 0.7, p_a = 0.3": (0.3, {"mpc.p_a_hat": 0.7}),
+    # a prior that already tries to persuade at epsilon = 0.02 (--settings extra)
+    "online Beta(30, 1)": (1.0, {"mpc.p_a_hat": "online", "mpc.p_a_prior": [30, 1]}),
+    "fixed 0.97": (1.0, {"mpc.p_a_hat": 0.97}),
+    "online Beta(30, 1), p_a = 0.3": (0.3, {"mpc.p_a_hat": "online", "mpc.p_a_prior": [30, 1]}),
+    "fixed 0.97, p_a = 0.3": (0.3, {"mpc.p_a_hat": 0.97}),
 }
+#: The issue's settings (``--settings all``) and the extra ones (``--settings extra``).
+MAIN = tuple(list(SETTINGS)[:6])
+EXTRA = tuple(list(SETTINGS)[6:])
 #: Interactions printed in the table (1-based).
 SHOWN = (1, 2, 3, 5, 10, 20, 30)
 
@@ -120,15 +128,15 @@ def to_markdown(summary: dict) -> str:
              "paper's human p_a = 1, leader start; corrected mode):", "",
              "| planner | " + " | ".join(f"{i}" for i in shown) + " |",
              "|---|" + "---|" * len(shown)]
-    for name in ("online", "informed", "fixed 0.7", "fixed 0.95"):
+    for name in [n for n in rows if SETTINGS[n][0] == 1.0]:
         if name in rows:
             lines.append(f"| {name} | " + " | ".join(
                 f"{rows[name]['av_first_pct'][i - 1]:.1f}" for i in shown) + " |")
-    if "online" in rows:
-        r = rows["online"]
-        lines.append("| online: mean p_a_hat at the end | " + " | ".join(
+    for name in [n for n in rows if SETTINGS[n][0] == 1.0 and n.startswith("online")]:
+        r = rows[name]
+        lines.append(f"| {name}: mean p_a_hat at the end | " + " | ".join(
             f"{r['pa_hat_final_mean'][i - 1]:.4f}" for i in shown) + " |")
-        lines.append("| online: steps the human could change role / run | " + " | ".join(
+        lines.append(f"| {name}: steps the human could change role / run | " + " | ".join(
             f"{r['informative_steps_mean'][i - 1]:.3f}" for i in shown) + " |")
     if "online" in rows and "fixed 0.7" in rows:
         gap = np.array(rows["online"]["av_first_pct"]) - np.array(rows["fixed 0.7"]["av_first_pct"])
@@ -138,7 +146,7 @@ def to_markdown(summary: dict) -> str:
     if "online" in rows and "informed" in rows:
         gap = np.array(rows["online"]["av_first_pct"]) - np.array(rows["informed"]["av_first_pct"])
         lines += [f"gap online - informed at interaction {k}: {gap[-1]:+.1f} points"]
-    reck = [n for n in ("online, p_a = 0.3", "fixed 0.7, p_a = 0.3") if n in rows]
+    reck = [n for n in rows if SETTINGS[n][0] != 1.0]
     if reck:
         lines += ["", "Recklessness check, human p_a = 0.3 (leader start), all interactions:", "",
                   "| planner | runs | runs with cc failed | steps with cc failed | collisions | "
@@ -148,7 +156,7 @@ def to_markdown(summary: dict) -> str:
             lines.append(f"| {n} | {r['humans'] * k} | {sum(r['cc_fail_runs'])} | "
                          f"{sum(r['cc_fail_steps'])} | {sum(r['collisions'])} | "
                          f"{np.mean(r['av_first_pct']):.1f} | {r['pa_hat_final_mean'][-1]:.4f} |")
-    cc = [n for n in ("online", "informed", "fixed 0.7", "fixed 0.95") if n in rows]
+    cc = [n for n in rows if SETTINGS[n][0] == 1.0]
     lines += ["", "Chance-constraint failures with the paper's human (runs / steps over all "
               "interactions): " + "; ".join(
                   f"{n} {sum(rows[n]['cc_fail_runs'])} / {sum(rows[n]['cc_fail_steps'])}"
@@ -163,18 +171,21 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=25, help="humans per task")
     ap.add_argument("--settings", default="all",
-                    help="comma-separated setting names (default: all): " + "; ".join(SETTINGS))
+                    help="all (the issue's six settings), extra (a prior that tries to "
+                         "persuade, Beta(30, 1), beside fixed 0.97), or names separated by "
+                         "';': " + "; ".join(SETTINGS))
     ap.add_argument("--out", default="results/online-pa")
     args = ap.parse_args(argv)
-    names = list(SETTINGS) if args.settings == "all" else \
-        [s.strip() for s in args.settings.split(";")]
+    names = list(MAIN) if args.settings == "all" else list(EXTRA) \
+        if args.settings == "extra" else [s.strip() for s in args.settings.split(";")]
     for n in names:
         if n not in SETTINGS:
             print(f"error: unknown setting {n!r}", file=sys.stderr)
             return 2
     folder = Path(args.out)
     (folder / "parts").mkdir(parents=True, exist_ok=True)
-    meta = {"humans": args.humans, "interactions": args.interactions, "chunk": args.chunk}
+    meta = {"humans": args.humans, "interactions": args.interactions, "chunk": args.chunk,
+            "settings": names}
     meta_path = folder / "benchmark.json"
     if meta_path.exists() and json.loads(meta_path.read_text()) != meta:
         print(f"error: {folder} holds another run ({meta_path.read_text().strip()})",
@@ -184,7 +195,7 @@ def main(argv=None) -> int:
     config_of(names[0]).digest()  # fail early on a bad setting
     from persuasive.simulation import simulate
 
-    simulate(config_of("online"), 1)  # compile (or load the cache) before forking
+    simulate(config_of(names[0]), 1)  # compile (or load the cache) before forking
     todo, parts = [], {n: [] for n in names}
     for n in names:
         for start in range(1, args.humans + 1, args.chunk):
