@@ -104,10 +104,16 @@ def _interactions(config, seed: int, as_json: bool) -> None:
         click.echo(json.dumps(out))
         return
     online = config.p_a_online and config.av.kind == "persuasive"
+    if online:
+        import numpy as np
+
+        a, b = config.p_a_prior
+        w = records[0].p_a_prior
+        start = float(w @ np.linspace(0.0, 1.0, w.size) / w.sum())
     click.echo(f"{config.av.kind} AV, {config.hv.kind} HV starting as {config.hv.role}, "
                f"p_a = {config.roles.p_a:g}, "
-               + (f"p_a_hat online (prior Beta{config.p_a_prior}, mean {config.p_a_hat:.3f})"
-                  if online else f"p_a_hat = {config.p_a_hat:g}")
+               + (f"p_a_hat online (prior Beta({a:g}, {b:g}) on {config.p_a_grid} points, "
+                  f"mean {start:.4f})" if online else f"p_a_hat = {config.p_a_hat:g}")
                + f", seed {seed}, {len(records)} interactions, {config.mode} mode")
     for r, s in zip(records, summaries):
         o = r.outcome
