@@ -43,8 +43,11 @@ whenever both roles are fed (``p_a > 0`` and a chance to change) or a filter sta
 known role, but a single filter started from a mixed prior could drop the initial role that
 later steps favour (with ``p_a = 0`` nothing feeds it again). So the offline likelihood runs
 one filter per initial role and mixes them by ``pi0`` (which also makes the maximisation over
-``pi0`` exact), and an online posterior should keep two rows per ``p_a`` value, one per
-initial role, weighted by its prior.
+``pi0`` exact), and the planner's online posterior (:mod:`persuasive.online`, docs/method.md
+§13.9) keeps two rows per ``p_a`` value, one per initial role, weighted by its prior.
+
+This module sits below the policies (it imports only :mod:`persuasive.roles`) so that the
+planner runs it; :mod:`persuasive.fitting.filter` re-exports it for the fit.
 """
 
 from __future__ import annotations

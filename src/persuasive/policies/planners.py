@@ -1,10 +1,13 @@
 """The AV's model-based planners (docs/method.md §6, §11): ``persuasive``, ``passive``, ``cv``.
 
 - ``persuasive``: the paper's branch MPC (``persuasive.mpc.decide``) with interactive
-  prediction and role persuasion; parameter ``p_a_hat``.
+  prediction and role persuasion; parameter ``p_a_hat``, fixed or, with
+  ``mpc.p_a_hat = "online"``, the mean of a posterior over ``p_a`` updated every step
+  (:mod:`persuasive.online`, docs/method.md §13.9; its block follows the MPC's state slots, and
+  the replay of the model human's plausible role runs for it whether or not the shield is on).
 - ``passive``: the same MPC, the same belief ``q`` and the same re-solves at T1, but the AV
   assumes its plan does not change the human's role (``Pi_hat`` is the identity, as with
-  ``p_a_hat = 0``): it predicts, it does not persuade.
+  ``p_a_hat = 0``): it predicts, it does not persuade (``"online"`` changes nothing for it).
 - ``cv``: the same candidates and chance constraint against a human holding its current speed
   (``persuasive.mpc.decide_cv``); it keeps no belief.
 
