@@ -385,3 +385,27 @@ def test_a_prior_without_an_online_planner_is_refused():
         Planner(corrected(**ONLINE), p_a_prior=np.ones(5))
     with pytest.raises(ConfigError, match="interaction = -1 is out of range"):
         simulate(corrected(**ONLINE), 1, interaction=-1)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_model_is_the_paper_human(seed):
+    """Against the paper's human the HMM is exact: the planner's replayed plausible role at the
+    start of step k is the human's own at step k - 1 (its log; a tie is its own role), and the
+    residual of the role the human acted in at step k - 1 is exactly 0."""
+    world = PythonWorld(corrected(**ONLINE), seed)
+    seen = []
+    while not world.done:
+        before = world.av.state.copy()
+        world.step()
+        seen.append(before)
+    log = world.record().log
+    dt = world.dt
+    for k in range(1, len(seen)):
+        st = seen[k]
+        own = 1.0 if log["hv_role"][k - 1] == "leader" else 0.0
+        # an exact belief tie (0.5 in the replay) is the human's own role (§5.1)
+        assert (own if st[PLAUSIBLE_PREV] == 0.5 else st[PLAUSIBLE_PREV]) == \
+            log["hv_plausible_leader"][k - 1]
+        v_hat = st[PRED_L_V] if log["hv_role"][k - 1] == "leader" else st[PRED_F_V]
+        assert (log["hv_meas_v_mps"][k] - v_hat) / dt == 0.0
+    assert (log["hv_role"] != log["hv_role"][0]).any()  # the human changed role on the way
