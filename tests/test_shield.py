@@ -268,7 +268,8 @@ def run_with_human(config: Config, accels: np.ndarray, seed: int = 1):
     run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind,
              policy_params(config, kd.AV), kd.REPLAY, hv_prm, st_.draws_av, np.zeros((n, 0)),
              needs, False, st_.meas_noise, st_.accel_noise, False, states, world_log, av_log,
-             hv_log, np.zeros(n, np.int64), np.zeros(slot.N_WORK, np.int64))
+             hv_log, np.zeros(n, np.int64), np.zeros(slot.N_WORK, np.int64),
+             np.zeros(kd.STATE_SIZE))
     return s.scenario, states, world_log
 
 

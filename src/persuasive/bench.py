@@ -16,6 +16,13 @@ code, as a user pays it):
   ``shielded_decision_ms_median`` / ``_p99``: the planner's decision with the shield on (the
   MPC then also checks its candidates against the shield and tracks its confidence in the
   human model, docs/method.md §12.3), replayed along the same states;
+- ``online_update_us_median`` / ``_p99``: the online posterior over ``p_a``
+  (``mpc.p_a_hat = "online"``, docs/method.md §13.9, 21 grid points) alone: one step of its
+  filter and its posterior mean, timed as batches of 61 steps (one run each, compiled loop,
+  residuals drawn ``N(0, 0.3^2)``) per step, microseconds; and
+  ``online_decision_ms_median``: the planner's decision with it, replayed along the same
+  states as ``mpc_decision_ms_median`` (the difference of the two medians is within the
+  decision's noise: compare the update's own cost);
 - ``work_per_decision``: the kernels' work counters per decision (pair tests of the games and
   of the MPC, re-solves done and skipped by the pruning, libraries built), so that a change
   that loses the pruning shows even when the machine's timings are noisy;
@@ -119,6 +126,31 @@ def _shield_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
     return np.array(times)
 
 
+def _online_times_ns(batches: int = 2000, steps: int = 61, n_grid: int = 21) -> np.ndarray:
+    """Per-step cost of the online posterior's update: batches of ``steps`` steps from a
+    fresh state (Beta(7, 3) prior on ``n_grid`` points)."""
+    from .online import online_init, online_params, online_replay, prior_masses, state_size
+
+    prm = online_params(*prior_masses(7.0, 3.0, n_grid))
+    st = np.zeros(state_size(n_grid))
+    rng = np.random.default_rng(0)
+    obs = np.empty((batches, steps, 3))
+    obs[:, :, :2] = rng.normal(0.0, 0.3, (batches, steps, 2))
+    obs[:, :, 2] = rng.choice([0.0, 1.0, 0.5], (batches, steps), p=[0.45, 0.45, 0.1])
+    means = np.empty(steps)
+    for b in range(min(20, batches)):  # warm-up
+        online_init(st, 0, prm, 0, 0.5)
+        online_replay(st, 0, prm, 0, obs[b], 0.3, 0.5, means)
+    times = np.empty(batches)
+    clock = time.perf_counter_ns
+    for b in range(batches):
+        online_init(st, 0, prm, 0, 0.5)
+        t = clock()
+        online_replay(st, 0, prm, 0, obs[b], 0.3, 0.5, means)
+        times[b] = (clock() - t) / steps
+    return times
+
+
 def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: bool = False,
           workers: int | None = None, av: str = "persuasive",
           scenario: str = "intersection") -> dict[str, Any]:
@@ -131,6 +163,11 @@ def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: boo
     shield = _shield_times_ns(config, runs, repeats)
     shielded, _ = _decision_times_ns(config.with_overrides({"av.shield": "worst-case"}), runs,
                                      repeats)
+    online = _online_times_ns()
+    online_decision = None
+    if av == "persuasive":
+        online_decision, _ = _decision_times_ns(
+            config.with_overrides({"mpc.p_a_hat": "online"}), runs, repeats)
     run_times = []
     for seed in range(1, n_runs + 1):
         t = time.perf_counter()
@@ -148,6 +185,10 @@ def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: boo
         "shield_us_p99": float(np.percentile(shield, 99) / 1e3),
         "shielded_decision_ms_median": float(np.median(shielded) / 1e6),
         "shielded_decision_ms_p99": float(np.percentile(shielded, 99) / 1e6),
+        "online_update_us_median": float(np.median(online) / 1e3),
+        "online_update_us_p99": float(np.percentile(online, 99) / 1e3),
+        "online_decision_ms_median": None if online_decision is None else
+        float(np.median(online_decision) / 1e6),
         "work_per_decision": {name: float(w) / decision.size
                               for name, w in zip(WORK_NAMES, planner.work)},
         "samples": {"game_solves": int(game.size), "mpc_decisions": int(decision.size),

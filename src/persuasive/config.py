@@ -48,6 +48,10 @@ class ConfigError(ValueError):
     """An out-of-range or inconsistent parameter; the message is one line."""
 
 
+#: The online posterior's prior over p_a, Beta(a, b) (mean 0.7), and its grid size.
+DEFAULT_P_A_PRIOR = (7.0, 3.0)
+DEFAULT_P_A_GRID = 21
+
 #: Smallest accepted chance-constraint level ``mpc.epsilon``.
 EPSILON_MIN = 1e-12
 
@@ -207,7 +211,13 @@ class MPCParams:
     """The persuasive branch MPC of the AV (docs/method.md §6)."""
 
     epsilon: float = 0.02  #: chance-constraint level: P(safe) > 1 - epsilon at every sample [-]
-    p_a_hat: float | None = None  #: the AV's estimate of p_a [-]; None means equal to roles.p_a
+    #: the AV's estimate of p_a [-]; None means equal to roles.p_a; "online": a posterior over
+    #: p_a on a grid, updated every step (docs/method.md §13.9)
+    p_a_hat: float | str | None = None
+    #: online only: the Beta(a, b) prior over p_a [-], both > 0; unset means (7, 3), mean 0.7
+    p_a_prior: tuple[float, float] | None = None
+    #: online only: points of the grid over p_a on [0, 1] (integer in [2, 101]); unset means 21
+    p_a_grid: int | None = None
     # With the shield on (``av.shield``; docs/method.md §12.3), the planner knows about it:
     #: candidates whose first step the shield would reject count as infeasible
     shield_aware: bool = True
@@ -223,8 +233,22 @@ class MPCParams:
         # below 1e-12 the threshold 1 - epsilon rounds to (nearly) 1.0 and no candidate is ever
         # feasible; the bound keeps the constraint meaningful
         _in_range("mpc.epsilon", self.epsilon, EPSILON_MIN, 1.0, hi_open=True)
-        if self.p_a_hat is not None:
+        if isinstance(self.p_a_hat, str):
+            if self.p_a_hat != "online":
+                _fail("mpc.p_a_hat", self.p_a_hat, 'a number in [0, 1] or "online"')
+        elif self.p_a_hat is not None:
+            if isinstance(self.p_a_hat, bool) or not isinstance(self.p_a_hat, (int, float)):
+                _fail("mpc.p_a_hat", self.p_a_hat, 'a number in [0, 1] or "online"')
             _in_range("mpc.p_a_hat", self.p_a_hat, 0.0, 1.0)
+        if self.p_a_prior is not None:
+            prior = self.p_a_prior
+            if (not isinstance(prior, (tuple, list)) or len(prior) != 2
+                    or any(isinstance(x, bool) or not isinstance(x, (int, float))
+                           or not math.isfinite(x) or x <= 0.0 for x in prior)):
+                _fail("mpc.p_a_prior", prior, "two finite numbers [a, b] > 0 (Beta(a, b))")
+            object.__setattr__(self, "p_a_prior", tuple(float(x) for x in prior))
+        if self.p_a_grid is not None:
+            _in_range("mpc.p_a_grid", self.p_a_grid, 2, 101, integer=True)
         _flag("mpc.shield_aware", self.shield_aware)
         _in_range("mpc.confidence_threshold", self.confidence_threshold, 0.0, 1.0)
         _in_range("mpc.confidence_accel_std_mps2", self.confidence_accel_std_mps2, 0.0,
@@ -309,9 +333,14 @@ class SimulationParams:
     #: random streams: "legacy" (one MT19937 stream, the reference's order; paper mode) or
     #: "per-agent" (independent streams per agent and for the initial state; corrected mode)
     streams: StreamLayout | None = None
+    #: repeated interactions with one human per seed (docs/method.md §13.9): the same human,
+    #: fresh initial states, the AV's online posterior over p_a carried over; unset means 1
+    interactions: int | None = None
 
     def __post_init__(self) -> None:
         p = "simulation."
+        if self.interactions is not None:
+            _in_range(p + "interactions", self.interactions, 1, 1000, integer=True)
         _in_range(p + "dt_s", self.dt_s, 0.0, 10.0, lo_open=True)
         _in_range(p + "n_steps", self.n_steps, 1, 100_000, integer=True)
         _choice(p + "measurement_noise", self.measurement_noise, NOISE_KINDS)
@@ -611,9 +640,30 @@ class Config:
         return "off" if self.mode == "paper" else "worst-case"
 
     @property
+    def p_a_online(self) -> bool:
+        """The AV keeps a posterior over ``p_a`` (``mpc.p_a_hat = "online"``)."""
+        return self.mpc.p_a_hat == "online"
+
+    @property
+    def p_a_prior(self) -> tuple[float, float]:
+        """The Beta prior ``(a, b)`` of the online posterior (``mpc.p_a_prior``, or (7, 3))."""
+        return self.mpc.p_a_prior if self.mpc.p_a_prior is not None else DEFAULT_P_A_PRIOR
+
+    @property
+    def p_a_grid(self) -> int:
+        """The online posterior's grid size (``mpc.p_a_grid``, or 21)."""
+        return self.mpc.p_a_grid if self.mpc.p_a_grid is not None else DEFAULT_P_A_GRID
+
+    @property
     def p_a_hat(self) -> float:
-        """The AV's estimate of ``p_a`` (``mpc.p_a_hat``, or ``roles.p_a`` when unset)."""
-        return self.roles.p_a if self.mpc.p_a_hat is None else self.mpc.p_a_hat
+        """The AV's estimate of ``p_a`` (``mpc.p_a_hat``, or ``roles.p_a`` when unset); online,
+        the prior's mean ``a / (a + b)`` (the estimate the planner starts from)."""
+        if self.mpc.p_a_hat is None:
+            return self.roles.p_a
+        if self.p_a_online:
+            a, b = self.p_a_prior
+            return a / (a + b)
+        return self.mpc.p_a_hat
 
     # -- building ----------------------------------------------------------------------------
 

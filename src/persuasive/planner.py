@@ -33,7 +33,9 @@ from .library import lib_buffers
 from .mpc import D_EXPECTED, D_MIN_SAFE, D_P_LL, N_DIAG
 from .packing import discounts, pack
 from .policies import kinds as kd
-from .policies import kind_of, policy_params
+from .online import posterior_of
+from .policies import kind_of, policy_params, state_size
+from .policies.planners import ONLINE_STATE, PRM_ONLINE
 from .policies.step import policy_init, policy_step_buffers
 from .roles import FOLLOWER, LEADER
 from .safety.shield import N_CONFLICT, VERDICTS, conflict_vector, shield_step
@@ -63,6 +65,9 @@ class Plan:
     shielded: bool = False  #: the shield overrode the policy (``accel_mps2`` is its fallback)
     shield_verdict: str | None = None  #: admitted | brake | go | uncertified; None: no shield
     model_confidence: float = math.nan  #: the MPC's confidence in its human model
+    #: the p_a_hat this decision planned with (online: the posterior mean; NaN for kinds that
+    #: do not use one)
+    p_a_hat: float = math.nan
 
 
 class Planner:
@@ -75,15 +80,25 @@ class Planner:
         planner: persuasive, passive, cv, yield or lfg; ``config.scenario`` the geometry.
     seed : int, optional
         Seed of the planner's own uniforms (only the ``lfg`` kind draws: its role changes).
+    p_a_prior : array, optional
+        With ``mpc.p_a_hat = "online"`` (persuasive planner): the prior masses over the grid
+        :attr:`p_a_grid` in place of the Beta prior ``mpc.p_a_prior``, e.g. a
+        :attr:`p_a_posterior` saved after earlier encounters with the same human.
+
+    With ``mpc.p_a_hat = "online"`` the planner keeps a posterior over the human's ``p_a``
+    (docs/method.md §13.9) and plans with its mean (:attr:`p_a_hat`). :meth:`reset` starts a
+    new encounter; ``reset(keep_posterior=True)`` when it is with the same human carries the
+    posterior over as the new encounter's prior (the role belief starts afresh).
     """
 
-    def __init__(self, config: Config | None = None, seed: int | None = None):
+    def __init__(self, config: Config | None = None, seed: int | None = None,
+                 p_a_prior=None):
         self.config = config if config is not None else Config(mode="corrected")
         self._spec = kind_of(self.config, kd.AV)
         self._scenario = build_scenario(self.config)
         self._P_av, self._P_hv = pack(self.config, self._scenario)
         self._disc = discounts(self.config)
-        self._prm = policy_params(self.config, kd.AV)
+        self._prm = policy_params(self.config, kd.AV, p_a_prior)
         n, n_traj = self.config.library.n_samples, self.config.library.n_traj
         self._hv, self._av = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
         self._ahead_a, self._ahead_b = lib_buffers(n, n_traj), lib_buffers(n, n_traj)
@@ -96,17 +111,28 @@ class Planner:
         self._times = np.arange(1, n + 1) * self.config.library.sample_dt_s
         self._rng = np.random.Generator(np.random.PCG64(seed))
         self._draws = np.zeros(2)
-        self._state = np.zeros(kd.STATE_SIZE)
+        self._state = np.zeros(state_size(self._prm, self._spec.kind))
+        self._online = self._state.shape[0] > kd.STATE_SIZE
         self._k = 0
         self._conflict = np.empty(N_CONFLICT)
         conflict_vector(self._P_av, self._P_hv, self._conflict)
         self._shielded = self.config.shield != "off"
         self._tie_given = self.config.effective_quirks.q3_tie_break_leak and \
             self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE)
+        self._prm0 = self._prm.copy()
         self.reset()
 
-    def reset(self) -> None:
-        """Forget the belief and the stored prediction (a new encounter)."""
+    def reset(self, keep_posterior: bool = False) -> None:
+        """Forget the belief and the stored prediction (a new encounter). With an online
+        posterior over ``p_a``: ``keep_posterior=True`` (the same human again) makes the
+        posterior the new encounter's prior; otherwise the prior the planner was built
+        with comes back."""
+        if keep_posterior and self._online:
+            n = int(self._prm[PRM_ONLINE])
+            w = posterior_of(self._state, ONLINE_STATE, n)
+            self._prm[PRM_ONLINE + 1 + 2 * n:PRM_ONLINE + 1 + 3 * n] = w
+        elif self._online:
+            self._prm[:] = self._prm0
         policy_init(self._spec.kind, self._prm, self._state, float(self._P_av[slot.PRIOR_L]))
         self._k = 0
 
@@ -114,6 +140,30 @@ class Planner:
     def kind(self) -> str:
         """The planner's kind (``config.av.kind``)."""
         return self._spec.name
+
+    @property
+    def p_a_hat(self) -> float:
+        """The estimate of ``p_a`` the next decision plans with: the posterior mean when
+        online, else ``mpc.p_a_hat`` (NaN for kinds that use none)."""
+        if self._online:
+            return float(self._state[ONLINE_STATE])
+        return self.config.p_a_hat if self._spec.kind == kd.PERSUASIVE else math.nan
+
+    @property
+    def p_a_grid(self) -> np.ndarray | None:
+        """The online posterior's grid over ``p_a`` ``(G,)`` (None unless online)."""
+        if not self._online:
+            return None
+        n = int(self._prm[PRM_ONLINE])
+        return self._prm[PRM_ONLINE + 1 + 3 * n:PRM_ONLINE + 1 + 4 * n].copy()
+
+    @property
+    def p_a_posterior(self) -> np.ndarray | None:
+        """The online posterior's masses over :attr:`p_a_grid` ``(G,)``, a copy (None unless
+        online); pass it as ``p_a_prior`` to a new planner to carry it on."""
+        if not self._online:
+            return None
+        return posterior_of(self._state, ONLINE_STATE, int(self._prm[PRM_ONLINE]))
 
     @property
     def belief_hv_leader(self) -> float:
@@ -205,6 +255,8 @@ class Planner:
             shield_verdict=verdict,
             model_confidence=float(self._log[self._spec.log.index("model_confidence")])
             if "model_confidence" in self._spec.log else math.nan,
+            p_a_hat=float(self._log[self._spec.log.index("p_a_hat")])
+            if "p_a_hat" in self._spec.log else math.nan,
         )
 
 

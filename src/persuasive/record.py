@@ -107,6 +107,13 @@ class RunRecord:
     #: the kernels' work counters of the run (``persuasive.packing.WORK_NAMES``)
     work: dict[str, int] | None = field(default=None, repr=False, compare=False)
     version: str = __version__
+    #: the repeated interaction with the same human this run is (0: the seed's own run;
+    #: ``persuasive.simulation.simulate_interactions``)
+    interaction: int = 0
+    #: online ``p_a`` only (``mpc.p_a_hat = "online"``): the AV's posterior over the grid
+    #: ``mpc.p_a_grid`` at the end of the run ``(G,)``, and the prior it started from
+    p_a_posterior: np.ndarray | None = field(default=None, repr=False, compare=False)
+    p_a_prior: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def mode(self) -> str:
@@ -140,6 +147,10 @@ class RunRecord:
         scene = self.scenario
         out["safety_distance_m"] = scene.min_dist_m if scene is not None else None
         out["distance_measured"] = None if scene is None else DISTANCE_MEASURED[scene.conflict]
+        if c.p_a_online:  # only online runs carry these keys
+            out["interaction"] = self.interaction
+            hat = self.log.get("av_p_a_hat")
+            out["pa_hat_final"] = float(hat[-1]) if hat is not None and len(hat) else None
         out["quirks"] = dict(vars(c.effective_quirks))
         out["config_hash"] = c.digest()
         out["version"] = self.version
@@ -263,17 +274,18 @@ def static_setup(config: Config) -> tuple[Scenario, np.ndarray, np.ndarray, np.n
 
 
 def setup(config: Config, seed: int, k_av: int | None = None,
-          k_hv: int | None = None) -> Setup:
+          k_hv: int | None = None, interaction: int = 0) -> Setup:
     """The scenario, parameter vectors, random streams and initial state of a run.
 
     ``k_av``, ``k_hv``: uniforms per step of each policy (default: the configured kinds').
-    A ``replay`` human starts from its recorded initial state.
+    A ``replay`` human starts from its recorded initial state. ``interaction``: the repeated
+    interaction with the seed's human (``persuasive.streams.interaction_seed``).
     """
     seed = check_seed(seed)
     scenario, P_av, P_hv, disc = static_setup(config)
     k_av = kind_of(config, kd.AV).draws if k_av is None else k_av
     k_hv = kind_of(config, kd.HV).draws if k_hv is None else k_hv
-    streams = draw_streams(config, seed, scenario, k_av, k_hv)
+    streams = draw_streams(config, seed, scenario, k_av, k_hv, interaction)
     x_hv = streams.x_hv
     if config.hv.kind == "replay":
         rec = load_replay(config)

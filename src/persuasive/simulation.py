@@ -16,24 +16,35 @@ clipped to the vehicle's ``[v_min, v_max]`` before a policy sees them.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from .config import Config
+from .config import Config, ConfigError
+from .online import posterior_of
 from .packing import N_WORK
 from .policies import kinds as kd
-from .policies import kind_of, policy_params
+from .policies import kind_of, policy_params, state_size
 from .record import (ARRIVAL_LABELS, WORLD_LOG, RunOutcome, RunRecord, check_seed, load_record,
                      make_record, setup)
 
 
-def simulate(config: Config, seed: int, timed: bool = False) -> RunRecord:
+def simulate(config: Config, seed: int, timed: bool = False, interaction: int = 0,
+             p_a_prior: np.ndarray | None = None) -> RunRecord:
     """Run one closed loop for ``seed``; bit-identical for equal inputs.
 
     ``timed``: also measure the AV's decision time per step (``RunRecord.av_decision_ms``).
+    ``interaction``: the repeated interaction ``k`` with the seed's human (fresh initial state
+    and draws from ``persuasive.streams.interaction_seed``; 0 is the seed's own run).
+    ``p_a_prior`` ``(mpc.p_a_grid,)``: with ``mpc.p_a_hat = "online"``, the prior masses over
+    the grid in place of the Beta prior's (:func:`simulate_interactions` hands each
+    interaction the last one's posterior).
     """
+    from .policies.planners import ONLINE_STATE, PRM_ONLINE
     from .world import run_loop
 
-    s = setup(config, seed)
+    check_interaction(interaction)
+    s = setup(config, seed, interaction=interaction)
     n = config.simulation.n_steps
     av, hv = kind_of(config, kd.AV), kind_of(config, kd.HV)
     states = np.empty((n + 1, 4))
@@ -45,12 +56,79 @@ def simulate(config: Config, seed: int, timed: bool = False) -> RunRecord:
                       av.needs_av_library or hv.needs_av_library,
                       av.needs_game or av.needs_av_library])
     st = s.streams
-    run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind,
-             policy_params(config, kd.AV), hv.kind, policy_params(config, kd.HV), st.draws_av,
-             st.draws_hv, needs, st.noisy, st.meas_noise, st.accel_noise, timed, states,
-             world_log, av_log, hv_log, av_ns, work)
-    return make_record(s, states, world_log, av_log, hv_log,
-                       av_ns / 1e6 if timed else None, work=work)
+    av_prm = policy_params(config, kd.AV, p_a_prior)
+    av_st = np.zeros(state_size(av_prm, av.kind))
+    run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind, av_prm,
+             hv.kind, policy_params(config, kd.HV), st.draws_av, st.draws_hv, needs, st.noisy,
+             st.meas_noise, st.accel_noise, timed, states, world_log, av_log, hv_log, av_ns,
+             work, av_st)
+    record = make_record(s, states, world_log, av_log, hv_log,
+                         av_ns / 1e6 if timed else None, work=work)
+    if av_st.shape[0] > kd.STATE_SIZE:  # an online posterior over p_a
+        n = int(av_prm[PRM_ONLINE])
+        prior = av_prm[PRM_ONLINE + 1 + 2 * n:PRM_ONLINE + 1 + 3 * n].copy()
+        record = replace(record, interaction=interaction, p_a_prior=prior,
+                         p_a_posterior=posterior_of(av_st, ONLINE_STATE, n))
+    elif interaction:
+        record = replace(record, interaction=interaction)
+    return record
 
 
-__all__ = ["ARRIVAL_LABELS", "RunOutcome", "RunRecord", "check_seed", "load_record", "simulate"]
+def check_interaction(k) -> int:
+    """``k`` as an int, or :class:`ConfigError` unless an integer in [0, 10^6]."""
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k <= 10**6:
+        raise ConfigError(f"interaction = {k!r} is out of range; allowed: integer in "
+                          "[0, 1000000]")
+    return int(k)
+
+
+def simulate_interactions(config: Config, seed: int, interactions: int | None = None,
+                          p_a_prior: np.ndarray | None = None) -> list[RunRecord]:
+    """``interactions`` runs of the AV with one human (docs/method.md §13.9): the same human
+    kind, ``p_a`` and initial-role setting; interaction ``k`` draws its initial state and
+    every random number from ``persuasive.streams.interaction_seed(seed, k)`` (interaction 0
+    is ``simulate(config, seed)``). With ``mpc.p_a_hat = "online"`` the AV's posterior over
+    ``p_a`` at the end of each interaction is the next one's prior (the first's is
+    ``p_a_prior``, default the Beta prior); every other AV starts each interaction afresh, as
+    the human does (its role belief and role start from the configuration).
+    ``interactions``: default ``simulation.interactions`` (unset: 1)."""
+    if interactions is None:
+        interactions = config.simulation.interactions or 1
+    if isinstance(interactions, bool) or not isinstance(interactions, (int, np.integer)) \
+            or not 1 <= interactions <= 10**6:
+        raise ConfigError(f"interactions = {interactions!r} is out of range; allowed: "
+                          "integer in [1, 1000000]")
+    out: list[RunRecord] = []
+    prior = p_a_prior
+    for k in range(int(interactions)):
+        record = simulate(config, seed, interaction=k, p_a_prior=prior)
+        if record.p_a_posterior is not None:
+            prior = record.p_a_posterior
+        out.append(record)
+    return out
+
+
+#: Per-interaction values of :func:`run_summary` (``by_interaction.<name>.<k>``).
+BY_INTERACTION = ("first_at_line", "infeasible_steps", "collision", "hv_role_changes",
+                  "pa_hat_final")
+
+
+def run_summary(config: Config, seed: int) -> dict:
+    """The summary of the run of ``seed`` (``RunRecord.summary``). With
+    ``simulation.interactions = K > 1``: the last interaction's summary, plus
+    ``interactions = K`` and ``by_interaction``, a list per :data:`BY_INTERACTION` value
+    (``pa_hat_final`` only online) over the K interactions (what the sweeps and ``compare``
+    store)."""
+    k = config.simulation.interactions or 1
+    if k == 1:
+        return simulate(config, seed).summary()
+    summaries = [r.summary() for r in simulate_interactions(config, seed, k)]
+    out = dict(summaries[-1])
+    out["interactions"] = k
+    out["by_interaction"] = {name: [s[name] for s in summaries] for name in BY_INTERACTION
+                             if name in summaries[0]}
+    return out
+
+
+__all__ = ["ARRIVAL_LABELS", "BY_INTERACTION", "run_summary", "RunOutcome", "RunRecord", "check_interaction", "check_seed",
+           "load_record", "simulate", "simulate_interactions"]

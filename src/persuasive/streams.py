@@ -35,7 +35,23 @@ class Streams:
     hv_rng: Any = None
 
 
-def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int) -> Streams:
+#: First entry of the spawn key of a repeated interaction's root seed sequence (see
+#: :func:`interaction_seed`).
+INTERACTION_KEY = 0x19A
+
+
+def interaction_seed(seed: int, interaction: int) -> np.random.SeedSequence:
+    """The root seed sequence of interaction ``k`` with the human of ``seed``: ``seed`` itself
+    for ``k = 0`` (today's run of the seed), else ``SeedSequence(seed, spawn_key=
+    (INTERACTION_KEY, k))``, independent of the seed's own streams and of every other
+    interaction."""
+    if interaction == 0:
+        return np.random.SeedSequence(seed)
+    return np.random.SeedSequence(seed, spawn_key=(INTERACTION_KEY, int(interaction)))
+
+
+def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int,
+                 interaction: int = 0) -> Streams:
     """The random numbers of a run (see the module docstring for the two layouts).
 
     Legacy order (one ``RandomState(seed)``): the initial state's uniforms; then per step the
@@ -44,6 +60,10 @@ def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int) -> S
     state from child 0; the HV's uniforms from child 1 and the AV's from child 2, one column
     (all steps) after the other, so that a policy's first column does not depend on how many it
     draws; the noise from child 3, measurement then acceleration.
+
+    ``interaction`` ``k > 0`` (a repeated interaction with the same human, fresh initial state
+    and draws): the same layout from :func:`interaction_seed` (the legacy stream seeded with
+    its first 32-bit word); ``k = 0`` is the seed's own run.
     """
     sim = config.simulation
     n = sim.n_steps
@@ -53,7 +73,8 @@ def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int) -> S
     widths = (sim.noise_s_m, sim.noise_v_mps) * 2
     meas, accel = np.zeros((n, 4)), np.zeros((n, 2))
     if layout == "legacy":
-        rng = np.random.RandomState(seed)
+        rng = np.random.RandomState(
+            seed if interaction == 0 else interaction_seed(seed, interaction).generate_state(1))
         x_av, x_hv = scenario.initial_states(rng.random_sample)
         draws = np.zeros((n, k_hv + k_av))
         if not noisy:
@@ -71,7 +92,7 @@ def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int) -> S
         return Streams(layout, x_av, x_hv, draws[:, k_hv:].copy(), draws[:, :k_hv].copy(),
                        meas, accel, noisy)
     init, hv, av, world = (np.random.Generator(np.random.PCG64(s))
-                           for s in np.random.SeedSequence(seed).spawn(4))
+                           for s in interaction_seed(seed, interaction).spawn(4))
     x_av, x_hv = scenario.initial_states(init.random)
     draws_hv = np.stack([hv.random(n) for _ in range(k_hv)], axis=1) if k_hv else np.zeros((n, 0))
     draws_av = np.stack([av.random(n) for _ in range(k_av)], axis=1) if k_av else np.zeros((n, 0))
@@ -84,4 +105,4 @@ def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int) -> S
     return Streams(layout, x_av, x_hv, draws_av, draws_hv, meas, accel, noisy, av, hv)
 
 
-__all__ = ["Streams", "draw_streams"]
+__all__ = ["INTERACTION_KEY", "Streams", "draw_streams", "interaction_seed"]

@@ -87,13 +87,16 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
              av_draws: np.ndarray, hv_draws: np.ndarray, needs: np.ndarray, noisy: bool,
              meas_noise: np.ndarray, accel_noise: np.ndarray, timed: bool,
              states: np.ndarray, world_log: np.ndarray, av_log: np.ndarray,
-             hv_log: np.ndarray, av_time_ns: np.ndarray, work: np.ndarray) -> None:
+             hv_log: np.ndarray, av_time_ns: np.ndarray, work: np.ndarray,
+             av_st: np.ndarray) -> None:
     """The closed loop, compiled: fills ``states`` ``(n_steps + 1, 4)`` and the logs.
 
     ``needs`` (3,) bool: compute the full prediction of the joint state (some policy reads
     it); build only the AV's library (a policy reads it, none the game); the AV's timing
     includes that work. ``av_time_ns`` (n_steps,): the AV's decision time per step when
     ``timed``. ``work``: the kernels' counters (``persuasive.packing.WORK_*``), added to.
+    ``av_st``: the AV policy's state (``persuasive.policies.state_size`` slots), initialised
+    here and left as the run ends it (e.g. the online posterior over ``p_a``).
     """
     n, n_traj = int(P_av[slot.N_SAMPLES]), int(P_av[slot.N_MESH]) + 1
     lib_h, lib_r = new_lib(n, n_traj), new_lib(n, n_traj)
@@ -105,7 +108,7 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
     idx = np.zeros(4, np.int64)
     q_values = np.zeros((4, n_traj))
     diag = np.empty((n_traj, N_DIAG))
-    av_st, hv_st = np.zeros(kd.STATE_SIZE), np.zeros(kd.STATE_SIZE)
+    hv_st = np.zeros(kd.STATE_SIZE)
     policy_init(av_kind, av_prm, av_st, P_av[slot.PRIOR_L])
     policy_init(hv_kind, hv_prm, hv_st, P_hv[slot.PRIOR_L])
     need_game, need_av_lib, av_uses_libs = needs[0], needs[1], needs[2]

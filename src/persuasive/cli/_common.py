@@ -90,6 +90,28 @@ def config_options(func: Callable) -> Callable:
     return func
 
 
+class _PaHat(click.ParamType):
+    """A number or ``online`` (``mpc.p_a_hat``; the range is the configuration's check)."""
+
+    name = "NUMBER|online"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, float) or value == "online":
+            return value
+        try:
+            return float(value)
+        except ValueError:
+            self.fail(f"{value!r} is neither a number nor online", param, ctx)
+
+
+PA_HAT = _PaHat()
+
+#: ``--interactions``: repeated interactions with one human per seed.
+INTERACTIONS_HELP = ("Repeated interactions with one human per seed (same human, fresh "
+                     "initial states; an online AV carries its posterior over p_a; "
+                     "docs/method.md §13.9) [1].")
+
+
 def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable:
     """The options that define one closed-loop run (shared by simulate, plot and animate)."""
     options = [
@@ -104,8 +126,9 @@ def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable
         click.option("--hv-role", type=click.Choice(list(ROLES)), default=None,
                      help="HV initial role [leader]."),
         click.option("--pa", type=float, default=None, help="Human's p_a in [0, 1] [1.0]."),
-        click.option("--pa-hat", type=float, default=None,
-                     help="AV's estimate of p_a in [0, 1] [equal to --pa]."),
+        click.option("--pa-hat", type=PA_HAT, default=None,
+                     help="AV's estimate of p_a in [0, 1], or online (a posterior over p_a, "
+                          "docs/method.md §13.9) [equal to --pa]."),
         click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default=None,
                      help="Geometry [intersection]: intersection, crossing, left-turn, merge."),
         click.option("--seed", type=int, default=seed_default, show_default=True,

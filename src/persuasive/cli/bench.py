@@ -50,6 +50,11 @@ def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, as_jso
                f"{result['shielded_decision_ms_median']:.3f} ms, p99 "
                f"{result['shielded_decision_ms_p99']:.3f} ms; the shield alone: median "
                f"{result['shield_us_median']:.2f} us, p99 {result['shield_us_p99']:.2f} us")
+    online = (f"; the decision with it: median {result['online_decision_ms_median']:.3f} ms"
+              if result["online_decision_ms_median"] is not None else "")
+    click.echo(f"online p_a posterior (21 points) update: median "
+               f"{result['online_update_us_median']:.2f} us, p99 "
+               f"{result['online_update_us_p99']:.2f} us per decision{online}")
     click.echo(f"closed-loop run (61 steps): median {result['mpc_run_ms_median']:.2f} ms")
     work = ", ".join(f"{k} {v:.1f}" for k, v in result["work_per_decision"].items())
     click.echo(f"work per decision: {work}")

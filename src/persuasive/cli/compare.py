@@ -6,7 +6,7 @@ import json
 
 import click
 
-from ._common import build_config, check_workers, compile_notice, config_options, progress_bar
+from ._common import INTERACTIONS_HELP, build_config, check_workers, compile_notice, config_options, progress_bar
 
 
 @click.command()
@@ -34,10 +34,12 @@ from ._common import build_config, check_workers, compile_notice, config_options
 @click.option("--force", is_flag=True, help="Replace a folder holding another comparison.")
 @click.option("--timing-seeds", type=click.IntRange(min=1), default=3, show_default=True,
               help="Seeds per pair whose AV decisions are timed (in this process).")
+@click.option("--interactions", type=click.IntRange(1, 1000), default=None,
+              help=INTERACTIONS_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the rows as one JSON list.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode, config_file,
-            sets, out, force, timing_seeds, as_json, quiet) -> None:
+            sets, out, force, timing_seeds, interactions, as_json, quiet) -> None:
     """Compare AV planners and human models on the same seeds (docs/method.md §11).
 
     Each pair runs on seeds 1..N with independent random streams per agent, so a seed gives
@@ -49,7 +51,8 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
     from ..studies import compare as cmp
 
     base = build_config(config_file, sets, {"mode": mode, "hv.role": hv_role,
-                                           "scenario.kind": scenario})
+                                           "scenario.kind": scenario,
+                                           "simulation.interactions": interactions})
     avs = cmp.parse_kinds(av_kinds, AV_KINDS, "--av", AV_KINDS)
     hvs = cmp.parse_kinds(hv_kinds, SIMULATED_HV_KINDS, "--hv", cmp.DEFAULT_HV_KINDS)
     shield_list = cmp.parse_kinds(shields, SHIELD_KINDS, "--shield", SHIELD_KINDS) \

@@ -7,7 +7,7 @@ import time
 
 import click
 
-from ._common import compile_notice, config_of, run_options
+from ._common import INTERACTIONS_HELP, compile_notice, config_of, run_options
 
 #: Per-step log formats ``--out`` writes, by extension.
 LOG_EXTENSIONS = (".parquet", ".csv")
@@ -31,12 +31,23 @@ def write_log(record, path: str) -> None:
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write the per-step log here: .parquet or .csv (the folder must exist).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def simulate(out, as_json, **run) -> None:
+@click.option("--interactions", type=click.IntRange(1, 1000), default=None,
+              help=INTERACTIONS_HELP)
+def simulate(out, as_json, interactions, **run) -> None:
     """Simulate one closed-loop run (two vehicles, one conflict)."""
     from .._files import check_output_file
     from ..simulation import ARRIVAL_LABELS, simulate as simulate_run
 
     config = config_of(run)
+    if interactions is not None:
+        config = config.with_overrides({"simulation.interactions": interactions})
+    if (config.simulation.interactions or 1) > 1:
+        if out:
+            raise click.UsageError("--out writes one run's log; with several interactions use "
+                                   "persuasive.simulation.simulate_interactions")
+        compile_notice()
+        _interactions(config, run["seed"], as_json)
+        return
     if out:
         check_output_file(out, LOG_EXTENSIONS, "log")  # before any work
     compile_notice()
@@ -75,3 +86,41 @@ def simulate(out, as_json, **run) -> None:
         changes += f"; steps where the chance constraint failed: {o.infeasible_steps}"
     click.echo(changes)
     click.echo(f"time: {elapsed:.3f} s" + (f"; per-step log written to {out}" if out else ""))
+
+
+def _interactions(config, seed: int, as_json: bool) -> None:
+    """K interactions with the human of ``seed``: one line each (or one JSON object)."""
+    from ..simulation import ARRIVAL_LABELS, BY_INTERACTION, simulate_interactions
+
+    t0 = time.perf_counter()
+    records = simulate_interactions(config, seed)
+    elapsed = time.perf_counter() - t0
+    summaries = [r.summary() for r in records]
+    if as_json:
+        out = dict(summaries[-1])
+        out["interactions"] = len(records)
+        out["by_interaction"] = {name: [s[name] for s in summaries] for name in BY_INTERACTION
+                                 if name in summaries[0]}
+        click.echo(json.dumps(out))
+        return
+    online = config.p_a_online and config.av.kind == "persuasive"
+    if online:
+        import numpy as np
+
+        a, b = config.p_a_prior
+        w = records[0].p_a_prior
+        start = float(w @ np.linspace(0.0, 1.0, w.size) / w.sum())
+    click.echo(f"{config.av.kind} AV, {config.hv.kind} HV starting as {config.hv.role}, "
+               f"p_a = {config.roles.p_a:g}, "
+               + (f"p_a_hat online (prior Beta({a:g}, {b:g}) on {config.p_a_grid} points, "
+                  f"mean {start:.4f})" if online else f"p_a_hat = {config.p_a_hat:g}")
+               + f", seed {seed}, {len(records)} interactions, {config.mode} mode")
+    for r, s in zip(records, summaries):
+        o = r.outcome
+        text = (f"interaction {r.interaction + 1}: first at the line: "
+                f"{ARRIVAL_LABELS[o.first_at_line]}; chance constraint failed on "
+                f"{o.infeasible_steps} steps; collision: {'yes' if o.collision else 'no'}")
+        if online:
+            text += f"; p_a_hat at the end {s['pa_hat_final']:.4f}"
+        click.echo(text)
+    click.echo(f"time: {elapsed:.3f} s")

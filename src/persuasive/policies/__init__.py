@@ -50,9 +50,16 @@ def _role(name: str) -> float:
     return float(LEADER if name == "leader" else FOLLOWER)
 
 
-def policy_params(config: Config, side: int) -> np.ndarray:
-    """The compiled parameter vector of the policy driving ``side`` in ``config``."""
+def policy_params(config: Config, side: int, p_a_prior: np.ndarray | None = None) -> np.ndarray:
+    """The compiled parameter vector of the policy driving ``side`` in ``config``.
+
+    ``p_a_prior`` ``(mpc.p_a_grid,)``: for a persuasive AV with ``mpc.p_a_hat = "online"``,
+    the prior masses over the grid in place of the Beta prior's (e.g. the posterior at the end
+    of an earlier interaction with the same human); only their ratios matter."""
     spec = kind_of(config, side)
+    if p_a_prior is not None and not (config.p_a_online and spec.kind == kd.PERSUASIVE):
+        raise ConfigError("p_a_prior is a prior over p_a for the persuasive planner with "
+                          'mpc.p_a_hat = "online"; this configuration keeps none')
     if spec.kind in (kd.LFG, kd.STUBBORN, kd.NOISY):
         from .lfg import PRM_ADAPT, PRM_BETA, PRM_P_A, PRM_ROLE
 
@@ -67,14 +74,24 @@ def policy_params(config: Config, side: int) -> np.ndarray:
                 1.0 - _role(config.hv.role)
         return prm
     if spec.kind in (kd.PERSUASIVE, kd.PASSIVE):
-        from .planners import PRM_HUMAN_ROLE, PRM_MODEL_IS_HUMAN, PRM_P_A_HAT, PRM_TIE_GIVEN
+        from .planners import (PRM_HUMAN_ROLE, PRM_MODEL_IS_HUMAN, PRM_P_A_HAT, PRM_SIZE,
+                               PRM_TIE_GIVEN)
 
-        prm = np.zeros(4)
+        prm = np.zeros(PRM_SIZE)
         prm[PRM_P_A_HAT] = config.p_a_hat
         prm[PRM_TIE_GIVEN] = float(config.effective_quirks.q3_tie_break_leak)
-        # Q3: with p_a_hat == p_a the reference's human model *is* the simulated human
-        prm[PRM_MODEL_IS_HUMAN] = float(config.p_a_hat == config.roles.p_a)
+        # Q3: with p_a_hat == p_a the reference's human model *is* the simulated human; an
+        # online posterior is never assumed to be the human
+        prm[PRM_MODEL_IS_HUMAN] = float(config.p_a_hat == config.roles.p_a
+                                        and not config.p_a_online)
         prm[PRM_HUMAN_ROLE] = _role(config.hv.role)
+        if config.p_a_online and spec.kind == kd.PERSUASIVE:
+            from ..online import online_params, prior_masses
+
+            grid, prior = prior_masses(*config.p_a_prior, config.p_a_grid) \
+                if p_a_prior is None else (np.linspace(0.0, 1.0, config.p_a_grid),
+                                           _check_prior(p_a_prior, config.p_a_grid))
+            prm = np.concatenate([prm[:-1], online_params(grid, prior)])
         return prm
     if spec.kind == kd.IDM:
         p = config.hv.idm
@@ -87,6 +104,27 @@ def policy_params(config: Config, side: int) -> np.ndarray:
     if spec.kind == kd.RANDOM:
         return np.array([config.hv.random.hold_min_s, config.hv.random.hold_max_s])
     return np.zeros(1)
+
+
+def _check_prior(prior, n: int) -> np.ndarray:
+    w = np.asarray(prior, dtype=np.float64)
+    if w.shape != (n,) or not np.all(np.isfinite(w)) or np.any(w < 0.0) or not w.sum() > 0.0:
+        raise ConfigError(f"p_a_prior must be {n} finite masses >= 0 with a positive sum "
+                          f"(one per point of mpc.p_a_grid = {n})")
+    return w  # only ratios matter: the posterior is normalised at every step
+
+
+def state_size(prm: np.ndarray, kind: int) -> int:
+    """Length of the state vector of a policy of ``kind`` with parameters ``prm``:
+    ``kinds.STATE_SIZE``, plus the online posterior's block for a persuasive planner that
+    keeps one."""
+    if kind == kd.PERSUASIVE:
+        from ..online import state_size as online_size
+        from .planners import ONLINE_STATE, PRM_ONLINE
+
+        if prm.shape[0] > PRM_ONLINE and prm[PRM_ONLINE] > 0.0:
+            return ONLINE_STATE + online_size(int(prm[PRM_ONLINE]))
+    return kd.STATE_SIZE
 
 
 @dataclass(frozen=True)
@@ -188,7 +226,7 @@ class CompiledPolicy:
 
         self.context = context
         self.prm = policy_params(context.config, self.side)
-        self.state = np.zeros(kd.STATE_SIZE)
+        self.state = np.zeros(state_size(self.prm, self.spec.kind))
         policy_init(self.spec.kind, self.prm, self.state, float(context.P_av[slot.PRIOR_L]))
         n_traj = context.config.library.n_traj
         self.diag = np.zeros((n_traj, 10))
@@ -233,4 +271,4 @@ def make_policy(config: Config, side: int) -> CompiledPolicy:
 
 
 __all__ = ["CompiledPolicy", "Context", "Observation", "Policy", "Recording", "kind_of",
-           "load_replay", "make_policy", "policy_params"]
+           "load_replay", "make_policy", "policy_params", "state_size"]

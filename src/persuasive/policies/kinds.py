@@ -29,7 +29,7 @@ MPC_LOG = ("trajectory", "feasible", "n_feasible", "p_safe_min", "p_safe_max",
            "expected_reward", "belief_hv_leader_used", "belief_hv_leader",
            "belief_hv_follower", "tie_role", "human_belief_av_leader",
            "human_plausible_leader", "branch_p_ll", "branch_p_lf", "branch_p_fl", "branch_p_ff",
-           "model_confidence", "n_allowed")
+           "model_confidence", "n_allowed", "p_a_hat")
 CV_LOG = ("trajectory", "feasible", "n_feasible", "p_safe_min", "expected_reward", "n_allowed")
 YIELD_LOG = ("trajectory", "released", "n_admissible")
 IDM_LOG = ("go", "committed", "waiting_s", "gap_s", "time_to_conflict_s",

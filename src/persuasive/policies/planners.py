@@ -1,10 +1,13 @@
 """The AV's model-based planners (docs/method.md §6, §11): ``persuasive``, ``passive``, ``cv``.
 
 - ``persuasive``: the paper's branch MPC (``persuasive.mpc.decide``) with interactive
-  prediction and role persuasion; parameter ``p_a_hat``.
+  prediction and role persuasion; parameter ``p_a_hat``, fixed or, with
+  ``mpc.p_a_hat = "online"``, the mean of a posterior over ``p_a`` updated every step
+  (:mod:`persuasive.online`, docs/method.md §13.9; its block follows the MPC's state slots, and
+  the replay of the model human's plausible role runs for it whether or not the shield is on).
 - ``passive``: the same MPC, the same belief ``q`` and the same re-solves at T1, but the AV
   assumes its plan does not change the human's role (``Pi_hat`` is the identity, as with
-  ``p_a_hat = 0``): it predicts, it does not persuade.
+  ``p_a_hat = 0``): it predicts, it does not persuade (``"online"`` changes nothing for it).
 - ``cv``: the same candidates and chance constraint against a human holding its current speed
   (``persuasive.mpc.decide_cv``); it keeps no belief.
 
@@ -32,6 +35,7 @@ from ..game import EGO_FOLLOWER, EGO_LEADER, OTHER_FOLLOWER, OTHER_LEADER
 from ..library import Lib
 from ..mpc import (D_BELIEF_L, D_EXPECTED, D_MAX_SAFE, D_MIN_SAFE, D_P_LL, D_PLAUSIBLE_L,
                    decide, decide_cv)
+from ..online import online_init, online_step
 from ..roles import FOLLOWER, LEADER, bayes_update
 from ..safety.confidence import confidence_update, plausible_of, role_prediction
 from ..safety.shield import (C_KIND, N_CONFLICT, admissible, conflict_vector, go_certified,
@@ -46,21 +50,27 @@ from ..safety.shield import (C_KIND, N_CONFLICT, admissible, conflict_vector, go
  HB_L, HB_F, HP_L_S, HP_L_V, HP_F_S, HP_F_V, PLAUSIBLE_PREV) = range(16)
 #: Slots of its parameter vector: the AV's estimate of p_a; quirk Q3 (belief ties read a given
 #: human role); whether that role is the simulated human's own (p_a_hat == p_a); the human's
-#: initial role (the Q3 fallback).
-PRM_P_A_HAT, PRM_TIE_GIVEN, PRM_MODEL_IS_HUMAN, PRM_HUMAN_ROLE = range(4)
+#: initial role (the Q3 fallback); the online posterior's grid size (0: p_a_hat is fixed),
+#: followed by the rest of the online block (``persuasive.online``) when it is not 0.
+PRM_P_A_HAT, PRM_TIE_GIVEN, PRM_MODEL_IS_HUMAN, PRM_HUMAN_ROLE, PRM_ONLINE = range(5)
+#: Length of the parameter vector without the online block.
+PRM_SIZE = 5
+#: The online posterior's state block (``persuasive.online``) starts after the MPC's slots.
+ONLINE_STATE = 16
 
 # Log columns (``persuasive.policies.kinds.MPC_LOG``; the cv planner's are its own).
 (COL_TRAJ, COL_FEASIBLE, COL_N_FEASIBLE, COL_PSAFE_MIN, COL_PSAFE_MAX, COL_EXPECTED,
  COL_BELIEF_USED, COL_BELIEF_L, COL_BELIEF_F, COL_TIE, COL_HUMAN_BELIEF_L, COL_HUMAN_PLAUSIBLE,
- COL_P_LL, COL_P_LF, COL_P_FL, COL_P_FF, COL_CONFIDENCE, COL_N_ALLOWED) = range(18)
+ COL_P_LL, COL_P_LF, COL_P_FL, COL_P_FF, COL_CONFIDENCE, COL_N_ALLOWED, COL_P_A_HAT) = range(19)
 (CV_COL_TRAJ, CV_COL_FEASIBLE, CV_COL_N_FEASIBLE, CV_COL_PSAFE_MIN, CV_COL_EXPECTED,
  CV_COL_N_ALLOWED) = range(6)
 
 
 @njit(cache=True)
-def mpc_init(st: np.ndarray, prior_l: float) -> None:
+def mpc_init(st: np.ndarray, prm: np.ndarray, prior_l: float) -> None:
     """A fresh MPC state in ``st``: belief ``(prior_l, 1 - prior_l)``, no prediction yet, full
-    confidence in the model."""
+    confidence in the model; with an online posterior over ``p_a`` (``prm[PRM_ONLINE] > 0``),
+    its rows from their initial roles and the prior mean as ``p_a_hat``."""
     st[:] = 0.0
     st[BELIEF_L] = prior_l
     st[BELIEF_F] = 1.0 - prior_l
@@ -68,6 +78,8 @@ def mpc_init(st: np.ndarray, prior_l: float) -> None:
     st[ROLE_PRED_L] = prior_l
     st[HB_L] = prior_l
     st[HB_F] = 1.0 - prior_l
+    if prm.shape[0] > PRM_ONLINE and prm[PRM_ONLINE] > 0.0:
+        online_init(st, ONLINE_STATE, prm, PRM_ONLINE, prior_l)
 
 
 @njit(cache=True)
@@ -132,21 +144,29 @@ def mpc_step(st: np.ndarray, prm: np.ndarray, persuade: bool, s_R: float, v_R: f
     ``lib_h1a``, ``lib_h1b``, ``ahead``: see :func:`persuasive.mpc.decide`.
     """
     tracking = (P_av[slot.SHIELD] != slot.SHIELD_OFF and P_av[slot.CONF_THRESHOLD] > 0.0)
-    p_model = prm[PRM_P_A_HAT] if persuade else 0.0  # the passive model: roles never change
+    online = persuade and prm[PRM_ONLINE] > 0.0  # a posterior over p_a (persuasive.online)
+    p_hat = prm[PRM_P_A_HAT]
     if st[READY] == 0.0:
         st[PRED_L_S], st[PRED_L_V] = s_H, v_H
         st[PRED_F_S], st[PRED_F_V] = s_H, v_H
         st[HP_L_S], st[HP_L_V] = s_R, v_R
         st[HP_F_S], st[HP_F_V] = s_R, v_R
         st[READY] = 1.0
-    elif tracking:  # the human's last action against the model's prediction of it
+    elif tracking or online:  # the human's last action against the model's prediction of it
         dt = P_av[slot.SAMPLE_DT]
-        conf, alpha_l = confidence_update(
-            st[CONFIDENCE], st[ROLE_PRED_L], (v_H - st[PRED_L_V]) / dt,
-            (v_H - st[PRED_F_V]) / dt, P_av[slot.CONF_STD], P_av[slot.CONF_SWITCH],
-            P_hv[slot.U_MAX] - P_hv[slot.U_MIN])
-        st[CONFIDENCE] = conf
-        st[ROLE_PRED_L] = role_prediction(alpha_l, st[PLAUSIBLE_PREV], p_model)
+        e_l, e_f = (v_H - st[PRED_L_V]) / dt, (v_H - st[PRED_F_V]) / dt
+        if online:
+            online_step(st, ONLINE_STATE, prm, PRM_ONLINE, e_l, e_f, P_av[slot.CONF_STD],
+                        st[PLAUSIBLE_PREV], P_av[slot.PRIOR_L])
+        if tracking:
+            conf, alpha_l = confidence_update(
+                st[CONFIDENCE], st[ROLE_PRED_L], e_l, e_f, P_av[slot.CONF_STD],
+                P_av[slot.CONF_SWITCH], P_hv[slot.U_MAX] - P_hv[slot.U_MIN])
+            st[CONFIDENCE] = conf
+            p_model = (st[ONLINE_STATE] if online else p_hat) if persuade else 0.0
+            st[ROLE_PRED_L] = role_prediction(alpha_l, st[PLAUSIBLE_PREV], p_model)
+    if online:
+        p_hat = st[ONLINE_STATE]
     q_l, q_f = st[BELIEF_L], st[BELIEF_F]
     if prm[PRM_TIE_GIVEN] != 0.0:  # Q3
         tie = human_role if (prm[PRM_MODEL_IS_HUMAN] != 0.0 and human_role >= 0) \
@@ -157,9 +177,9 @@ def mpc_step(st: np.ndarray, prm: np.ndarray, persuade: bool, s_R: float, v_R: f
     robust = tracking and st[CONFIDENCE] < P_av[slot.CONF_THRESHOLD]
     n_allowed = shield_allowed(s_R, v_R, s_H, v_H, lib_r, P_av, P_hv, robust, allowed)
     c, feasible = decide(s_R, v_R, s_H, v_H, lib_h, lib_r, idx, q_l, q_f, tie == LEADER,
-                         prm[PRM_P_A_HAT], persuade, P_av, P_hv, disc, diag, lib_h1a, lib_h1b,
+                         p_hat, persuade, P_av, P_hv, disc, diag, lib_h1a, lib_h1b,
                          ahead, work, allowed)
-    if tracking:  # the model human's own step: plausible role, then its belief about the AV
+    if tracking or online:  # the model human's step: plausible role, then its belief of the AV
         st[PLAUSIBLE_PREV] = plausible_of(st[HB_L], st[HB_F])
         st[HB_L], st[HB_F] = bayes_update(
             st[HB_L], st[HB_F],
@@ -195,6 +215,7 @@ def mpc_step(st: np.ndarray, prm: np.ndarray, persuade: bool, s_R: float, v_R: f
         log[COL_P_LL + b] = diag[c, D_P_LL + b]
     log[COL_CONFIDENCE] = st[CONFIDENCE] if tracking else np.nan
     log[COL_N_ALLOWED] = n_allowed
+    log[COL_P_A_HAT] = p_hat if persuade else np.nan
     return lib_r.A[0, c]
 
 

@@ -30,12 +30,13 @@ SWAP = np.array([2, 3, 0, 1], np.int64)
 
 @njit(cache=True)
 def policy_init(kind: int, prm: np.ndarray, st: np.ndarray, prior_l: float) -> None:
-    """A fresh state of a policy of ``kind`` in ``st`` (``STATE_SIZE`` slots)."""
+    """A fresh state of a policy of ``kind`` in ``st`` (``STATE_SIZE`` slots, more for a
+    planner with an online posterior over ``p_a``: :func:`persuasive.policies.state_size`)."""
     st[:] = 0.0
     if kind == kd.LFG or kind == kd.STUBBORN or kind == kd.NOISY:
         lfg_init(st, int(prm[PRM_ROLE]), prior_l)
     elif kind == kd.PERSUASIVE or kind == kd.PASSIVE:
-        mpc_init(st, prior_l)
+        mpc_init(st, prm, prior_l)
 
 
 @njit(cache=True)

@@ -259,7 +259,33 @@ def pair_row(frame, av: str, hv: str, timing: float | None,
         "av_max_brake_mps2_mean": _mean(brake),
         "av_max_brake_mps2_max": float(np.nanmax(brake)) if np.isfinite(brake).any() else None,
         "av_decision_ms_median": timing,
+        **by_interaction(frame),
     }
+
+
+def by_interaction(frame) -> dict[str, Any]:
+    """With ``simulation.interactions = K > 1`` (repeated interactions with one human per
+    seed; docs/method.md §13.9): per interaction, the share of runs the AV was first, the runs
+    and steps where the chance constraint failed and, online, the mean of the AV's final
+    estimate of p_a. Empty without repeated interactions."""
+    k = 0
+    while f"by_interaction.first_at_line.{k}" in frame.columns:
+        k += 1
+    if k == 0:
+        return {}
+    col = lambda name, i: frame[f"by_interaction.{name}.{i}"].to_numpy(float)  # noqa: E731
+    out: dict[str, Any] = {
+        "interactions": k,
+        "av_first_pct_by_interaction": [_pct(col("first_at_line", i) == 1) for i in range(k)],
+        "cc_fail_runs_by_interaction": [int((col("infeasible_steps", i) > 0).sum())
+                                        for i in range(k)],
+        "cc_fail_steps_by_interaction": [int(col("infeasible_steps", i).sum())
+                                         for i in range(k)],
+    }
+    if "by_interaction.pa_hat_final.0" in frame.columns:
+        out["pa_hat_final_mean_by_interaction"] = [_mean(col("pa_hat_final", i))
+                                                   for i in range(k)]
+    return out
 
 
 def _paired(ref, other, column: str, scale: float = 1.0) -> dict[str, Any]:
@@ -435,6 +461,18 @@ def to_markdown(summary: dict[str, Any]) -> str:
             f"{_fmt(r['av_max_brake_mps2_mean'], 2)} ({_fmt(r['av_max_brake_mps2_max'], 2)})",
             _fmt(r["av_rms_jerk_mps3_mean"], 2),
         ]) + " |")
+    repeated = [r for r in summary["rows"] if r.get("interactions")]
+    if repeated:
+        k = repeated[0]["interactions"]
+        head = name + [f"AV first % in interaction {i + 1}" for i in range(k)]
+        lines += ["", f"Repeated interactions with one human per seed ({k} each; docs/method.md "
+                  "§13.9): AV first % per interaction (in brackets, runs where the chance "
+                  "constraint failed):", "",
+                  "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for r in repeated:
+            lines.append("| " + " | ".join(key(r) + [
+                f"{_fmt(a)} ({c})" for a, c in zip(r["av_first_pct_by_interaction"],
+                                                   r["cc_fail_runs_by_interaction"])]) + " |")
     diff_head = ["AV first % diff", "AV collision % diff", "AV delay s diff", "HV delay s diff",
                  "min distance m diff"]
     if summary["paired"]:

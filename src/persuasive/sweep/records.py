@@ -102,7 +102,7 @@ def run_rows(grid: Grid, start: int, stop: int) -> tuple[dict[str, list[Any]], l
     ``columns`` maps each column name (in first-seen order) to one value per finished run;
     a column a run does not have holds None for it.
     """
-    from ..simulation import simulate
+    from ..simulation import run_summary
 
     columns: dict[str, list[Any]] = {}
     summary_columns: dict[str, None] = {}
@@ -117,7 +117,7 @@ def run_rows(grid: Grid, start: int, stop: int) -> tuple[dict[str, list[Any]], l
         values, config, config_hash = combos[combo]
         seed = grid.seed_start + offset
         try:
-            flat = flatten(simulate(config, seed).summary())
+            flat = flatten(run_summary(config, seed))
         except Exception as exc:  # noqa: BLE001 - record the run, keep the others
             failures.append(failure_record(grid, index, _error_line(exc)))
             continue
