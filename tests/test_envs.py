@@ -528,3 +528,18 @@ def test_the_shielded_planner_does_not_collide_where_the_unshielded_one_did():
     shielded = run_episode(1, "persuasive", planner_config("persuasive", "worst-case"))
     assert unshielded.collision and not shielded.collision
     assert shielded.shield_interventions > 0 and unshielded.shield_interventions == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [46, 70, 88])
+def test_a_stopped_ego_is_not_admitted_a_step_it_cannot_stop_from(seed):
+    """Seeds where the shielded ego braked to rest within millimetres of a vehicle's occupancy:
+    when the shield added the lead of the current speed only (0 at rest), it admitted a step
+    at u_max after which the Euler stop no longer fitted, found no fallback from then on, and
+    the least-bad choice drove the ego into a crossing vehicle. With the lead of the state
+    after the step (euler_shift) the ego waits."""
+    from persuasive.envs.highway import planner_config, run_episode
+
+    result = run_episode(seed, "persuasive", planner_config("persuasive", "worst-case"))
+    assert not result.collision
+    assert result.shield_interventions > 0
