@@ -273,6 +273,11 @@ def test_workers_end_when_the_main_process_is_killed(tmp_path):
         time.sleep(0.2)
         workers = _children(proc.pid)
     assert len(workers) == 2, "the pool never started"
+    # kill it mid-table, once the workers are running (not still importing: a loaded machine
+    # can take longer than the 10 s below to import a worker, which then ends at its start)
+    runs = tmp_path / "r" / "runs"
+    while not (runs.is_dir() and any(runs.glob("*.parquet"))) and time.monotonic() < deadline:
+        time.sleep(0.1)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     deadline = time.monotonic() + 10
