@@ -188,11 +188,24 @@ def online_replay(st: np.ndarray, o: int, prm: np.ndarray, q: int, obs: np.ndarr
         means[k] = online_step(st, o, prm, q, obs[k, 0], obs[k, 1], sigma, obs[k, 2], pi0)
 
 
+def prior_view(prm: np.ndarray, q: int) -> np.ndarray:
+    """The prior masses ``w`` ``(G,)`` of the parameter block at ``prm[q:]``, a view (writing
+    into it sets the prior of the next encounter)."""
+    n = int(prm[q])
+    return prm[q + 1 + 2 * n:q + 1 + 3 * n]
+
+
+def grid_view(prm: np.ndarray, q: int) -> np.ndarray:
+    """The grid ``p_g`` ``(G,)`` of the parameter block at ``prm[q:]``, a view."""
+    n = int(prm[q])
+    return prm[q + 1 + 3 * n:q + 1 + 4 * n]
+
+
 def posterior_of(state: np.ndarray, o: int, n: int) -> np.ndarray:
     """A copy of the posterior over the grid ``(n,)`` held in a state at offset ``o``."""
     return np.array(state[o + 1 + 6 * n:o + 1 + 7 * n])
 
 
-__all__ = ["online_init", "online_mean", "online_params", "online_replay", "online_step",
-           "params_size",
-           "posterior_of", "prior_masses", "state_size"]
+__all__ = ["grid_view", "online_init", "online_mean", "online_params", "online_replay",
+           "online_step", "params_size", "posterior_of", "prior_masses", "prior_view",
+           "state_size"]

@@ -33,7 +33,7 @@ from .library import lib_buffers
 from .mpc import D_EXPECTED, D_MIN_SAFE, D_P_LL, N_DIAG
 from .packing import discounts, pack
 from .policies import kinds as kd
-from .online import posterior_of
+from .online import grid_view, posterior_of, prior_view
 from .policies import kind_of, policy_params, state_size
 from .policies.planners import ONLINE_STATE, PRM_ONLINE
 from .policies.step import policy_init, policy_step_buffers
@@ -128,9 +128,7 @@ class Planner:
         posterior the new encounter's prior; otherwise the prior the planner was built
         with comes back."""
         if keep_posterior and self._online:
-            n = int(self._prm[PRM_ONLINE])
-            w = posterior_of(self._state, ONLINE_STATE, n)
-            self._prm[PRM_ONLINE + 1 + 2 * n:PRM_ONLINE + 1 + 3 * n] = w
+            prior_view(self._prm, PRM_ONLINE)[:] = self.p_a_posterior
         elif self._online:
             self._prm[:] = self._prm0
         policy_init(self._spec.kind, self._prm, self._state, float(self._P_av[slot.PRIOR_L]))
@@ -154,8 +152,7 @@ class Planner:
         """The online posterior's grid over ``p_a`` ``(G,)`` (None unless online)."""
         if not self._online:
             return None
-        n = int(self._prm[PRM_ONLINE])
-        return self._prm[PRM_ONLINE + 1 + 3 * n:PRM_ONLINE + 1 + 4 * n].copy()
+        return grid_view(self._prm, PRM_ONLINE).copy()
 
     @property
     def p_a_posterior(self) -> np.ndarray | None:

@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from .config import Config, ConfigError
-from .online import posterior_of
+from .online import posterior_of, prior_view
 from .packing import N_WORK
 from .policies import kinds as kd
 from .policies import kind_of, policy_params, state_size
@@ -65,10 +65,10 @@ def simulate(config: Config, seed: int, timed: bool = False, interaction: int = 
     record = make_record(s, states, world_log, av_log, hv_log,
                          av_ns / 1e6 if timed else None, work=work)
     if av_st.shape[0] > kd.STATE_SIZE:  # an online posterior over p_a
-        n = int(av_prm[PRM_ONLINE])
-        prior = av_prm[PRM_ONLINE + 1 + 2 * n:PRM_ONLINE + 1 + 3 * n].copy()
-        record = replace(record, interaction=interaction, p_a_prior=prior,
-                         p_a_posterior=posterior_of(av_st, ONLINE_STATE, n))
+        record = replace(record, interaction=interaction,
+                         p_a_prior=prior_view(av_prm, PRM_ONLINE).copy(),
+                         p_a_posterior=posterior_of(av_st, ONLINE_STATE,
+                                                    int(av_prm[PRM_ONLINE])))
     elif interaction:
         record = replace(record, interaction=interaction)
     return record
@@ -130,5 +130,5 @@ def run_summary(config: Config, seed: int) -> dict:
     return out
 
 
-__all__ = ["ARRIVAL_LABELS", "BY_INTERACTION", "run_summary", "RunOutcome", "RunRecord", "check_interaction", "check_seed",
-           "load_record", "simulate", "simulate_interactions"]
+__all__ = ["ARRIVAL_LABELS", "BY_INTERACTION", "RunOutcome", "RunRecord", "check_interaction",
+           "check_seed", "load_record", "run_summary", "simulate", "simulate_interactions"]
