@@ -15,7 +15,12 @@ Planners, on the same humans and the same initial states:
   in corrected mode.
 
 The recklessness check runs ``online`` and ``fixed 0.7`` against a human with ``p_a = 0.3``
-(leader start) and counts the steps and runs where the chance constraint failed.
+(leader start) and counts the runs and steps where the chance constraint failed, collisions,
+safety violations (a distance below ``min_dist``, up to the line and over the whole run, as the
+tables count them), the smallest distance and the shield's interventions; it compares the two
+run by run (the same humans and initial states: which runs differ, and a bootstrap interval
+over humans of the difference in failed steps). ``--settings reckless`` runs it alone, beside
+the planner that knows ``p_a = 0.3`` and one fixed at 0.5, near where the online estimate ends.
 
 Per interaction it reports the share of humans the AV was first with, the runs and steps where
 the chance constraint failed, collisions, the mean posterior mean at the end (online), and the
@@ -28,6 +33,8 @@ rerun skips the chunks already written. Prints a Markdown table and writes
 
     python benchmarks/online_pa.py --humans 1000 --interactions 30 --workers 2 \\
         --out results/online-pa
+    python benchmarks/online_pa.py --settings reckless --humans 3000 --interactions 30 \
+        --workers 2 --out results/online-pa-reckless
 """
 
 from __future__ import annotations
@@ -55,10 +62,20 @@ SETTINGS = {
     "fixed 0.97": (1.0, {"mpc.p_a_hat": 0.97}),
     "online Beta(30, 1), p_a = 0.3": (0.3, {"mpc.p_a_hat": "online", "mpc.p_a_prior": [30, 1]}),
     "fixed 0.97, p_a = 0.3": (0.3, {"mpc.p_a_hat": 0.97}),
+    # the planner that knows p_a = 0.3, and one fixed near where the online estimate ends
+    "informed, p_a = 0.3": (0.3, {"mpc.p_a_hat": 0.3}),
+    "fixed 0.5, p_a = 0.3": (0.3, {"mpc.p_a_hat": 0.5}),
 }
 #: The issue's settings (``--settings all``) and the extra ones (``--settings extra``).
 MAIN = tuple(list(SETTINGS)[:6])
-EXTRA = tuple(list(SETTINGS)[6:])
+EXTRA = tuple(list(SETTINGS)[6:10])
+#: The recklessness check on its own (``--settings reckless``), beside the planner that knows
+#: ``p_a = 0.3`` and one fixed near the online estimate's end.
+RECKLESS = ("online, p_a = 0.3", "fixed 0.7, p_a = 0.3", "informed, p_a = 0.3",
+            "fixed 0.5, p_a = 0.3")
+#: The pair the recklessness target compares (issue 19): the online planner against the fixed
+#: planner at its prior mean.
+PAIR = ("online, p_a = 0.3", "fixed 0.7, p_a = 0.3")
 #: Interactions printed in the table (1-based).
 SHOWN = (1, 2, 3, 5, 10, 20, 30)
 
@@ -83,15 +100,29 @@ def run_chunk(name: str, seeds: list[int], interactions: int) -> dict:
 
     config = config_of(name)
     out = {"setting": name, "seeds": seeds, "first_at_line": [], "infeasible_steps": [],
-           "collision": [], "pa_hat_final": [], "informative_steps": []}
+           "collision": [], "pa_hat_final": [], "informative_steps": [], "violation_line": [],
+           "violation_run": [], "min_distance_m": [], "shield_interventions": []}
     for seed in seeds:
         recs = simulate_interactions(config, seed, interactions)
         out["first_at_line"].append([r.outcome.first_at_line for r in recs])
         out["infeasible_steps"].append([r.outcome.infeasible_steps for r in recs])
         out["collision"].append([bool(r.outcome.collision) for r in recs])
+        # safety violations as the tables count them (docs/method.md §8.4): a distance below
+        # the pair's min_dist up to the line and over the whole run
+        out["violation_line"].append([bool(r.outcome.min_distance_to_line_m < r.scenario.min_dist_m)
+                                      for r in recs])
+        out["violation_run"].append([bool(r.outcome.min_distance_m < r.scenario.min_dist_m)
+                                     for r in recs])
+        out["min_distance_m"].append([float(r.outcome.min_distance_m) for r in recs])
+        out["shield_interventions"].append([int(r.outcome.shield_interventions) for r in recs])
         out["informative_steps"].append([_informative(r.log) for r in recs])
         out["pa_hat_final"].append([float(r.log["av_p_a_hat"][-1]) for r in recs])
     return out
+
+
+#: What ``run_chunk`` records per human and interaction.
+_KEYS = ("first_at_line", "infeasible_steps", "collision", "pa_hat_final", "informative_steps",
+         "violation_line", "violation_run", "min_distance_m", "shield_interventions")
 
 
 def _part(folder: Path, name: str, start: int) -> Path:
@@ -104,8 +135,7 @@ def summarise(parts: dict[str, list[dict]], interactions: int, humans: int) -> d
     for name, chunks in parts.items():
         chunks = sorted(chunks, key=lambda c: c["seeds"][0])
         cat = {key: np.array([row for c in chunks for row in c[key]], dtype=float)
-               for key in ("first_at_line", "infeasible_steps", "collision", "pa_hat_final",
-                           "informative_steps")}
+               for key in _KEYS}
         rows[name] = {
             "humans": int(cat["first_at_line"].shape[0]),
             "av_first_pct": (100.0 * np.mean(cat["first_at_line"] == 1, axis=0)).tolist(),
@@ -116,8 +146,42 @@ def summarise(parts: dict[str, list[dict]], interactions: int, humans: int) -> d
             "pa_hat_final_mean": np.mean(cat["pa_hat_final"], axis=0).tolist(),
             "pa_hat_final_max": np.max(cat["pa_hat_final"], axis=0).tolist(),
             "informative_steps_mean": np.mean(cat["informative_steps"], axis=0).tolist(),
+            "violation_line_runs": np.sum(cat["violation_line"], axis=0).astype(int).tolist(),
+            "violation_run_runs": np.sum(cat["violation_run"], axis=0).astype(int).tolist(),
+            "min_distance_m": float(np.min(cat["min_distance_m"])),
+            "shield_interventions": int(np.sum(cat["shield_interventions"])),
         }
-    return {"interactions": interactions, "humans": humans, "rows": rows}
+    out = {"interactions": interactions, "humans": humans, "rows": rows}
+    if all(n in parts for n in PAIR):
+        out["pair"] = paired(*(sorted(parts[n], key=lambda c: c["seeds"][0]) for n in PAIR))
+    return out
+
+
+def paired(chunks_a: list[dict], chunks_b: list[dict], n_boot: int = 10_000) -> dict:
+    """The recklessness pair run by run: the same humans and initial states under two planners.
+
+    Returns which runs failed the chance constraint under each (and whether they are the same
+    runs), the runs whose failed-step counts differ (``[seed, interaction, a - b]``), and a 95 %
+    bootstrap interval of the difference in failed steps, resampling humans (each human's 30
+    interactions stay together; ``numpy.random.default_rng(19)``, ``n_boot`` resamples).
+    """
+    seeds = [s for c in chunks_a for s in c["seeds"]]
+    if seeds != [s for c in chunks_b for s in c["seeds"]]:
+        raise ValueError("the two settings ran different humans")
+    a = np.array([row for c in chunks_a for row in c["infeasible_steps"]], dtype=np.int64)
+    b = np.array([row for c in chunks_b for row in c["infeasible_steps"]], dtype=np.int64)
+    d = a - b
+    where = np.argwhere(d != 0)
+    per_human = d.sum(axis=1)
+    rng = np.random.default_rng(19)
+    boot = per_human[rng.integers(0, len(per_human), (n_boot, len(per_human)))].sum(axis=1)
+    return {
+        "same_failed_runs": bool(np.array_equal(a > 0, b > 0)),
+        "failed_runs": [int(np.sum(a > 0)), int(np.sum(b > 0))],
+        "failed_steps": [int(a.sum()), int(b.sum())],
+        "differing_runs": [[seeds[i], int(k), int(d[i, k])] for i, k in where],
+        "steps_diff_ci95": [float(x) for x in np.percentile(boot, [2.5, 97.5])],
+    }
 
 
 def to_markdown(summary: dict) -> str:
@@ -150,12 +214,27 @@ def to_markdown(summary: dict) -> str:
     if reck:
         lines += ["", "Recklessness check, human p_a = 0.3 (leader start), all interactions:", "",
                   "| planner | runs | runs with cc failed | steps with cc failed | collisions | "
-                  "AV first % | mean p_a_hat at the end of the last |", "|---|---|---|---|---|---|---|"]
+                  "violations to line / whole run | min distance m | shield interventions | "
+                  "AV first % | mean p_a_hat at the end of the last |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         for n in reck:
             r = rows[n]
             lines.append(f"| {n} | {r['humans'] * k} | {sum(r['cc_fail_runs'])} | "
                          f"{sum(r['cc_fail_steps'])} | {sum(r['collisions'])} | "
+                         f"{sum(r['violation_line_runs'])} / {sum(r['violation_run_runs'])} | "
+                         f"{r['min_distance_m']:.3f} | {r['shield_interventions']} | "
                          f"{np.mean(r['av_first_pct']):.1f} | {r['pa_hat_final_mean'][-1]:.4f} |")
+        if "pair" in summary:
+            p = summary["pair"]
+            diff = p["differing_runs"]
+            lines += ["", f"{PAIR[0]} against {PAIR[1]}, run by run: "
+                      f"failed runs {p['failed_runs'][0]} / {p['failed_runs'][1]} "
+                      f"({'the same runs' if p['same_failed_runs'] else 'not the same runs'}); "
+                      f"failed steps {p['failed_steps'][0]} / {p['failed_steps'][1]}, "
+                      f"difference 95 % CI [{p['steps_diff_ci95'][0]:+.0f}, "
+                      f"{p['steps_diff_ci95'][1]:+.0f}] (bootstrap over humans); "
+                      f"{len(diff)} runs differ, {sum(x[2] > 0 for x in diff)} with more steps "
+                      "online: " + ", ".join(f"seed {s} k={i} {x:+d}" for s, i, x in diff)]
     cc = [n for n in rows if SETTINGS[n][0] == 1.0]
     lines += ["", "Chance-constraint failures with the paper's human (runs / steps over all "
               "interactions): " + "; ".join(
@@ -172,12 +251,15 @@ def main(argv=None) -> int:
     ap.add_argument("--chunk", type=int, default=25, help="humans per task")
     ap.add_argument("--settings", default="all",
                     help="all (the issue's six settings), extra (a prior that tries to "
-                         "persuade, Beta(30, 1), beside fixed 0.97), or names separated by "
+                         "persuade, Beta(30, 1), beside fixed 0.97), reckless (the p_a = 0.3 "
+                         "human against online, fixed 0.7, informed and fixed 0.5), or names "
+                         "separated by "
                          "';': " + "; ".join(SETTINGS))
     ap.add_argument("--out", default="results/online-pa")
     args = ap.parse_args(argv)
-    names = list(MAIN) if args.settings == "all" else list(EXTRA) \
-        if args.settings == "extra" else [s.strip() for s in args.settings.split(";")]
+    groups = {"all": MAIN, "extra": EXTRA, "reckless": RECKLESS}
+    names = list(groups[args.settings]) if args.settings in groups \
+        else [s.strip() for s in args.settings.split(";")]
     for n in names:
         if n not in SETTINGS:
             print(f"error: unknown setting {n!r}", file=sys.stderr)

@@ -217,6 +217,55 @@ def test_against_a_stubborn_human_the_posterior_falls(kind, p_a):
     assert all(r.outcome.infeasible_steps == 0 for r in recs)
 
 
+#: Runs of the recklessness check (benchmarks/online_pa.py --settings reckless, 3000 humans x 30
+#: interactions) where the chance constraint failed, as (seed, interaction): failed steps of
+#: the online planner (Beta(7, 3)) and of the fixed 0.7 one. Seed 12's second interaction is
+#: one of the standoffs in which the online planner stays infeasible longer; seed 1686's 14th
+#: the one in which the fixed planner does.
+RECKLESS_PINS = {(42, 0): (27, 27), (450, 1): (44, 44), (12, 1): (40, 6), (1686, 13): (2, 36)}
+
+
+@pytest.mark.parametrize("seed,k", sorted(RECKLESS_PINS))
+def test_against_a_reluctant_human_online_fails_in_the_same_runs_as_fixed(seed, k):
+    """A human with p_a = 0.3: where the chance constraint fails, it fails for both planners
+    (the same runs, pinned step counts from the long run), with no collision and no safety
+    violation up to the line."""
+    human = {"roles.p_a": 0.3, "hv.role": "leader"}
+    got = []
+    for p_a_hat in ("online", 0.7):
+        config = corrected(**human, **{"mpc.p_a_hat": p_a_hat})
+        rec = simulate_interactions(config, seed, k + 1)[k]
+        assert not rec.outcome.collision
+        assert rec.outcome.min_distance_to_line_m >= rec.scenario.min_dist_m
+        got.append(rec.outcome.infeasible_steps)
+    assert tuple(got) == RECKLESS_PINS[seed, k]
+
+
+def test_the_benchmark_pairs_runs_by_seed_and_interaction():
+    """benchmarks/online_pa.py's run-by-run comparison of the recklessness pair."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).parents[1] / "benchmarks" / "online_pa.py"
+    spec = importlib.util.spec_from_file_location("online_pa", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    a = [{"seeds": [1, 2], "infeasible_steps": [[0, 5], [0, 0]]},
+         {"seeds": [3], "infeasible_steps": [[2, 0]]}]
+    b = [{"seeds": [1, 2], "infeasible_steps": [[0, 3], [0, 0]]},
+         {"seeds": [3], "infeasible_steps": [[2, 0]]}]
+    got = bench.paired(a, b, n_boot=200)
+    assert got["same_failed_runs"] and got["failed_runs"] == [2, 2]
+    assert got["failed_steps"] == [7, 5] and got["differing_runs"] == [[1, 1, 2]]
+    lo, hi = got["steps_diff_ci95"]
+    assert 0 <= lo <= hi <= 6  # a resample holds human 1 zero to three times
+    b[1]["infeasible_steps"] = [[0, 0]]
+    assert not bench.paired(a, b, n_boot=10)["same_failed_runs"]
+    b[1]["seeds"] = [4]
+    with pytest.raises(ValueError, match="different humans"):
+        bench.paired(a, b)
+
+
 # -- interactions, carrying, determinism -----------------------------------------------------
 
 
