@@ -13,15 +13,14 @@
   both initial roles, and ``idm`` (critical gap 1.5 s, time gap 1.2 s, desired speed 9 m/s, not
   the fit's start values), each without and with noise: 10 settings.
 
-Every dataset is fitted with all four models (point estimates) and the smallest BIC names the
-kind. The design of a dataset: corrected mode, the paper's intersection, run ``j`` against the
-persuasive AV when ``j`` is even and the passive AV when odd (the two planners of the built-in
-``drive`` study), both AVs assuming ``p_a_hat = 1`` (Table 2's rows and the drive study) and unshielded (the
-shield, on by default in corrected mode, came later; it changes what the AV does, not the
-human, and the recovery figures were measured without it);
-seeds ``1 + runs * d + j`` for dataset ``d``. The persuasive AV gives a human who starts as
-leader its chances to change role (it tries to lead), the passive AV one who starts as
-follower (it yields).
+Every dataset is fitted with all four models (point estimates) and the smallest BIC names the kind.
+The design of a dataset: corrected mode, the paper's intersection, run ``j`` against the persuasive
+AV when ``j`` is even and the passive AV when odd (the two planners of the built-in ``drive``
+study), both AVs assuming ``p_a_hat = 1`` (Table 2's rows and the drive study) and unshielded (the
+shield, on by default in corrected mode, came later; it changes what the AV does, not the human,
+and the recovery figures were measured without it); seeds ``1 + runs * d + j`` for dataset ``d``.
+The persuasive AV gives a human who starts as leader its chances to change role (it tries to lead),
+the passive AV one who starts as follower (it yields).
 
 Per dataset one JSON line goes to ``OUT/results.jsonl`` as soon as it is done: run the same
 command again to resume. ``OUT/meta.json`` records a digest of the code of the fitting

@@ -475,10 +475,11 @@ class HVParams:
     ``lfg``: the paper's adaptive-role LFG human; ``stubborn``: the LFG with ``p_a = 0``;
     ``noisy``: a Boltzmann-rational LFG; ``idm``: an IDM driver with gap acceptance;
     ``aggressive``: full throttle, never yields; ``replay``: a recorded trajectory, open loop;
-    ``adversary``: aims at the conflict to arrive when the AV does; ``deceptive``: yields until
-    the AV commits, then accelerates fully; ``random``: bounded random accelerations held for
-    random times (docs/method.md §12.4); ``person``: a person at the controls (``persuasive drive``; a Python policy, not a compiled
-    kind: ``simulate`` cannot run it, and records of the browser page carry it).
+    ``adversary``: aims at the conflict to arrive when the AV does; ``deceptive``: yields until the
+    AV commits, then accelerates fully; ``random``: bounded random accelerations held for random
+    times (docs/method.md §12.4); ``person``: a person at the controls (``persuasive drive``; a
+    Python policy, not a compiled kind: ``simulate`` cannot run it, and records of the browser page
+    carry it).
     """
 
     kind: HVKind = "lfg"  #: lfg | stubborn | noisy | idm | aggressive | replay | adversary |

@@ -19,11 +19,11 @@ of :mod:`persuasive.fitting.models` compute them).
   ``exp(logscale)``;
 - ``logscale`` ``(G,)``: the log of that scale.
 
-Each emission enters relative to the likelier role (one ``exp`` per step and row), and
-``alpha`` is brought back to a sum in [0.5, 1) by an exact power of two whenever its sum
-leaves ``[2^-200, 2^200]``, so no rounding is added and nothing underflows. :func:`filter_loglik` reads the log-likelihood so
-far, ``logscale + log(alpha_L + alpha_F)``, and :func:`filter_posterior` the role's
-posterior ``alpha_L / (alpha_L + alpha_F)``.
+Each emission enters relative to the likelier role (one ``exp`` per step and row), and ``alpha`` is
+brought back to a sum in [0.5, 1) by an exact power of two whenever its sum leaves ``[2^-200,
+2^200]``, so no rounding is added and nothing underflows. :func:`filter_loglik` reads the
+log-likelihood so far, ``logscale + log(alpha_L + alpha_F)``, and :func:`filter_posterior` the
+role's posterior ``alpha_L / (alpha_L + alpha_F)``.
 
 **Steps.** :func:`filter_start` takes the first emission with a prior ``P(r_0 = L)``;
 :func:`filter_step` predicts with the previous step's transition, then takes this step's

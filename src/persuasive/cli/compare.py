@@ -6,7 +6,8 @@ import json
 
 import click
 
-from ._common import INTERACTIONS_HELP, build_config, check_workers, compile_notice, config_options, progress_bar
+from ._common import (INTERACTIONS_HELP, build_config, check_workers, compile_notice,
+                      config_options, progress_bar)
 
 
 @click.command()

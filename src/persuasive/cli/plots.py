@@ -1,12 +1,12 @@
 """The ``persuasive plot`` and ``persuasive animate`` commands (registered by ``persuasive.cli``).
 
 The run options are those of ``persuasive simulate`` (:func:`persuasive.cli._common.run_options`),
-except that ``--seed`` defaults to the run the authors show in their Figs. 2 and 3 (996), so
-that ``persuasive plot profile`` draws the paper's figure; ``simulate`` defaults to seed 1. matplotlib and the
-simulation are imported inside the commands, so ``persuasive --help`` stays fast and the
-command line never pulls matplotlib in unless a figure is drawn; the Agg backend is forced
-there, as no window is ever opened. Every file is checked for a known extension before any
-work, and written to a temporary sibling first, then renamed.
+except that ``--seed`` defaults to the run the authors show in their Figs. 2 and 3 (996), so that
+``persuasive plot profile`` draws the paper's figure; ``simulate`` defaults to seed 1. matplotlib
+and the simulation are imported inside the commands, so ``persuasive --help`` stays fast and the
+command line never pulls matplotlib in unless a figure is drawn; the Agg backend is forced there,
+as no window is ever opened. Every file is checked for a known extension before any work, and
+written to a temporary sibling first, then renamed.
 """
 
 from __future__ import annotations

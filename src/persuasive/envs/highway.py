@@ -21,32 +21,31 @@ right-angle crossing. A vehicle's lane sequence and conflict point are kept from
 first seen, so that a vehicle past the point is still measured against it until it has
 cleared it.
 
-Which vehicle the planner plans against, and the shield: **all of them**, through the
-adapter every outside simulator shares (``persuasive.envs.external.ExternalPlanner``): one
-planner per conflicting vehicle (each keeps its own belief on that driver's role), the lowest
-of their accelerations, an IDM gap to a vehicle ahead in the ego's lane, full throttle without
-a conflict, and the safety shield over every conflicting vehicle and every vehicle ahead in
-the lane (corrected mode: the worst-case shield; ``--shield`` sets it). For the shield each
-projected vehicle also gets its **occupancy**: the stretch of its lanes where its footprint
-can touch the ego's (its centre within ``ego width / 2 + its half-diagonal +`` :data:`TRACK_MARGIN_M`
-of the ego's line) and the stretch of the ego's path facing it (widened by ``ego length / 2 +
-its half-diagonal``); a vehicle whose lanes stay in that band to their end joins the ego's lane
-(a merge, with its merge point where its lane centre comes within :data:`SAME_LANE_M` of the
-ego's line), one in the ego's lane ahead of it is followed. Its limits are highway-env's own:
-``IDMVehicle`` accelerates at most at its ``COMFORT_ACC_MAX``, brakes at most at its
-``ACC_MAX`` and never drives faster than the larger of its speed and its target speed.
-highway-env integrates positions with the speed of the step's start (Euler): a braking ego
-rolls further than the planner's exact step says, by ``v dt / 2`` from speed ``v`` plus at most
-``b dt^2 / 8`` for the last, partial step of deceleration ``b`` (the speed is clipped at 0), and
-an accelerating one lags behind it. The shield therefore takes the ego, for each first step it
-checks, that much further along than the exact kinematics after that step
+Which vehicle the planner plans against, and the shield: **all of them**, through the adapter every
+outside simulator shares (``persuasive.envs.external.ExternalPlanner``): one planner per
+conflicting vehicle (each keeps its own belief on that driver's role), the lowest of their
+accelerations, an IDM gap to a vehicle ahead in the ego's lane, full throttle without a conflict,
+and the safety shield over every conflicting vehicle and every vehicle ahead in the lane (corrected
+mode: the worst-case shield; ``--shield`` sets it). For the shield each projected vehicle also gets
+its **occupancy**: the stretch of its lanes where its footprint can touch the ego's (its centre
+within ``ego width / 2 + its half-diagonal +`` :data:`TRACK_MARGIN_M` of the ego's line) and the
+stretch of the ego's path facing it (widened by ``ego length / 2 + its half-diagonal``); a vehicle
+whose lanes stay in that band to their end joins the ego's lane (a merge, with its merge point
+where its lane centre comes within :data:`SAME_LANE_M` of the ego's line), one in the ego's lane
+ahead of it is followed. Its limits are highway-env's own: ``IDMVehicle`` accelerates at most at
+its ``COMFORT_ACC_MAX``, brakes at most at its ``ACC_MAX`` and never drives faster than the larger
+of its speed and its target speed. highway-env integrates positions with the speed of the step's
+start (Euler): a braking ego rolls further than the planner's exact step says, by ``v dt / 2`` from
+speed ``v`` plus at most ``b dt^2 / 8`` for the last, partial step of deceleration ``b`` (the speed
+is clipped at 0), and an accelerating one lags behind it. The shield therefore takes the ego, for
+each first step it checks, that much further along than the exact kinematics after that step
 (:func:`euler_shift`: the Euler step's own displacement against the exact one, plus
-:func:`euler_lead`, the exact Euler surplus of a stop at ``u_min`` from the new speed; 0 for
-an ego at rest that stays at rest), and the far end of the ego's
-occupancy is widened by ``v_max dt`` for the lag (at ``u_max = 1 m/s^2`` it stays below that
-for the 10 s it takes the ego to accelerate from rest to ``v_max``); the other vehicles' near
-ends by their ``v_max dt / 2`` (an Euler vehicle that stops, stops that much further). The acceleration is finally limited so
-that the speed stays in ``[v_min, v_max]`` within the step.
+:func:`euler_lead`, the exact Euler surplus of a stop at ``u_min`` from the new speed; 0 for an ego
+at rest that stays at rest), and the far end of the ego's occupancy is widened by ``v_max dt`` for
+the lag (at ``u_max = 1 m/s^2`` it stays below that for the 10 s it takes the ego to accelerate
+from rest to ``v_max``); the other vehicles' near ends by their ``v_max dt / 2`` (an Euler vehicle
+that stops, stops that much further). The acceleration is finally limited so that the speed stays
+in ``[v_min, v_max]`` within the step.
 
 The comparison driver (``default``) is highway-env's own: the ego becomes one of the env's
 ``IDMVehicle`` (its parameters as the env sets them for traffic, lane changes off, routed to

@@ -1,13 +1,13 @@
 """A comparison of planners and humans (``persuasive compare``) as one figure.
 
-:func:`compare_figure` draws, from a comparison's summary and runs: left, the outcome matrix,
-AV planners by human models, each cell coloured by the share of runs in which the AV reached
-its line first and labelled with that share, its 95 % interval (when the cells leave room)
-and the number of collisions the AV caused; with several shield settings (``compare --shield``)
-each planner has a row per setting; right, box plots of the AV's and the human's delays per pair (time to leave the conflict zone
-minus the free-flow time; runs where a vehicle never cleared are left out and counted). A pair
-whose delays are all zero, or undefined (the vehicle never cleared), says "0" or "n/a" beside
-its empty box.
+:func:`compare_figure` draws, from a comparison's summary and runs: left, the outcome matrix, AV
+planners by human models, each cell coloured by the share of runs in which the AV reached its line
+first and labelled with that share, its 95 % interval (when the cells leave room) and the number of
+collisions the AV caused; with several shield settings (``compare --shield``) each planner has a
+row per setting; right, box plots of the AV's and the human's delays per pair (time to leave the
+conflict zone minus the free-flow time; runs where a vehicle never cleared are left out and
+counted). A pair whose delays are all zero, or undefined (the vehicle never cleared), says "0" or
+"n/a" beside its empty box.
 """
 
 from __future__ import annotations

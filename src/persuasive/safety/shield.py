@@ -37,20 +37,20 @@ makes an AV-caused overlap along it:
   braking at its ``u_min`` from now: ``s_H(t) - s_R(t) > L`` for all ``t`` (checked on the
   breakpoints and the stationary points of the piecewise-quadratic gap, exactly).
 
-**Invariant.** Let ``S`` be the joint states from which ``BRAKE`` or ``GO`` for ever is
-certified. If the state is in ``S``, the shield's output keeps it in ``S`` and no AV-caused
-overlap happens during the step. *Proof.* An admitted ``a`` comes with a fallback ``F`` such
-that "``a``, then ``F``" is certified from ``(x_R, x_H)``; after the step the AV is at the
-second piece's start and the human at some state it reached within its limits, and the
-humans from there are a subset of those from ``x_H``, so "``F`` for ever" is certified from
-the new state. An override applies the first step of a certified fallback, and the same
-argument holds with ``a = F``. Certification covers the step itself (the windows are in
-continuous time from now), so no overlap happens within it either. By induction, from an
-initial state in ``S`` no AV-caused overlap ever happens. The closed loop's initial states
-let each vehicle stop before its conflict zone, which contains its occupancy interval whenever
-the safety distance exceeds the two half-diagonals (the default sizes), so they are in ``S``. From states outside it the shield still answers (``UNCERTIFIED``: the
-fallback whose possible overlap starts latest, or is shortest), e.g. with measurement noise on, or when a vehicle appears out of nowhere in an outside simulator, where the guarantee does not
-hold.
+**Invariant.** Let ``S`` be the joint states from which ``BRAKE`` or ``GO`` for ever is certified.
+If the state is in ``S``, the shield's output keeps it in ``S`` and no AV-caused overlap happens
+during the step. *Proof.* An admitted ``a`` comes with a fallback ``F`` such that "``a``, then
+``F``" is certified from ``(x_R, x_H)``; after the step the AV is at the second piece's start and
+the human at some state it reached within its limits, and the humans from there are a subset of
+those from ``x_H``, so "``F`` for ever" is certified from the new state. An override applies the
+first step of a certified fallback, and the same argument holds with ``a = F``. Certification
+covers the step itself (the windows are in continuous time from now), so no overlap happens within
+it either. By induction, from an initial state in ``S`` no AV-caused overlap ever happens. The
+closed loop's initial states let each vehicle stop before its conflict zone, which contains its
+occupancy interval whenever the safety distance exceeds the two half-diagonals (the default sizes),
+so they are in ``S``. From states outside it the shield still answers (``UNCERTIFIED``: the
+fallback whose possible overlap starts latest, or is shortest), e.g. with measurement noise on, or
+when a vehicle appears out of nowhere in an outside simulator, where the guarantee does not hold.
 
 **Conservative, never optimistic.** Every time compared carries a margin of
 :data:`TIME_MARGIN_S` against the AV and every interval is widened by rounding margins when it
