@@ -33,7 +33,7 @@ rerun skips the chunks already written. Prints a Markdown table and writes
 
     python benchmarks/online_pa.py --humans 1000 --interactions 30 --workers 2 \\
         --out results/online-pa
-    python benchmarks/online_pa.py --settings reckless --humans 3000 --interactions 30 \
+    python benchmarks/online_pa.py --settings reckless --humans 3000 --interactions 30 \\
         --workers 2 --out results/online-pa-reckless
 """
 
@@ -188,11 +188,13 @@ def to_markdown(summary: dict) -> str:
     k = summary["interactions"]
     shown = [i for i in SHOWN if i <= k]
     rows = summary["rows"]
-    lines = [f"AV first % per interaction ({summary['humans']} humans, {k} interactions each; "
-             "paper's human p_a = 1, leader start; corrected mode):", "",
-             "| planner | " + " | ".join(f"{i}" for i in shown) + " |",
-             "|---|" + "---|" * len(shown)]
-    for name in [n for n in rows if SETTINGS[n][0] == 1.0]:
+    cc = [n for n in rows if SETTINGS[n][0] == 1.0]  # the settings with the paper's human
+    lines = [f"{summary['humans']} humans, {k} interactions each; corrected mode"]
+    if cc:
+        lines += ["", "AV first % per interaction (paper's human p_a = 1, leader start):", "",
+                  "| planner | " + " | ".join(f"{i}" for i in shown) + " |",
+                  "|---|" + "---|" * len(shown)]
+    for name in cc:
         if name in rows:
             lines.append(f"| {name} | " + " | ".join(
                 f"{rows[name]['av_first_pct'][i - 1]:.1f}" for i in shown) + " |")
@@ -235,11 +237,11 @@ def to_markdown(summary: dict) -> str:
                       f"{p['steps_diff_ci95'][1]:+.0f}] (bootstrap over humans); "
                       f"{len(diff)} runs differ, {sum(x[2] > 0 for x in diff)} with more steps "
                       "online: " + ", ".join(f"seed {s} k={i} {x:+d}" for s, i, x in diff)]
-    cc = [n for n in rows if SETTINGS[n][0] == 1.0]
-    lines += ["", "Chance-constraint failures with the paper's human (runs / steps over all "
-              "interactions): " + "; ".join(
-                  f"{n} {sum(rows[n]['cc_fail_runs'])} / {sum(rows[n]['cc_fail_steps'])}"
-                  for n in cc)]
+    if cc:
+        lines += ["", "Chance-constraint failures with the paper's human (runs / steps over "
+                  "all interactions): " + "; ".join(
+                      f"{n} {sum(rows[n]['cc_fail_runs'])} / {sum(rows[n]['cc_fail_steps'])}"
+                      for n in cc)]
     return "\n".join(lines) + "\n"
 
 
@@ -266,8 +268,10 @@ def main(argv=None) -> int:
             return 2
     folder = Path(args.out)
     (folder / "parts").mkdir(parents=True, exist_ok=True)
+    # "format": what a part holds (2: with the safety measures), so that a folder of older
+    # parts is refused rather than summarised without them
     meta = {"humans": args.humans, "interactions": args.interactions, "chunk": args.chunk,
-            "settings": names}
+            "settings": names, "format": 2}
     meta_path = folder / "benchmark.json"
     if meta_path.exists() and json.loads(meta_path.read_text()) != meta:
         print(f"error: {folder} holds another run ({meta_path.read_text().strip()})",
