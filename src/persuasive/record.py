@@ -198,7 +198,6 @@ def load_record(path) -> RunRecord:
     """The :class:`RunRecord` saved by :meth:`RunRecord.save` (``simulate --out x.parquet``, a
     recorded trial of the browser page): states, log, outcome and configuration."""
     import json
-    import tomllib
     from pathlib import Path
 
     import pyarrow.parquet as pq
@@ -227,9 +226,17 @@ def load_record(path) -> RunRecord:
     if raw is None:
         raise ConfigError(f"run file {str(path)!r} holds no run record (write it with "
                           "'persuasive simulate --out FILE.parquet' or the browser page)")
-    meta = json.loads(raw)
+    return record_from_frame(json.loads(raw), table.to_pandas(), __version__)
+
+
+def record_from_frame(meta: dict, frame, default_version: str) -> RunRecord:
+    """A :class:`RunRecord` from a saved run's metadata (``config_toml``, ``seed``,
+    ``final_state``, and ``streams`` and ``version`` when present) and its per-step log as a
+    pandas frame; the states are the log's ``av_``/``hv_`` positions and speeds plus the final
+    state, and the outcome is computed again from them."""
+    import tomllib
+
     config = Config.from_dict(tomllib.loads(meta["config_toml"]))
-    frame = table.to_pandas()
     log = {name: frame[name].to_numpy() for name in frame.columns}
     states = np.vstack([frame[["av_s_m", "av_v_mps", "hv_s_m", "hv_v_mps"]].to_numpy(float),
                         np.asarray(meta["final_state"], float)[None, :]])
@@ -237,7 +244,7 @@ def load_record(path) -> RunRecord:
     return RunRecord(config, int(meta["seed"]), (float(states[0, 0]), float(states[0, 1])),
                      (float(states[0, 2]), float(states[0, 3])), states, log,
                      outcome(scenario, states, log), scenario, meta.get("streams", "legacy"),
-                     version=meta.get("version", __version__))
+                     version=meta.get("version", default_version))
 
 
 def check_seed(seed: Any) -> int:
@@ -429,4 +436,4 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
 
 __all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA",
            "WORLD_LOG", "RunOutcome", "RunRecord", "Setup", "check_seed", "load_record",
-           "make_record", "outcome", "setup", "static_setup"]
+           "make_record", "outcome", "record_from_frame", "setup", "static_setup"]

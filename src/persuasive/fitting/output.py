@@ -97,13 +97,10 @@ def is_fit_file(path: str | Path) -> bool:
 def load_fitted_run(path: str | Path, run: int = 0):
     """The :class:`persuasive.simulation.RunRecord` of run ``run`` of a fit's Parquet file,
     its log holding ``hv_fit_p_leader``."""
-    import tomllib
-
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
-    from ..config import Config
-    from ..record import RunRecord, outcome, static_setup
+    from ..record import record_from_frame
 
     table = pq.read_table(path)
     meta = json.loads(table.schema.metadata[FIT_METADATA])
@@ -113,17 +110,7 @@ def load_fitted_run(path: str | Path, run: int = 0):
                           f"allowed: 0..{len(runs) - 1}")
     entry = runs[run]
     sub = table.filter(pc.equal(table["fit_run"], run)).select(entry["columns"])
-    frame = sub.to_pandas()
-    rec = entry["record"]
-    config = Config.from_dict(tomllib.loads(rec["config_toml"]))
-    log = {name: frame[name].to_numpy() for name in frame.columns}
-    states = np.vstack([frame[["av_s_m", "av_v_mps", "hv_s_m", "hv_v_mps"]].to_numpy(float),
-                        np.asarray(rec["final_state"], float)[None, :]])
-    scenario = static_setup(config)[0]
-    return RunRecord(config, int(rec["seed"]), (float(states[0, 0]), float(states[0, 1])),
-                     (float(states[0, 2]), float(states[0, 3])), states, log,
-                     outcome(scenario, states, log), scenario, rec.get("streams", "legacy"),
-                     version=rec.get("version", ""))
+    return record_from_frame(entry["record"], sub.to_pandas(), "")
 
 
 __all__ = ["FIT_METADATA", "OUT_EXTENSIONS", "is_fit_file", "load_fitted_run",
