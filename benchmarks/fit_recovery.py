@@ -55,6 +55,7 @@ import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -272,7 +273,10 @@ def recovery(args) -> None:
           f"{args.workers} workers)", flush=True)
     t0 = time.perf_counter()
     if tasks:
-        with ProcessPoolExecutor(args.workers) as pool, open(results, "a") as fh:
+        # spawned workers: they import this script (its run_task) afresh, never a fork of
+        # this threaded process
+        with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn")) as pool, \
+                open(results, "a") as fh:
             futures = [pool.submit(run_task, s, d, args.runs) for s, d in tasks]
             for i, fut in enumerate(as_completed(futures), 1):
                 row = fut.result()

@@ -45,6 +45,7 @@ import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -293,7 +294,9 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     print(f"{len(todo)} chunks to run ({sum(len(s) for _, s in todo)} humans x "
           f"{args.interactions} interactions), {args.workers} workers", file=sys.stderr)
-    with ProcessPoolExecutor(args.workers) as pool:
+    # spawned workers: they import this script (its run_chunk) afresh, never a fork of this
+    # threaded process
+    with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn")) as pool:
         futures = {pool.submit(run_chunk, n, seeds, args.interactions): (n, seeds)
                    for n, seeds in todo}
         for i, fut in enumerate(as_completed(futures), 1):

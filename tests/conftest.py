@@ -1,10 +1,26 @@
-"""Shared fixtures and the hypothesis profile.
+"""Shared fixtures, the hypothesis profiles and the suite's own temporary folder.
 
-The profile drops hypothesis' per-example deadline: the first call of a Numba kernel loads it
-from the on-disk cache (or compiles it), which takes longer than any sensible deadline.
+Hypothesis profiles. ``persuasive`` (the default, what ``make test`` and CI run) is
+derandomized: every run tries the same examples, so a fresh clone's ``make test`` cannot fail
+on an example nobody has seen; an example that once failed is kept as an explicit
+``@example`` beside its test. ``explore`` (``pytest --hypothesis-profile=explore``) draws at
+random, ten times as many examples where a test does not set its own count, and keeps what
+it finds in ``.hypothesis/``: run it while developing. Both drop hypothesis' per-example
+deadline: the first call of a Numba kernel loads it from the on-disk cache (or compiles it),
+which takes longer than any sensible deadline.
+
+Temporary folders. Every test and every process it starts writes its temporary files under
+the session's own folder (``TMPDIR`` points there for the whole session), never into the
+machine's temporary folder, so that suites running side by side cannot see each other's
+files.
 """
 
 from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -14,9 +30,95 @@ from persuasive.scenarios import build_scenario
 from persuasive.config import Config
 
 settings.register_profile(
-    "persuasive", deadline=None, suppress_health_check=[HealthCheck.too_slow]
+    "persuasive", deadline=None, suppress_health_check=[HealthCheck.too_slow],
+    derandomize=True, database=None, print_blob=True,
 )
-settings.load_profile("persuasive")
+settings.register_profile(
+    "explore", deadline=None, suppress_health_check=[HealthCheck.too_slow],
+    derandomize=False, max_examples=1000, print_blob=True,
+)
+settings.load_profile("persuasive")  # --hypothesis-profile=explore replaces it
+
+
+@pytest.fixture(scope="session", autouse=True)
+def own_temporary_folder(tmp_path_factory):
+    """``TMPDIR`` (and :mod:`tempfile`'s folder) is a folder of this session's."""
+    folder = tmp_path_factory.mktemp("tmp")
+    old = os.environ.get("TMPDIR")
+    os.environ["TMPDIR"] = str(folder)
+    tempfile.tempdir = None  # read TMPDIR again
+    yield folder
+    if old is None:
+        os.environ.pop("TMPDIR", None)
+    else:
+        os.environ["TMPDIR"] = old
+    tempfile.tempdir = None
+
+
+def _stat(pid: int) -> list[str]:
+    return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+
+
+@pytest.fixture
+def gone():
+    """``gone(pid, within_s=10)``: True once the process has ended (or is a zombie)."""
+    def check(pid: int, within_s: float = 10.0) -> bool:
+        end = time.monotonic() + within_s
+        while time.monotonic() < end:
+            try:
+                if _stat(pid)[0] == "Z":
+                    return True
+            except OSError:
+                return True
+            time.sleep(0.05)
+        return False
+
+    return check
+
+
+def descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (its children, theirs, ...)."""
+    kids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if int(_stat(int(entry.name))[1]) == pid:
+                    kids.append(int(entry.name))
+            except (OSError, IndexError, ValueError):
+                continue
+    return kids + [d for k in kids for d in descendants(k)]
+
+
+@pytest.fixture
+def kill_mid_run(tmp_path):
+    """``kill_mid_run(argv, started, workers=2)``: start ``persuasive argv`` with a ``TMPDIR``
+    of its own, SIGKILL it once ``started()`` holds and its workers run, and return the
+    processes it had below it and its ``TMPDIR``."""
+    import signal
+    import subprocess
+    import sys
+
+    def run(argv: list[str], started, workers: int = 2) -> tuple[list[int], Path]:
+        temp = tmp_path / "killed-tmp"
+        temp.mkdir()
+        env = dict(os.environ, TMPDIR=str(temp))
+        proc = subprocess.Popen([sys.executable, "-m", "persuasive", *argv], env=env,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 240
+        try:
+            while time.monotonic() < deadline and proc.poll() is None:
+                # the fork server, multiprocessing's resource tracker and the workers
+                if started() and len(descendants(proc.pid)) >= 2 + workers:
+                    break
+                time.sleep(0.1)
+            assert proc.poll() is None, "the command ended before it was killed"
+            below = descendants(proc.pid)
+        finally:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
+        return below, temp
+
+    return run
 
 
 class Packed:

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from persuasive import Config
@@ -68,6 +68,9 @@ def test_reach_time_by_hand():
 
 
 @given(s=st.floats(-50, 50), v=st.floats(0, 10), a=st.floats(-2, 1), target=st.floats(-50, 60))
+@example(s=0.0, v=6e-236, a=6e-236, target=6e-236)  # v^2 + 2 a d underflowed: 2 s, not 0.73
+@example(s=0.0, v=1e-207, a=0.0, target=1e-207)  # v * v underflowed at constant speed
+@example(s=0.0, v=1e-160, a=-1e-160, target=1e-170)
 def test_reach_time_agrees_with_the_saturated_step(s, v, a, target):
     """The closed form lands on the target when stepping the same motion (docs/method.md
     §1.2) for that long, and is not there a little earlier."""

@@ -14,7 +14,6 @@ import os
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -425,7 +424,10 @@ def test_bad_input_is_one_line_exit_2(args, name, capsys, tmp_path):
 
 
 def _leftovers():
-    return sorted(p.name for p in Path(tempfile.gettempdir()).glob("persuasive-sumo-*"))
+    """What this process's commands have in their scratch folder (none of another's)."""
+    from persuasive._processes import scratch_root
+
+    return sorted(p.name for p in scratch_root().iterdir())
 
 
 def test_missing_extra_is_one_line_exit_2(capsys, tmp_path, monkeypatch):
@@ -480,27 +482,19 @@ def test_netconvert_child_dies_with_its_parent_on_sigkill():
 
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux")
-def test_sumo_workers_die_with_the_command_on_sigkill(tmp_path):
-    import psutil
-
-    exe = Path(sys.executable).with_name("persuasive")
-    cmd = subprocess.Popen([str(exe), "sumo", "--episodes", "20", "--workers", "2",
-                            "--out", str(tmp_path / "res")], stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL)
-    proc = psutil.Process(cmd.pid)
-    end = time.monotonic() + 120
-    kids = []
-    while time.monotonic() < end:
-        kids = [k for k in proc.children(recursive=True) if k.is_running()]
-        if len(kids) >= 2:
-            break
-        time.sleep(0.2)
-    assert len(kids) >= 2, "the workers did not start"
-    time.sleep(1.0)  # SUMO running in them
-    cmd.send_signal(signal.SIGKILL)
-    cmd.wait()
-    for k in kids:
-        assert _gone(k.pid), f"worker {k.pid} outlived the command"
+def test_sumo_workers_die_with_the_command_on_sigkill(tmp_path, kill_mid_run, gone):
+    """SIGKILL mid-study: every process below the command ends (SUMO runs in the workers)
+    and its temporary files go with it; nothing is written to --out."""
+    episodes = tmp_path / "killed-tmp"  # kill_mid_run's TMPDIR: SUMO runs once these exist
+    below, temp = kill_mid_run(["sumo", "--episodes", "20", "--workers", "2", "--out",
+                                str(tmp_path / "res")],
+                               lambda: any(not p.name.startswith("sumo-net-")
+                                           for p in episodes.glob("persuasive-*/sumo-*")))
+    assert all(gone(pid) for pid in below), "a process outlived the command"
+    end = time.monotonic() + 10
+    while any(temp.iterdir()) and time.monotonic() < end:
+        time.sleep(0.05)
+    assert list(temp.iterdir()) == []
     assert not (tmp_path / "res").exists()
 
 

@@ -88,16 +88,22 @@ def ensure_fresh_cache() -> bool:
     return True
 
 
-def kernels_cached() -> bool:
-    """True when the closed loop's compiled code is cached and newer than its source."""
-    from .world import run_loop
+def kernels_cached(*kernels) -> bool:
+    """True when these compiled functions (default: the closed loop's, ``world.run_loop``)
+    are cached and newer than their sources."""
+    if not kernels:
+        from .world import run_loop
 
-    try:
-        index = run_loop._cache._cache_file._index_path  # numba's cache layout
-        source = run_loop.py_func.__code__.co_filename
-        return os.path.getmtime(index) >= os.path.getmtime(source)
-    except (AttributeError, OSError):
-        return False
+        kernels = (run_loop,)
+    for kernel in kernels:
+        try:
+            index = kernel._cache._cache_file._index_path  # numba's cache layout
+            source = kernel.py_func.__code__.co_filename
+            if os.path.getmtime(index) < os.path.getmtime(source):
+                return False
+        except (AttributeError, OSError):
+            return False
+    return True
 
 
 def warm_up() -> None:

@@ -13,23 +13,20 @@ run. The published shares are printed beside the reproduced ones.
 
 from __future__ import annotations
 
-import ctypes
 import json
 import os
-import signal
-import sys
-import threading
 import time
 import tomllib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
 from ._version import __version__
 from ._compile import warm_up
+from ._processes import context
 from ._files import OutputError, atomic_folder, atomic_write
 from .config import Config, ConfigError
 from .simulation import simulate
@@ -190,30 +187,6 @@ def _tasks(tables: Iterable[str], base: Config, seeds: int, chunk: int):
                 yield table, i, cfg, list(range(lo, min(lo + chunk, seeds + 1)))
 
 
-def _die_with_parent(parent_pid: int) -> None:
-    """Worker initializer: end this worker when the process that started it dies.
-
-    On Linux the kernel sends SIGKILL on the parent's death (``prctl(PR_SET_PDEATHSIG)``);
-    everywhere, a daemon thread also checks once a second that the parent is still there.
-    """
-    if sys.platform.startswith("linux"):
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):
-            pass
-    if os.getppid() != parent_pid:  # the parent died before the line above
-        os._exit(1)
-
-    def watch() -> None:
-        while True:
-            time.sleep(1.0)
-            if os.getppid() != parent_pid:
-                os._exit(1)
-
-    threading.Thread(target=watch, name="persuasive-parent-watch", daemon=True).start()
-
-
 def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = None,
                mode: str | None = None, base: Config | None = None, chunk: int = 25,
                progress: Callable[[int, int, int], None] | None = None,
@@ -221,8 +194,8 @@ def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = N
     """Run every row of ``tables`` for seeds ``1..seeds``; one dict per run, in order.
 
     ``mode``: overrides ``base.mode`` when given. ``workers``: processes (default: all cores,
-    never more than the chunks of ``chunk`` runs; 1 runs in this process); workers end when
-    this process dies. ``progress(done_runs, total_runs, rows_done)`` is called as chunks
+    never more than the chunks of ``chunk`` runs; 1 runs in this process), started from the
+    fork server and ending when this process dies (:mod:`persuasive._processes`). ``progress(done_runs, total_runs, rows_done)`` is called as chunks
     finish. A run that raises is left out of the result and appended to ``failures`` (when
     given) as a :class:`RunFailure`; the others go on.
     """
@@ -265,8 +238,7 @@ def run_tables(tables: Iterable[str], seeds: int = 1000, workers: int | None = N
             collect(task, _run_chunk(task))
     else:
         warm_up()  # compile once here rather than in every worker at the same time
-        with ProcessPoolExecutor(max_workers=workers, initializer=_die_with_parent,
-                                 initargs=(os.getpid(),)) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context()) as pool:
             for task, outcome in zip(tasks, pool.map(_run_chunk, tasks)):
                 collect(task, outcome)
     if failures is not None:
@@ -493,21 +465,25 @@ def runs_of(table: str, frame) -> list[dict[str, Any]]:
 def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
               mode: str | None = None, base: Config | None = None,
               progress: Callable[[int, int, int], None] | None = None,
-              out: str | Path | None = None, force: bool = False,
-              scheduler: str | None = None) -> Reproduction:
+              out: str | Path | Mapping[str, str | Path] | None = None,
+              force: bool = False, scheduler: str | None = None) -> Reproduction:
     """Rerun the paper's tables: ``table`` is "table1", "table2" or "all".
 
     The runs go through the sweep runner (``persuasive.sweep``, Dask): each table is a sweep
-    whose cases are its rows, so a reproduction into a folder resumes where it stopped. ``out``:
-    the results folder (with ``"all"``, one subfolder per table); without it the runs go to a
-    temporary folder. ``mode`` overrides ``base.mode`` when given (``base`` defaults to the
+    whose cases are its rows, so a reproduction into a folder resumes where it stopped; one
+    local cluster runs every table. ``out``: the results folder (with ``"all"``, one subfolder
+    per table), or a mapping of table to folder; without it the runs go to a folder in the
+    command's scratch folder, removed at the end. ``mode`` overrides ``base.mode`` when given (``base`` defaults to the
     paper's values). A folder holding another reproduction is refused unless ``force``.
     """
-    import tempfile
+    import contextlib
+    import shutil
 
     import pandas as pd
 
     from . import sweep
+    from ._processes import scratch_dir
+    from .sweep.runner import local_cluster, pending_chunks
 
     if table not in (*TABLES, "all"):
         raise ConfigError(f"table = {table!r} is out of range; allowed: "
@@ -535,21 +511,40 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
     failures: list[RunFailure] = []
     folders: dict[str, Path] = {}
     skipped = ran = 0
-    with tempfile.TemporaryDirectory(prefix="persuasive-reproduce-") as scratch:
-        for t in tables:
-            if out is not None:
-                folder = Path(out) / t if table == "all" else Path(out)
-            else:
-                folder = Path(scratch) / t
-            result = sweep.run(grids[t], folder, workers=workers, scheduler=scheduler,
-                               force=force, progress=tracker(t), what="results folder")
-            runs += runs_of(t, sweep.load(folder))
-            skipped, ran = skipped + result.skipped, ran + result.ran
-            for f in result.failures:
-                failures.append(RunFailure(t, int(f["axes"][CASE]), int(f["seed"]),
-                                           f["config_hash"], f["error"]))
-            if out is not None:
-                folders[t] = folder
+    scratch = scratch_dir("reproduce-") if out is None else None
+    what = "results folder"
+    if out is None:
+        targets = {t: scratch / t for t in tables}
+    elif isinstance(out, Mapping):
+        targets = {t: Path(out[t]) for t in tables}
+    else:
+        targets = {t: Path(out) / t if table == "all" else Path(out) for t in tables}
+    try:
+        with contextlib.ExitStack() as stack:
+            client = None
+            if scheduler is None:  # one cluster for every table (never one per table)
+                chunks = max(pending_chunks(grids[t], targets[t], None, force, what)
+                             for t in tables)
+                client = stack.enter_context(local_cluster(list(grids.values()), chunks,
+                                                           workers))
+            for t in tables:
+                folder = targets[t]
+                if client is not None:
+                    result = sweep.run(grids[t], folder, client=client, force=force,
+                                       progress=tracker(t), what=what)
+                else:
+                    result = sweep.run(grids[t], folder, workers=workers, scheduler=scheduler,
+                                       force=force, progress=tracker(t), what=what)
+                runs += runs_of(t, sweep.load(folder))
+                skipped, ran = skipped + result.skipped, ran + result.ran
+                for f in result.failures:
+                    failures.append(RunFailure(t, int(f["axes"][CASE]), int(f["seed"]),
+                                               f["config_hash"], f["error"]))
+                if out is not None:
+                    folders[t] = folder
+    finally:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
     wall = time.perf_counter() - t0
     summaries = {t: summarize(runs, t, base, seeds, failures) for t in tables}
     for t, folder in folders.items():  # a results folder is complete: runs and summary

@@ -70,7 +70,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, field, replace
@@ -79,6 +78,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .._processes import scratch_dir
 from ..config import AV_KIND_ALIASES, AV_KINDS, SHIELD_KINDS, Config, ConfigError
 from .external import (CROSSING, FOLLOW, MERGE, ExternalPlanner, Limits, Polyline,
                        RouteConflict, route_conflict)
@@ -723,7 +723,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
     else:
         ego_limits = Limits.of(planner_config(scenario=scenario), "av")
     with_ego = driver != NO_EGO
-    folder = Path(tempfile.mkdtemp(prefix="persuasive-sumo-"))
+    folder = scratch_dir("sumo-")  # the command's scratch: removed if this worker is killed
     departures = traffic(network, seed, flow_veh_h, ignore_foes, end_s)
     reckless = {d.vehicle for d in departures if d.reckless}
     approach = lane_shapes(net_file)[f"{network.ego_route[0]}_0"]
@@ -843,12 +843,6 @@ def run_seed(scenario: str, seed: int, drivers: Sequence[str], flow_veh_h: float
 # -- a study: episodes on worker processes ---------------------------------------------------
 
 
-def _worker_init(parent_pid: int) -> None:  # pragma: no cover - runs in the workers
-    from ..experiments import _die_with_parent
-
-    _die_with_parent(parent_pid)
-
-
 def _run_seed_task(task: tuple) -> list[EpisodeOutput]:  # pragma: no cover - in workers
     return run_seed(*task)
 
@@ -912,6 +906,20 @@ class SumoReport:
                 "episodes": [e.to_dict() for e in self.episodes]}
 
 
+#: Most episodes (seeds) one study may have: about a day of SUMO on two cores (every seed
+#: runs each driver and the reference run without the ego), and what the report holds in
+#: memory; more is a mistake, not a study.
+MAX_EPISODES = 10_000
+
+
+def planner_kernels() -> tuple:
+    """The compiled functions the planner's decisions run (for the first-use notice)."""
+    from ..policies.step import policy_step_buffers
+    from ..safety.shield import shield_step_many
+
+    return policy_step_buffers, shield_step_many
+
+
 def check_study(scenario: str, episodes: int, seed: int, flow_veh_h: float,
                 ignore_foes: float, planner: str, shields: Sequence[str],
                 workers: int | None) -> None:
@@ -919,8 +927,10 @@ def check_study(scenario: str, episodes: int, seed: int, flow_veh_h: float,
     if scenario not in SCENARIOS:
         raise ConfigError(f"--scenario = {scenario!r} is out of range; allowed: "
                           f"{' | '.join(SCENARIOS)}")
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise ConfigError(f"--episodes = {episodes!r} is out of range; allowed: integer >= 1")
+    if (isinstance(episodes, bool) or not isinstance(episodes, int)
+            or not 1 <= episodes <= MAX_EPISODES):
+        raise ConfigError(f"--episodes = {episodes!r} is out of range; allowed: integer in "
+                          f"[1, {MAX_EPISODES}]")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**31 - episodes:
         raise ConfigError(f"--seed = {seed!r} is out of range; allowed: integer in "
                           "[0, 2^31 - episodes)")
@@ -946,15 +956,17 @@ def run_study(scenario: str = "intersection", episodes: int = 10, seed: int = 1,
               workers: int | None = None, logs: bool = False,
               progress=None) -> tuple[SumoReport, list[EpisodeOutput], Path | None]:
     """``episodes`` seeds from ``seed``, each driven by the planner with every shield of
-    ``shields`` and by SUMO's own driver (after the run without the ego), on worker
-    processes that die with this one. Returns the report, the outputs (with logs when
+    ``shields`` and by SUMO's own driver (after the run without the ego), on the worker
+    processes of a local Dask cluster (started from the fork server, dying with this
+    process; :mod:`persuasive._processes`), a bounded number of seeds in flight. An
+    interrupt (Ctrl-C) kills the workers at once. Returns the report, the outputs (with logs when
     ``logs``) and the built network's folder (the caller removes it; ``None`` if none)."""
     check_study(scenario, episodes, seed, flow_veh_h, ignore_foes, planner, shields, workers)
     binaries = sumo_binaries()
     kind = planner_config(planner, shields[0], scenario).av.kind
     drivers = tuple(dict.fromkeys([driver_name(kind, s) for s in shields] + [SUMO_DRIVER]))
     t0 = time.perf_counter()
-    folder = Path(tempfile.mkdtemp(prefix="persuasive-sumo-net-"))
+    folder = scratch_dir("sumo-net-")
     try:
         net = build_network(NETWORKS[scenario], folder, binaries["netconvert"])
         _warm_up(scenario, drivers)
@@ -962,16 +974,15 @@ def run_study(scenario: str = "intersection", episodes: int = 10, seed: int = 1,
         tasks = [(scenario, s, drivers, float(flow_veh_h), float(ignore_foes), str(net), logs)
                  for s in seeds]
         n = min(workers or os.cpu_count() or 1, len(tasks))
-        outputs: list[EpisodeOutput] = []
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
+        by_seed: dict[int, list[EpisodeOutput]] = {}
+        from ..sweep.runner import local_client, map_bounded
 
-        with ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("fork"),
-                                 initializer=_worker_init, initargs=(os.getpid(),)) as pool:
-            for i, outs in enumerate(pool.map(_run_seed_task, tasks)):
-                outputs.extend(outs)
+        with local_client(n) as client:  # workers from the fork server, tied to this process
+            for i, outs in map_bounded(client, _run_seed_task, tasks):
+                by_seed[i] = outs
                 if progress is not None:
-                    progress(i + 1, len(tasks))
+                    progress(len(by_seed), len(tasks))
+        outputs = [o for i in range(len(tasks)) for o in by_seed[i]]
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise
@@ -985,7 +996,8 @@ def run_study(scenario: str = "intersection", episodes: int = 10, seed: int = 1,
 
 
 def _warm_up(scenario: str, drivers: Sequence[str]) -> None:
-    """Load the planner's compiled kernels here, so forked workers start with them."""
+    """Compile (once) and load the planner's kernels here, so that the workers load them from
+    the cache and never compile them at the same time."""
     from .external import Conflict
 
     for d in drivers:
@@ -1016,9 +1028,9 @@ def frames_of(outputs: Sequence[EpisodeOutput]) -> dict[str, Any]:
             for k, v in parts.items()}
 
 
-__all__ = ["DT_S", "EGO_DEPART_S", "EPISODE_S", "NETWORKS", "NO_EGO", "SCENARIOS",
+__all__ = ["DT_S", "EGO_DEPART_S", "EPISODE_S", "MAX_EPISODES", "NETWORKS", "NO_EGO", "SCENARIOS",
            "SPEED_MODE", "SUMO_DRIVER", "ballistic_slack", "EpisodeOutput", "EpisodeResult", "Network",
            "Projector", "SumoReport", "VehicleState", "build_network", "check_study",
            "conflicts_of", "decide", "driver_name", "entry_vehicles", "frames_of", "run_study",
-           "lane_shapes", "planner_config", "routes_xml",
+           "lane_shapes", "planner_config", "planner_kernels", "routes_xml",
            "run_episode", "run_seed", "spawn_tied", "sumo_binaries", "traffic"]

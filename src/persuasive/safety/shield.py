@@ -132,9 +132,21 @@ def reach_time(s: float, v: float, a: float, target: float, v_min: float,
     else:  # constant speed (not the root below: v * v underflows for a speed of 1e-160)
         return d / v if v > 0.0 else _INF
     if d <= d_sat:  # reached before the speed saturates
-        disc = max(v * v + 2.0 * a * d, 0.0)
-        den = v + math.sqrt(disc)
-        return 2.0 * d / den if den > 0.0 else _INF
+        # t = 2 d / (v + sqrt(v^2 + 2 a d))
+        if v >= 1e-150 or abs(a) * d >= 1e-300:  # neither square underflows
+            disc = max(v * v + 2.0 * a * d, 0.0)
+            den = v + math.sqrt(disc)
+            return 2.0 * d / den if den > 0.0 else _INF
+        # tiny numbers (v = a = d = 6e-236 underflow v^2 + 2 a d to 0, giving 2 s for
+        # 0.73 s, a late arrival): the same root with everything scaled by
+        # m = max(v, sqrt(|a| d)) first
+        m = max(v, math.sqrt(abs(a)) * math.sqrt(d))
+        if m <= 0.0:
+            return _INF
+        r = math.sqrt(abs(a)) * math.sqrt(d) / m
+        disc = max((v / m) * (v / m) + (2.0 if a > 0.0 else -2.0) * r * r, 0.0)
+        den = v / m + math.sqrt(disc)
+        return 2.0 * (d / m) / den if den > 0.0 else _INF
     if v_lim <= 0.0:
         return _INF
     return t_sat + (d - d_sat) / v_lim

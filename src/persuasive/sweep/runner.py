@@ -10,9 +10,11 @@ workers need no shared file system: only the client writes.
 
 By default a :class:`distributed.LocalCluster` is started with ``workers`` processes of one
 thread each (the compiled kernels hold the GIL, so threads would not run in parallel), on
-127.0.0.1 only, no dashboard, no profiler, quiet logs. The kernels are loaded in this process
-first and, on Linux, the workers are forked from it (:func:`start_method`), so they start
-with the kernels loaded instead of importing and loading them again. ``scheduler`` connects
+127.0.0.1 only, no dashboard, no profiler, quiet logs. The kernels are compiled (once) and
+loaded in this process first; the workers are started from a fork server that has them loaded
+(:func:`start_method`, :mod:`persuasive._processes`), never forked from this process, which
+runs threads by then (a forked child can inherit a lock another thread held, and hang), and
+they die with it. Dask's temporary files go to the command's scratch folder. ``scheduler`` connects
 to a running scheduler instead (``dask scheduler`` / ``dask worker``), and ``client`` uses a
 client you made (e.g. of a ``dask_jobqueue.SLURMCluster``). Every run is a pure function of
 its configuration and seed, so the results do not depend on the cluster, the number of
@@ -24,10 +26,12 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import shutil
+import signal
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, Sequence
 
 from ..config import ConfigError
 from .grid import Grid
@@ -96,24 +100,22 @@ def _quiet_logs() -> Iterator[None]:
 
 
 def start_method() -> str:
-    """How the local cluster starts its worker processes: Dask's
-    ``distributed.worker.multiprocessing-method`` when set to other than its default
-    (``spawn``); else ``fork`` on Linux, ``spawn`` elsewhere.
+    """How the local cluster starts its worker processes: ``forkserver`` where the platform
+    has one (Linux, macOS), else ``spawn`` (:func:`persuasive._processes.start_method`).
 
-    A forked worker inherits this process's loaded modules and compiled kernels, so it is
-    ready at once; a spawned one imports Dask and the package and loads the kernels first
-    (1.5 to 2 s on the 2-core machine CI uses, the time of a few thousand 2-LFG runs).
-    Set ``distributed.worker.multiprocessing-method`` to ``forkserver`` in Dask's
-    configuration to avoid forking this process.
+    Never ``fork``: this process runs threads (Dask's event loop, the process watchers of a
+    cluster already closed, tqdm's monitor), and a forked child inherits their locks in the
+    state they had, held by threads it does not have. ``reproduce all`` hung so on a 16-core
+    machine. The fork server is a fresh, single-threaded interpreter that loads the package
+    and its kernels once and forks each worker from itself, so workers still start with the
+    kernels loaded (a spawned worker would load them itself: 1.5 to 2 s on 2 cores). Dask's
+    ``distributed.worker.multiprocessing-method`` is not read: its default, ``spawn``, is slower
+    and has no tie to this process; a cluster of your own (``scheduler``, ``client``) uses
+    its own settings.
     """
-    import sys
+    from .._processes import start_method as method
 
-    import dask
-
-    method = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
-    if method != "spawn":
-        return method
-    return "fork" if sys.platform.startswith("linux") else "spawn"
+    return method()
 
 
 def _warm_up(grid: Grid) -> None:
@@ -130,26 +132,49 @@ def _warm_up(grid: Grid) -> None:
 
 
 @contextlib.contextmanager
-def local_client(workers: int) -> Iterator[Any]:
+def local_client(workers: int, method: str | None = None) -> Iterator[Any]:
     """A client of a new :class:`distributed.LocalCluster`: ``workers`` processes, one thread
-    each, started by :func:`start_method`, listening on 127.0.0.1 only, no dashboard, no
-    profiler, quiet logs; closed on exit."""
+    each, started by ``method`` (default :func:`start_method`; another only to show why it is
+    the default), listening on 127.0.0.1 only, no dashboard, no profiler, quiet logs, its
+    temporary files in the command's scratch folder; closed on exit (an exception or an
+    interrupt in the block kills the workers first)."""
     import dask
     from distributed import Client, LocalCluster
+    from distributed.utils import get_mp_context
 
-    settings = {"distributed.worker.multiprocessing-method": start_method(),
-                "distributed.worker.profile.enabled": False}
-    with dask.config.set(settings):
-        # the scheduler's HTTP server (health checks only: no dashboard) on any free port
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address=None,
-                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                               silence_logs=logging.ERROR)
+    from .. import _processes
+
+    method = method or start_method()
+    scratch = _processes.scratch_dir("dask-")
+    settings = {"distributed.worker.multiprocessing-method": method,
+                "distributed.worker.profile.enabled": False,
+                "temporary-directory": str(scratch)}
+    cluster = None
     try:
+        with dask.config.set(settings):
+            if method == "forkserver":
+                get_mp_context()  # Dask names its own preload once per process: before ours
+                _processes.context()  # the fork server, with the kernels loaded
+            # the scheduler's HTTP server (health checks only: no dashboard) on any free port
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address=None,
+                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                   silence_logs=logging.ERROR)
         with Client(cluster, set_as_default=False) as client:
-            yield client
+            pids = list(client.run(os.getpid).values())
+            try:
+                yield client
+            except BaseException:
+                # interrupted (Ctrl-C) or failed: end the workers' tasks now; a graceful
+                # close would wait for them (seconds for a SUMO episode)
+                for pid in pids:
+                    with contextlib.suppress(OSError):
+                        os.kill(pid, signal.SIGKILL)
+                raise
     finally:
-        cluster.close()
+        if cluster is not None:
+            cluster.close()
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 @contextlib.contextmanager
@@ -164,6 +189,37 @@ def remote_client(address: str) -> Iterator[Any]:
                           f"{_error_line(exc)}") from None
     with client:
         yield client
+
+
+def map_bounded(client: Any, fn: Callable[[Any], Any], tasks: Sequence[Any],
+                in_flight: int | None = None) -> Iterator[tuple[int, Any]]:
+    """``(i, fn(tasks[i]))`` for every task, as each finishes on ``client``'s workers, with at
+    most ``in_flight`` tasks submitted at once [:data:`IN_FLIGHT_PER_THREAD` per worker
+    thread], so that any number of tasks takes bounded memory here. A task that raises
+    raises here."""
+    from distributed import as_completed
+
+    limit = in_flight or IN_FLIGHT_PER_THREAD * max(1, _threads(client))
+    queue = as_completed(loop=client.loop, with_results=False)
+    index: dict[str, int] = {}
+    todo = iter(enumerate(tasks))
+
+    def submit_more() -> None:
+        while len(index) < limit:
+            item = next(todo, None)
+            if item is None:
+                return
+            future = client.submit(fn, item[1], pure=False, retries=0)
+            index[future.key] = item[0]
+            queue.add(future)
+
+    submit_more()
+    for future in queue:
+        i = index.pop(future.key)
+        result = future.result()
+        future.release()
+        yield i, result
+        submit_more()
 
 
 def _threads(client: Any) -> int:
@@ -213,6 +269,33 @@ def _execute(client: Any, grid: Grid, store: SweepStore, pending: Iterator[Chunk
         if progress is not None:
             progress(done, total)
         submit_more()
+
+
+def pending_chunks(grid: Grid, out: str | Path, chunk: int | None = None, force: bool = False,
+                   what: str = "sweep folder") -> int:
+    """Chunks of ``grid`` that :func:`run` into ``out`` would run now (it checks the folder as
+    :func:`run` does, and writes nothing)."""
+    store = SweepStore.open(out, grid, chunk, force, what)
+    todo, _ = store.pending()
+    return n_chunks(todo, store.chunk) if todo else 0
+
+
+@contextlib.contextmanager
+def local_cluster(grids: Sequence[Grid], chunks: int,
+                  workers: int | None = None) -> Iterator[Any]:
+    """One local cluster (:func:`local_client`) for the sweeps of ``grids``, which have at
+    most ``chunks`` chunks to run each: ``workers`` processes [all cores], never more than
+    ``chunks``; ``None`` when there is nothing to run. The grids' kernels are compiled and
+    loaded here first, so that the fork server loads them from the cache and the workers
+    never compile them at the same time. Pass the client to :func:`run` (``client=``) for
+    each grid: a command with several sweeps (``reproduce all``) starts one cluster."""
+    if chunks <= 0:
+        yield None
+        return
+    for grid in grids:
+        _warm_up(grid)
+    with _quiet_logs(), local_client(min(workers or os.cpu_count() or 1, chunks)) as client:
+        yield client
 
 
 def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
@@ -281,9 +364,7 @@ def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
             elif scheduler is not None:
                 context = remote_client(scheduler)
             else:
-                n = min(workers or os.cpu_count() or 1, n_chunks(todo, store.chunk))
-                _warm_up(grid)
-                context = local_client(n)
+                context = local_cluster([grid], n_chunks(todo, store.chunk), workers)
             with context as active:  # connected: only now is anything written
                 store.start()
                 threads = _threads(active)
@@ -294,4 +375,5 @@ def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
                         wall_time_s=time.perf_counter() - t0)
 
 
-__all__ = ["SweepSummary", "local_client", "remote_client", "run"]
+__all__ = ["SweepSummary", "local_client", "local_cluster", "map_bounded", "pending_chunks",
+           "remote_client", "run", "start_method"]

@@ -1,0 +1,123 @@
+"""Kill a running command N times under CPU load and check that nothing outlives it.
+
+    python benchmarks/kill_loop.py [--times 20] [--load 2] [--command reproduce|sumo]
+
+Each round starts ``persuasive reproduce table2`` (or ``persuasive sumo``) with two workers and
+a ``TMPDIR`` of its own, waits until its workers run, SIGKILLs it, and checks that within 10 s
+every process that was below it (the fork server, multiprocessing's resource tracker, the
+workers) has ended and its ``TMPDIR`` is empty. ``--load`` busy processes keep the cores
+loaded for the whole loop. Prints one line per round and the count of clean rounds; exits 1
+if any round left something behind. This is the loop the issue asks for; the test suite runs
+one round of each (tests/test_processes.py, tests/test_sumo.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def _stat(pid: int) -> list[str]:
+    return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+
+
+def descendants(pid: int) -> list[int]:
+    kids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if int(_stat(int(entry.name))[1]) == pid:
+                    kids.append(int(entry.name))
+            except (OSError, IndexError, ValueError):
+                continue
+    return kids + [d for k in kids for d in descendants(k)]
+
+
+def alive(pid: int) -> bool:
+    try:
+        return _stat(pid)[0] != "Z"
+    except OSError:
+        return False
+
+
+def burn() -> None:  # pragma: no cover - a load process
+    while True:
+        pass
+
+
+def one_round(command: str, folder: Path) -> tuple[bool, str]:
+    temp = folder / "tmp"
+    temp.mkdir(parents=True)
+    out = folder / "out"
+    if command == "reproduce":
+        argv = ["reproduce", "table2", "--seeds", "400", "--workers", "2", "--quiet",
+                "--out", str(out)]
+
+        def started() -> bool:
+            return any((out / "runs").glob("*.parquet"))
+    else:
+        argv = ["sumo", "--episodes", "20", "--workers", "2", "--quiet", "--out", str(out)]
+
+        def started() -> bool:
+            return any(not p.name.startswith("sumo-net-")
+                       for p in temp.glob("persuasive-*/sumo-*"))
+    env = dict(os.environ, TMPDIR=str(temp))
+    proc = subprocess.Popen([sys.executable, "-m", "persuasive", *argv], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:
+        if started() and len(descendants(proc.pid)) >= 4:
+            break
+        time.sleep(0.1)
+    if proc.poll() is not None:
+        return False, f"the command ended first (exit {proc.returncode})"
+    below = descendants(proc.pid)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    t0 = time.monotonic()
+    while (any(alive(p) for p in below) or any(temp.iterdir())) and time.monotonic() - t0 < 10:
+        time.sleep(0.05)
+    left = [p for p in below if alive(p)]
+    files = sorted(str(p.relative_to(temp)) for p in temp.rglob("*"))
+    ok = not left and not files
+    return ok, (f"{len(below)} processes below it, all gone after "
+                f"{time.monotonic() - t0:.2f} s" if ok else
+                f"left: processes {left}, files {files[:5]}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--times", type=int, default=20)
+    parser.add_argument("--load", type=int, default=2, help="busy processes beside it")
+    parser.add_argument("--command", choices=["reproduce", "sumo"], default="reproduce")
+    args = parser.parse_args()
+    burners = [multiprocessing.get_context("spawn").Process(target=burn, daemon=True)
+               for _ in range(args.load)]
+    for b in burners:
+        b.start()
+    root = Path(tempfile.mkdtemp(prefix="kill-loop-"))
+    clean = 0
+    try:
+        for i in range(args.times):
+            ok, what = one_round(args.command, root / str(i))
+            clean += ok
+            print(f"round {i + 1}: {'clean' if ok else 'LEFT SOMETHING'}: {what}", flush=True)
+    finally:
+        for b in burners:
+            b.kill()
+        shutil.rmtree(root, ignore_errors=True)
+    print(f"{clean} of {args.times} rounds clean ({args.command}, {args.load} busy "
+          f"processes beside it, {os.cpu_count()} cores)")
+    sys.exit(0 if clean == args.times else 1)
+
+
+if __name__ == "__main__":
+    main()
