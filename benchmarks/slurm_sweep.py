@@ -1,4 +1,4 @@
-"""Run a sweep on a SLURM cluster with dask-jobqueue (``pip install 'persuasive[cluster]'``).
+"""Run a sweep on a SLURM cluster with dask-jobqueue (``pip install -e '.[cluster]'``).
 
 Usage, on the cluster's login node, in the environment where ``persuasive`` is installed
 (the batch jobs must see the same environment, e.g. a shared home or a module/conda env)::

@@ -4,10 +4,12 @@ import json
 import subprocess
 import sys
 import tomllib
+from pathlib import Path
 
 import pandas as pd
 import pytest
 
+from persuasive.cli.simulate import json_summary
 from persuasive.cli import main
 from persuasive.simulation import simulate
 from persuasive.config import Config
@@ -88,7 +90,8 @@ def test_simulate_options_reach_the_configuration(capsys):
     assert (payload["av"], payload["hv_role"], payload["pa"]) == ("lfg", "follower", 0.7)
     cfg = Config().with_overrides({"av.kind": "lfg", "hv.role": "follower", "roles.p_a": 0.7,
                                    "mpc.epsilon": 0.05})
-    assert payload == json.loads(json.dumps(simulate(cfg, 3).summary()))
+    assert payload == json.loads(json.dumps(json_summary(simulate(cfg, 3).summary(), cfg)))
+    assert payload["pa_hat"] is None  # the lfg AV reads no estimate
 
 
 def test_simulate_agent_and_scenario_options(capsys):
@@ -104,7 +107,10 @@ def test_simulate_agent_and_scenario_options(capsys):
                                                                    "crossing")
     cfg = Config(mode="corrected").with_overrides({"av.kind": "passive", "hv.kind": "stubborn",
                                                    "scenario.kind": "crossing"})
-    assert payload == json.loads(json.dumps(simulate(cfg, 3).summary()))
+    # the passive AV reads no p_a_hat, the stubborn human no p_a: null, not a default
+    summary = simulate(cfg, 3).summary()
+    assert (summary["pa"], summary["pa_hat"]) == (1.0, 1.0)
+    assert payload == json.loads(json.dumps({**summary, "pa": None, "pa_hat": None}))
     # the explicit option beats --set
     _, out, _ = run(capsys, "simulate", "--json", "--set", "av.kind=cv", "--av", "lfg")
     assert json.loads(out)["av"] == "lfg"
@@ -320,10 +326,26 @@ def test_output_errors_are_one_line_exit_2_and_create_nothing(capsys, tmp_path, 
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
 
 
-def test_unwritable_output_names_the_users_path(capsys, tmp_path):
-    code, _, err = run(capsys, "simulate", "--out", "/proc/x.parquet")
-    assert code == 2 and err.startswith("error: cannot write '/proc/x.parquet'")
-    assert err.count("\n") == 1 and ".tmp" not in err
+@pytest.mark.skipif(not Path("/proc/self/mounts").exists(), reason="needs Linux's /proc")
+@pytest.mark.parametrize("args, message", [
+    (["simulate", "--out", "/proc/x.parquet"],
+     "cannot write '/proc/x.parquet': '/proc' is on a virtual file system (proc) that cannot "
+     "hold result files"),
+    (["simulate", "--out", "/proc/x.csv"],
+     "cannot write '/proc/x.csv': '/proc' is on a virtual file system (proc) that cannot hold "
+     "result files"),
+    (["compare", "--av", "cv", "--hv", "idm", "--seeds", "2", "--out", "/proc/foo"],
+     "comparison folder '/proc/foo' cannot be written: '/proc' is on a virtual file system "
+     "(proc) that cannot hold result files"),
+    (["plot", "profile", "--single", "--out", "/sys/f.png"],
+     "cannot write '/sys/f.png': '/sys' is on a virtual file system (sysfs) that cannot hold "
+     "result files"),
+], ids=["simulate-parquet", "simulate-csv", "compare", "plot"])
+def test_outputs_on_a_virtual_file_system_say_so_before_any_work(capsys, args, message):
+    """/proc answers "no such file or directory" even to root, whose permissions pass: the
+    message must give the true reason, before the run (no compile notice, no bar)."""
+    code, out, err = main(list(args)), *capsys.readouterr()
+    assert (code, out, err) == (2, "", f"error: {message}\n")
 
 
 def _precedence_runs(capsys, tmp_path, command, extra=()):
@@ -495,3 +517,158 @@ def test_bench_json(capsys):
         assert result[key] > 0
     assert result["mpc_decision_ms_p99"] >= result["mpc_decision_ms_median"]
     assert result["samples"]["mpc_decisions"] == 61 and "reproduce_all_s" not in result
+
+
+# -- options that only some kinds read (--pa, --pa-hat, --hv-role) ------------------------------
+
+PA_HAT_USERS = "it is read only by the persuasive AV (its estimate of the human's p_a)"
+PA_USERS = ("it is read only by the lfg, noisy humans and the lfg AV (their own p_a; the "
+            "persuasive AV's estimate is --pa-hat)")
+ROLE_USERS = ("it is read only by the lfg, stubborn, noisy humans and the lfg AV (the lfg AV "
+              "starts in the other role)")
+KIND_OPTION_ERRORS = [
+    (["simulate", "--pa-hat", "online", "--av", "passive"],
+     f"--pa-hat = online is not used by the lfg HV with the passive AV; {PA_HAT_USERS}"),
+    (["simulate", "--pa-hat", "0.3", "--av", "yield"],
+     f"--pa-hat = 0.3 is not used by the lfg HV with the yield AV; {PA_HAT_USERS}"),
+    (["simulate", "--pa-hat", "0.3", "--set", "av.kind=cv"],  # the kind from --set counts
+     f"--pa-hat = 0.3 is not used by the lfg HV with the cv AV; {PA_HAT_USERS}"),
+    (["simulate", "--hv", "adversary", "--pa", "0.3", "--hv-role", "follower"],
+     f"--pa = 0.3 is not used by the adversary HV with the persuasive AV; {PA_USERS}"),
+    (["simulate", "--hv", "stubborn", "--pa", "0.3"],  # the stubborn human's p_a is 0
+     f"--pa = 0.3 is not used by the stubborn HV with the persuasive AV; {PA_USERS}"),
+    (["simulate", "--hv", "idm", "--hv-role", "follower"],
+     f"--hv-role = follower is not used by the idm HV with the persuasive AV; {ROLE_USERS}"),
+    (["simulate", "--hv", "idm", "--av", "lfg", "--set", "av.role=leader", "--hv-role",
+      "follower"],  # an LFG AV with a role of its own ignores the human's
+     f"--hv-role = follower is not used by the idm HV with the lfg AV; {ROLE_USERS}"),
+    (["plot", "profile", "--single", "--av", "cv", "--pa-hat", "0.5"],
+     f"--pa-hat = 0.5 is not used by the lfg HV with the cv AV; {PA_HAT_USERS}"),
+    (["animate", "--hv", "random", "--pa", "0.5"],
+     f"--pa = 0.5 is not used by the random HV with the persuasive AV; {PA_USERS}"),
+]
+
+
+@pytest.mark.parametrize("args, message", KIND_OPTION_ERRORS,
+                         ids=[" ".join(a) for a, _ in KIND_OPTION_ERRORS])
+def test_options_the_run_ignores_are_refused(capsys, tmp_path, args, message):
+    ext = ".gif" if args[0] == "animate" else ".png" if args[0] == "plot" else ".parquet"
+    target = tmp_path / f"out{ext}"
+    code, out, err = run(capsys, *args, "--out", str(target))
+    assert (code, out, err) == (2, "", f"error: {message}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args", [
+    ["simulate", "--av", "lfg", "--hv", "adversary", "--pa", "0.3", "--hv-role", "follower"],
+    ["simulate", "--hv", "noisy", "--pa", "0.3", "--hv-role", "follower", "--pa-hat", "0.5"],
+    ["simulate", "--hv", "stubborn", "--hv-role", "follower"],
+], ids=["lfg-av", "noisy-human", "stubborn-role"])
+def test_options_a_kind_reads_are_accepted(capsys, args):
+    code, out, err = run(capsys, *args, "--json")
+    assert code == 0 and err == ""
+
+
+def test_fields_from_a_config_file_are_run_and_the_summary_names_those_ignored(capsys,
+                                                                               tmp_path):
+    """A configuration file is shared between kinds: its fields are never refused; the
+    summary says which of them the run's kinds do not read."""
+    toml = tmp_path / "c.toml"
+    toml.write_text('[mpc]\np_a_hat = "online"\n[roles]\np_a = 0.4\n[hv]\nrole = "follower"\n')
+    code, out, err = run(capsys, "simulate", "--config", str(toml), "--av", "yield",
+                         "--hv", "idm")
+    assert code == 0 and err == ""
+    assert out.splitlines()[0] == (
+        "yield AV, idm HV, intersection, seed 1, paper mode; ignored, as no kind here reads "
+        "them: mpc.p_a_hat = online, roles.p_a = 0.4, hv.role = follower")
+    # read by these kinds: named as values of the run, not as ignored
+    code, out, _ = run(capsys, "simulate", "--config", str(toml), "--mode", "corrected")
+    assert code == 0 and out.splitlines()[0] == (
+        "persuasive AV, lfg HV starting as follower, p_a = 0.4, p_a_hat online (prior "
+        "Beta(7, 3) on 21 points), intersection, seed 1, corrected mode")
+    # roles.p_a is the persuasive AV's estimate when mpc.p_a_hat is unset: read, not ignored
+    code, out, _ = run(capsys, "simulate", "--hv", "idm", "--set", "roles.p_a=0.4")
+    assert code == 0 and out.splitlines()[0] == (
+        "persuasive AV, idm HV, p_a_hat = 0.4, intersection, seed 1, paper mode")
+
+
+def test_repeated_interactions_name_the_estimate_only_for_the_persuasive_av(capsys):
+    code, out, _ = run(capsys, "simulate", "--av", "passive", "--interactions", "2",
+                       "--set", "mpc.p_a_hat=0.6")
+    assert code == 0 and out.splitlines()[0] == (
+        "passive AV, lfg HV starting as leader, p_a = 1, seed 1, 2 interactions, paper mode; "
+        "ignored, as no kind here reads them: mpc.p_a_hat = 0.6")
+
+
+# -- every integer option names its range --------------------------------------------------------
+
+COUNT_ERRORS = [
+    (["highway", "--episodes", "1e9"], "--episodes = 1e9 is out of range; allowed: integer in "
+     "[1, 10000]"),
+    (["highway", "--episodes", "1000000000"], "--episodes = 1000000000 is out of range; "
+     "allowed: integer in [1, 10000]"),
+    (["highway", "--seed", "2147483646", "--episodes", "2"], "--seed = 2147483646 is out of "
+     "range; allowed: integer in [0, 2147483645] for 2 episodes (every episode's seed below "
+     "2147483647)"),
+    (["simulate", "--seed", "1e3"], "--seed = 1e3 is out of range; allowed: integer in "
+     "[0, 4294967295]"),
+    (["simulate", "--interactions", "1001"], "--interactions = 1001 is out of range; allowed: "
+     "integer in [1, 1000]"),
+    (["compare", "--seeds", "x"], "--seeds = x is out of range; allowed: integer in "
+     "[1, 4294967295]"),
+    (["compare", "--timing-seeds", "1e9"], "--timing-seeds = 1e9 is out of range; allowed: "
+     "integer in [1, 1000]"),
+    (["sweep", "g.toml", "--chunk", "0"], "--chunk = 0 is out of range; allowed: integer in "
+     "[1, 100000]"),
+    (["bench", "--repeats", "1e9"], "--repeats = 1e9 is out of range; allowed: integer in "
+     "[1, 100]"),
+    (["animate", "--fps", "0"], "--fps = 0 is out of range; allowed: integer in [1, 120]"),
+    (["drive", "--seed", "-1"], "--seed = -1 is out of range; allowed: integer in "
+     "[0, 4294967295]"),
+    (["drive", "--port", "70000"], "--port = 70000 is out of range; allowed: integer in "
+     "[0, 65535]"),
+]
+
+
+@pytest.mark.parametrize("args, message", COUNT_ERRORS, ids=[" ".join(a) for a, _ in COUNT_ERRORS])
+def test_integer_options_name_their_range(capsys, tmp_path, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)  # a default results folder would go here
+    code, out, err = run(capsys, *args)
+    assert (code, out, err) == (2, "", f"error: {message}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_workers_name_the_cores(capsys, tmp_path, monkeypatch):
+    import os
+
+    monkeypatch.chdir(tmp_path)
+    cores = os.cpu_count() or 1
+    for command in (["compare"], ["sweep", "g.toml"], ["bench", "--full"]):
+        code, out, err = run(capsys, *command, "--workers", "1e3")
+        assert (code, out) == (2, "")
+        assert err == (f"error: --workers = 1e3 is out of range; allowed: integer in "
+                       f"[1, {8 * cores}] (8 per core, {cores} cores)\n")
+
+
+@pytest.mark.parametrize("value, message", [
+    ("nan", 'mpc.p_a_hat = nan is out of range; allowed: a number in [0, 1] or "online"'),
+    ("inf", 'mpc.p_a_hat = inf is out of range; allowed: a number in [0, 1] or "online"'),
+    ("often", "--pa-hat = often is out of range; allowed: a number in [0, 1] or online"),
+])
+def test_pa_hat_names_its_range(capsys, value, message):
+    code, out, err = run(capsys, "simulate", "--pa-hat", value)
+    assert (code, out, err) == (2, "", f"error: {message}\n")
+
+
+def test_json_summary_gives_no_value_for_what_no_kind_reads(capsys):
+    """``--av yield`` reads no estimate of p_a: its JSON says null, not the default 0.7 it
+    never used; a configuration that sets it is named as ignored."""
+    from persuasive.cli import main
+
+    assert main(["simulate", "--av", "yield", "--set", "mpc.p_a_hat=online", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["pa_hat"] is None and data["ignored_fields"] == ["mpc.p_a_hat = online"]
+    assert data["pa"] == 1.0 and data["hv_role"] == "leader"  # the lfg human reads both
+    assert main(["simulate", "--pa-hat", "0.9", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["pa_hat"] == 0.9 and "ignored_fields" not in data

@@ -134,3 +134,75 @@ def test_compare_command_json_and_figure(capsys, tmp_path):
 def test_compare_bad_input(capsys, tmp_path, args, message):
     code, out, err = run(capsys, "compare", *args, "--out", str(tmp_path / "c"), "--quiet")
     assert code == 2 and out == "" and message in err and err.count("\n") == 1
+
+
+# -- the size of a comparison counts every interaction; the bar counts runs --------------------
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--interactions", "1000", "--seeds", "2000"],
+     "--seeds = 2000 is out of range; allowed: 1..25 for 40 pairs x 1000 interactions (at "
+     "most 1000000 runs, every interaction counted, summarised in memory; 'persuasive sweep' "
+     "streams more to disk)"),
+    # the interactions from --set count as well as --interactions
+    (["--set", "simulation.interactions=10", "--av", "cv", "--hv", "idm,lfg", "--seeds",
+      "50001"],
+     "--seeds = 50001 is out of range; allowed: 1..50000 for 2 pairs x 10 interactions (at "
+     "most 1000000 runs, every interaction counted, summarised in memory; 'persuasive sweep' "
+     "streams more to disk)"),
+    # shield settings are pairs too
+    (["--shield", "off,worst-case,responsive", "--interactions", "4", "--seeds", "2084"],
+     "--seeds = 2084 is out of range; allowed: 1..2083 for 120 pairs x 4 interactions (at "
+     "most 1000000 runs, every interaction counted, summarised in memory; 'persuasive sweep' "
+     "streams more to disk)"),
+], ids=["interactions", "set-interactions", "shields"])
+def test_the_run_cap_counts_interactions(capsys, tmp_path, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)  # the default folder would go here
+
+    def never(*args, **kwargs):
+        raise AssertionError("a comparison over the cap started")
+
+    monkeypatch.setattr(cmp, "run_comparison", never)
+    code, out, err = run(capsys, "compare", *args, "--quiet")
+    assert (code, out, err) == (2, "", f"error: {message}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_check_size_bounds():
+    assert cmp.check_size(25, 40, 1000) == 25  # exactly 1,000,000 runs
+    with pytest.raises(ConfigError, match=r"^seeds = 26 is out of range; allowed: 1\.\.25 "):
+        cmp.check_size(26, 40, 1000)
+    assert cmp.check_size(25000, 40) == 25000
+    with pytest.raises(ConfigError, match=r"^seeds = 25001 is out of range; allowed: 1\.\.25000 "
+                                          r"for 40 pairs \(at most"):
+        cmp.check_size(25001, 40)
+    with pytest.raises(ConfigError, match=r"allowed: 1\.\.25 for 40 pairs x 1000 interactions"):
+        cmp.comparison_grid(Config().with_overrides({"simulation.interactions": 1000}),
+                            cmp.AV_KINDS, cmp.DEFAULT_HV_KINDS, 26)
+
+
+@pytest.mark.slow  # a local cluster starts
+def test_the_progress_counts_runs_with_their_interactions(tmp_path):
+    calls = []
+    base = Config().with_overrides({"simulation.interactions": 3})
+    cmp.run_comparison(base, ("cv",), ("idm",), seeds=2, out=tmp_path / "c", workers=1,
+                       timing_seeds=1, progress=lambda done, total: calls.append((done, total)))
+    assert calls[0] == (0, 6) and calls[-1] == (6, 6)  # 2 seeds x 3 interactions
+    assert all(total == 6 and done % 3 == 0 for done, total in calls)
+
+
+def test_hv_role_is_refused_when_no_compared_kind_reads_it(capsys, tmp_path, monkeypatch):
+    monkeypatch.setattr(cmp, "run_comparison", None)  # never reached
+    code, out, err = run(capsys, "compare", "--av", "persuasive,cv", "--hv", "idm,adversary",
+                         "--hv-role", "follower", "--out", str(tmp_path / "c"), "--quiet")
+    assert (code, out) == (2, "")
+    assert err == ("error: --hv-role = follower is not used by the idm, adversary HVs with the "
+                   "persuasive, cv AVs; it is read only by the lfg, stubborn, noisy humans and "
+                   "the lfg AV (the lfg AV starts in the other role)\n")
+    assert list(tmp_path.iterdir()) == []
+    from persuasive.cli.compare import check_hv_role
+
+    # one kind that reads it is enough: the pairs with it start from it
+    check_hv_role("follower", Config(), ("persuasive", "lfg"), ("idm",))
+    check_hv_role("follower", Config(), ("cv",), ("idm", "noisy"))
+    check_hv_role(None, Config(), ("cv",), ("idm",))

@@ -443,3 +443,23 @@ def test_crossing_and_merge_angles_are_bounded_to_meaningful_geometry(kind, good
                                               rf"range; allowed: \[{lo}, {hi}\] degrees for "
                                               rf"a {kind} \("):
             Config().with_overrides({"scenario.kind": kind, "scenario.angle_deg": angle})
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: RoleParams(p_a=float("nan")),
+     "roles.p_a = nan is out of range; allowed: a finite number in [0, 1]"),
+    (lambda: RoleParams(p_a=float("inf")),
+     "roles.p_a = inf is out of range; allowed: a finite number in [0, 1]"),
+    (lambda: RoleParams(w_s_m2=float("inf")),
+     "roles.w_s_m2 = inf is out of range; allowed: a finite number in (0, inf)"),
+    (lambda: MPCParams(p_a_hat=float("nan")),
+     'mpc.p_a_hat = nan is out of range; allowed: a number in [0, 1] or "online"'),
+    (lambda: MPCParams(p_a_hat=-float("inf")),
+     'mpc.p_a_hat = -inf is out of range; allowed: a number in [0, 1] or "online"'),
+    (lambda: MPCParams(p_a_hat=1.5),
+     'mpc.p_a_hat = 1.5 is out of range; allowed: a number in [0, 1] or "online"'),
+], ids=["p_a-nan", "p_a-inf", "w_s-inf", "p_a_hat-nan", "p_a_hat-minus-inf", "p_a_hat-1.5"])
+def test_non_finite_values_are_out_of_range_with_the_range_named(make, message):
+    with pytest.raises(ConfigError) as info:
+        make()
+    assert str(info.value) == message

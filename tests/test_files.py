@@ -97,3 +97,73 @@ def test_folder_target_that_is_a_file(tmp_path):
         check_output_folder(tmp_path / "f")
     with pytest.raises(OutputError, match="is not a folder"):
         check_output_folder(tmp_path / "f" / "sub")
+
+
+# -- the true reason: a virtual file system, not "no such file or directory" ------------------
+
+VIRTUAL = "that cannot hold result files"
+
+
+def test_mount_type_takes_the_deepest_mount_and_reads_escapes(tmp_path, monkeypatch):
+    from persuasive import _files
+
+    mounts = tmp_path / "mounts"
+    deep = tmp_path / "my dir" / "proc"
+    (deep / "sub").mkdir(parents=True)
+    escaped = str(deep).replace(" ", "\\040")
+    mounts.write_text(f"/dev/sda1 / ext4 rw 0 0\nproc {escaped} proc rw 0 0\n"
+                      f"tmpfs {escaped}/sub tmpfs rw 0 0\n")
+    monkeypatch.setattr(_files, "MOUNTS", str(mounts))
+    assert _files.mount_type(tmp_path) == "ext4"
+    assert _files.mount_type(deep) == "proc"
+    assert _files.mount_type(deep / "x" / "y") == "proc"
+    assert _files.mount_type(deep / "sub" / "z") == "tmpfs"
+    assert _files.mount_type(str(deep) + "x") == "ext4"  # a prefix is not a parent
+    with pytest.raises(OutputError) as info:
+        check_output_file(deep / "x.csv", (".csv",), "log")
+    assert str(info.value) == (f"cannot write {str(deep / 'x.csv')!r}: {str(deep)!r} is on "
+                               f"a virtual file system (proc) {VIRTUAL}")
+    with pytest.raises(OutputError, match=f"virtual file system \\(proc\\) {VIRTUAL}$"):
+        check_output_folder(deep / "a" / "b")
+    check_output_folder(deep / "sub" / "z")  # tmpfs: fine
+    monkeypatch.setattr(_files, "MOUNTS", str(tmp_path / "none"))  # not Linux: unknown
+    assert _files.mount_type(deep) is None
+    assert check_output_file(deep / "x.csv", (".csv",)) == ".csv"
+
+
+@pytest.mark.skipif(not Path("/proc/self/mounts").exists(), reason="needs Linux's /proc")
+def test_proc_and_sys_are_named_as_virtual(tmp_path):
+    with pytest.raises(OutputError) as info:
+        check_output_file("/proc/x.csv", (".csv",), "log")
+    assert str(info.value) == ("cannot write '/proc/x.csv': '/proc' is on a virtual file "
+                               f"system (proc) {VIRTUAL}")
+    with pytest.raises(OutputError) as info:
+        check_output_folder("/proc", "comparison folder")
+    assert str(info.value) == ("comparison folder '/proc' cannot be written: '/proc' is on a "
+                               f"virtual file system (proc) {VIRTUAL}")
+    with pytest.raises(OutputError) as info:  # the write itself fails for the same reason
+        atomic_write("/proc/x.csv", lambda p: p.write_text("x"))
+    assert str(info.value) == ("cannot write '/proc/x.csv': '/proc' is on a virtual file "
+                               f"system (proc) {VIRTUAL}")
+    with pytest.raises(OutputError) as info:
+        with atomic_folder("/sys/kernel/res"):
+            pass
+    assert str(info.value).endswith(f"'/sys/kernel' is on a virtual file system (sysfs) "
+                                    f"{VIRTUAL}")
+
+
+def test_a_folder_without_write_permission_is_named(tmp_path, monkeypatch):
+    import os
+
+    real = os.access
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    # root passes every permission check, so the refusal is simulated
+    monkeypatch.setattr(os, "access", lambda p, mode: False if Path(p) == locked
+                        else real(p, mode))
+    with pytest.raises(OutputError) as info:
+        check_output_file(locked / "x.png", (".png",), "figure")
+    assert str(info.value) == (f"cannot write {str(locked / 'x.png')!r}: {str(locked)!r} is "
+                               "not writable")
+    with pytest.raises(OutputError, match="is not writable"):
+        check_output_folder(locked)  # an existing folder receives the files itself

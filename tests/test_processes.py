@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -151,3 +152,81 @@ def test_a_killed_sweep_leaves_no_process_and_no_file_behind(tmp_path, kill_mid_
         time.sleep(0.05)
     assert list(temp.iterdir()) == []  # the fork server removed the command's scratch
     assert not (tmp_path / "r" / "summary.json").exists()
+
+
+def _interrupt(tmp_path: Path, argv: list[str], ready, env_extra=None):
+    """Start ``persuasive argv`` with a TMPDIR of its own, send it SIGINT (Ctrl-C) once
+    ``ready(stderr_so_far)`` holds, and return (exit status, seconds to exit, stderr, the
+    processes that were below it, its TMPDIR)."""
+    temp = tmp_path / "int-tmp"
+    temp.mkdir()
+    env = dict(os.environ, TMPDIR=str(temp), **(env_extra or {}))
+    err_path = tmp_path / "stderr.txt"
+    with open(err_path, "w") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "persuasive", *argv], env=env,
+                                stdout=subprocess.DEVNULL, stderr=err)
+        deadline = time.monotonic() + 240
+        while proc.poll() is None and time.monotonic() < deadline:
+            if ready(err_path.read_text()):
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the command ended before it was interrupted"
+        from conftest import descendants
+
+        below = descendants(proc.pid)
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=60)
+        finally:
+            proc.kill()
+        took = time.monotonic() - t0
+    return proc.returncode, took, err_path.read_text(), below, temp
+
+
+def _one_error_line(stderr: str) -> str:
+    assert "Traceback" not in stderr, stderr
+    errors = [line for line in stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, stderr
+    return errors[0]
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_a_kernel_compile_stops_at_once(tmp_path):
+    """With an empty kernel cache the command compiles for many seconds; Ctrl-C there ends
+    it at once (an interrupt raised inside the compile would be swallowed by LLVM's
+    callbacks or end in a traceback)."""
+    noticed: list[float] = []
+
+    def compiling(err: str) -> bool:  # 3 s after the notice: inside the first compile
+        if "compiling the numerical kernels" in err and not noticed:
+            noticed.append(time.monotonic())
+        return bool(noticed) and time.monotonic() - noticed[0] > 3.0
+
+    code, took, err, _, temp = _interrupt(tmp_path, ["simulate", "--seed", "3"], compiling,
+                                          {"NUMBA_CACHE_DIR": str(tmp_path / "empty-cache")})
+    assert code == 130 and took < 5.0, (code, took)
+    assert _one_error_line(err) == "error: interrupted during a kernel compile"
+    assert list(temp.iterdir()) == []
+
+
+def _bar_moved(err: str) -> bool:
+    """The progress bar counts at least one finished run (or seed)."""
+    return any(int(done) > 0 for done in re.findall(r"(\d+)/\d+ \[", err))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("argv", [
+    ["reproduce", "table2", "--seeds", "1000", "--workers", "2"],
+    ["sumo", "--episodes", "40", "--workers", "2", "--flow", "900"],
+])
+def test_ctrl_c_mid_study_stops_within_a_second_and_leaves_nothing(tmp_path, argv, gone):
+    """Ctrl-C once the study's progress bar runs: exit 130 within a second (5 s on a loaded
+    machine), one line, every worker gone, the scratch folder removed, no results folder."""
+    out = tmp_path / "out"
+    code, took, err, below, temp = _interrupt(tmp_path, [*argv, "--out", str(out)], _bar_moved)
+    assert code == 130 and took < 5.0, (code, took, err[-500:])
+    assert _one_error_line(err) == "error: interrupted"
+    assert len(below) >= 4 and all(gone(pid) for pid in below)
+    assert list(temp.iterdir()) == []
+    assert not (out / "summary.json").exists() and not (out / "episodes.parquet").exists()

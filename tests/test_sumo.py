@@ -434,7 +434,7 @@ def test_missing_extra_is_one_line_exit_2(capsys, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "libsumo", None)
     out = tmp_path / "res"
     rc, stdout, err = _run_cli(["--episodes", "1", "--out", str(out)], capsys)
-    assert rc == 2 and stdout == "" and "persuasive[sumo]" in err
+    assert rc == 2 and stdout == "" and "pip install -e '.[sumo]'" in err
     assert len(err.strip().splitlines()) == 1 and not out.exists()
 
 

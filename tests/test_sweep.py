@@ -658,3 +658,25 @@ def test_slurm_example_smoke(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "20 of 20 runs" in done.stdout
     assert len(sweep.load(tmp_path / "slurm")) == 20
+
+
+def test_an_axis_mixing_a_word_and_numbers_points_to_cases(capsys, tmp_path):
+    """``["online", 0.9]`` for mpc.p_a_hat cannot be one axis (one column of one type); the
+    message says how to write it as cases, and what it says builds the intended grid."""
+    grid_file = write(tmp_path / "g.toml", 'seeds = 2\n[axes]\n"mpc.p_a_hat" = ["online", 0.9]\n'
+                      '"roles.p_a" = [0.5, 1.0]\n')
+    out = tmp_path / "never"
+    code, stdout, err = cli(capsys, "sweep", grid_file, "--out", out)
+    advice = '[[cases]] "mpc.p_a_hat" = "online" [[cases]] "mpc.p_a_hat" = 0.9'
+    assert (code, stdout) == (2, "")
+    assert err == ("error: grid: axes.mpc.p_a_hat mixes value types (number and string); give "
+                   f"values of one type, or run each value as a case of its own: {advice} (and "
+                   "no axes.mpc.p_a_hat)\n")
+    assert not out.exists()
+    cases = advice.replace(" [[cases]]", "\n[[cases]]").replace("] ", "]\n")
+    fixed = write(tmp_path / "fixed.toml",
+                  f'seeds = 2\n[axes]\n"roles.p_a" = [0.5, 1.0]\n{cases}\n')
+    grid = sweep.Grid.from_toml(fixed)
+    assert [grid.config(i).mpc.p_a_hat for i in range(grid.n_combinations)] == \
+        ["online", "online", 0.9, 0.9]
+    assert len(grid) == 8

@@ -72,6 +72,7 @@ SERVER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THRE
 
 _lock = threading.RLock()
 _scratch: Path | None = None
+_scratch_owner = 0
 _jobs: queue.SimpleQueue | None = None
 
 
@@ -86,20 +87,27 @@ def scratch_root() -> Path:
     In a worker it is the command's (named by :data:`SCRATCH_ENV`), so what a worker leaves
     there is removed with the command's.
     """
-    global _scratch
+    global _scratch, _scratch_owner
     inherited = os.environ.get(SCRATCH_ENV)
     if inherited and Path(inherited).is_dir():
         return Path(inherited)
     with _lock:
         if _scratch is None or not _scratch.is_dir():
-            _scratch = Path(tempfile.mkdtemp(prefix="persuasive-"))
-            atexit.register(_remove_scratch, _scratch, os.getpid())
+            _scratch, _scratch_owner = Path(tempfile.mkdtemp(prefix="persuasive-")), os.getpid()
+            atexit.register(_remove_scratch, _scratch, _scratch_owner)
         return _scratch
 
 
 def _remove_scratch(folder: Path, owner: int) -> None:
     if os.getpid() == owner:  # not in a child that inherited the exit handler
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def remove_scratch() -> None:
+    """Remove this command's scratch folder now (before an immediate exit)."""
+    with _lock:
+        if _scratch is not None:
+            _remove_scratch(_scratch, _scratch_owner)
 
 
 def scratch_dir(prefix: str) -> Path:
@@ -176,5 +184,5 @@ def server_pid() -> int | None:
     return getattr(forkserver._forkserver, "_forkserver_pid", None)  # noqa: SLF001
 
 
-__all__ = ["PRELOAD", "SERVER_ENV", "context", "scratch_dir", "scratch_root", "server_pid",
-           "start_method"]
+__all__ = ["PRELOAD", "SERVER_ENV", "context", "remove_scratch", "scratch_dir", "scratch_root",
+           "server_pid", "start_method"]

@@ -82,13 +82,18 @@ def _in_range(
     hi_open: bool = False,
     integer: bool = False,
 ) -> None:
+    """``value`` is a number in the interval, or :class:`ConfigError` naming the interval; a
+    NaN or an infinity is out of range too, "a finite number in" the interval."""
+    left = "(" if lo_open or lo == -math.inf else "["
+    right = ")" if hi_open or hi == math.inf else "]"
+    interval = f"{left}{lo:g}, {hi:g}{right}"
+    if isinstance(value, float) and not math.isfinite(value) and not integer:
+        _fail(name, value, f"a finite number in {interval}")
     _number(name, value, integer=integer)
     too_low = value <= lo if lo_open else value < lo
     too_high = value >= hi if hi_open else value > hi
     if too_low or too_high:
-        left = "(" if lo_open or lo == -math.inf else "["
-        right = ")" if hi_open or hi == math.inf else "]"
-        _fail(name, value, f"{left}{lo:g}, {hi:g}{right}")
+        _fail(name, value, interval)
 
 
 def _choice(name: str, value: Any, allowed: tuple[str, ...]) -> None:
@@ -237,9 +242,10 @@ class MPCParams:
             if self.p_a_hat != "online":
                 _fail("mpc.p_a_hat", self.p_a_hat, 'a number in [0, 1] or "online"')
         elif self.p_a_hat is not None:
-            if isinstance(self.p_a_hat, bool) or not isinstance(self.p_a_hat, (int, float)):
+            # NaN fails the comparison too, so it is named with the range, not as "not finite"
+            if isinstance(self.p_a_hat, bool) or not isinstance(self.p_a_hat, (int, float)) \
+                    or not 0.0 <= self.p_a_hat <= 1.0:
                 _fail("mpc.p_a_hat", self.p_a_hat, 'a number in [0, 1] or "online"')
-            _in_range("mpc.p_a_hat", self.p_a_hat, 0.0, 1.0)
         if self.p_a_prior is not None:
             prior = self.p_a_prior
             if (not isinstance(prior, (tuple, list)) or len(prior) != 2

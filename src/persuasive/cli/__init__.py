@@ -9,7 +9,12 @@ results are written to temporary files (or folders) first, then renamed.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 import sys
+import threading
+from typing import Iterator
 
 import click
 
@@ -52,16 +57,89 @@ _register()
 _NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point: one-line errors, exit status 2 for bad input; a group without a command
-    (``persuasive``, ``persuasive plot``) prints its help and exits 0."""
+class _Compiling:
+    """How deep this thread is in Numba's compiler lock (a listener of its events)."""
+
+    depth = 0
+    installed = False
+
+    @classmethod
+    def install(cls) -> None:
+        if cls.installed:
+            return
+        from numba.core import event
+
+        class Listener(event.Listener):
+            def on_start(self, _event) -> None:
+                if threading.current_thread() is threading.main_thread():
+                    cls.depth += 1
+
+            def on_end(self, _event) -> None:
+                if threading.current_thread() is threading.main_thread():
+                    cls.depth = max(0, cls.depth - 1)
+
+        event.register("numba:compiler_lock", Listener())
+        cls.installed = True
+
+
+def _on_interrupt(signum, frame) -> None:
+    """Ctrl-C: a KeyboardInterrupt, which every command turns into one line and exit 130
+    (its workers killed at once, its temporary files removed). Inside a kernel compile (which
+    would swallow the interrupt in LLVM's callbacks, or break half-way with a traceback) and
+    at a second Ctrl-C, the command ends at once instead: one line, its scratch folder
+    removed, exit 130 (its workers end with it; the kernel cache is written atomically, so
+    an interrupted compile only compiles again next time)."""
+    _on_interrupt.count = getattr(_on_interrupt, "count", 0) + 1
+    if _on_interrupt.count > 1 or _Compiling.depth > 0:
+        during = " during a kernel compile" if _Compiling.depth > 0 else ""
+        sys.stderr.write(f"\nerror: interrupted{during}\n")
+        sys.stderr.flush()
+        from .._processes import remove_scratch
+
+        remove_scratch()
+        os._exit(130)
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _interruptible() -> Iterator[None]:
+    """:func:`_on_interrupt` for Ctrl-C while a command runs in the main thread (the previous
+    handler is put back afterwards, e.g. when a test calls :func:`main`)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _Compiling.install()
+    _on_interrupt.count = 0
+    previous = signal.signal(signal.SIGINT, _on_interrupt)
     try:
-        rv = cli.main(args=argv, prog_name="persuasive", standalone_mode=False)
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """True when ``exc`` is, or was raised while handling, a KeyboardInterrupt (a library's
+    cleanup may turn one into another error)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: one-line errors, exit status 2 for bad input, 130 for Ctrl-C; a group
+    without a command (``persuasive``, ``persuasive plot``) prints its help and exits 0."""
+    try:
+        with _interruptible():
+            rv = cli.main(args=argv, prog_name="persuasive", standalone_mode=False)
     except _NO_ARGS_IS_HELP as exc:
         click.echo(exc.ctx.get_help())
         return 0
-    except click.exceptions.Abort:
-        click.echo("error: aborted", err=True)
+    except (click.exceptions.Abort, KeyboardInterrupt):
+        click.echo("error: interrupted", err=True)
         return 130
     except click.ClickException as exc:
         click.echo(f"error: {exc.format_message()}", err=True)
@@ -70,9 +148,17 @@ def main(argv: list[str] | None = None) -> int:
         click.echo(f"error: {exc}", err=True)
         return 2
     except OSError as exc:
+        if _interrupted(exc):
+            click.echo("error: interrupted", err=True)
+            return 130
         where = f": {exc.filename}" if exc.filename else ""
         click.echo(f"error: {(exc.strerror or str(exc)).lower()}{where}", err=True)
         return 2
+    except Exception as exc:
+        if _interrupted(exc):  # an interrupt a library's cleanup turned into another error
+            click.echo("error: interrupted", err=True)
+            return 130
+        raise
     return rv if isinstance(rv, int) else 0
 
 

@@ -3,6 +3,20 @@
 Precedence, the same for every command: an explicit option (``--mode``, ``--av``, ``--pa``,
 ...) beats ``--set section.field=value``, which beats ``--config FILE.toml``, which beats the
 defaults (the paper's values).
+
+Every list of kinds a command offers (its ``click.Choice`` and its help) is read from the
+registries of :mod:`persuasive.config` (``AV_KINDS``, ``SIMULATED_HV_KINDS``,
+``SCENARIO_KINDS``, ``SHIELD_KINDS``, ``ROLES``) and :mod:`persuasive.policies.kinds`, in their
+order, so that a new planner, human kind or scenario needs no edit here. Every integer option
+takes :class:`Count`, whose message names the allowed range whatever the mistake (``1e9``,
+``0``, ``x``).
+
+Options only some kinds read (``--pa``, ``--pa-hat``, ``--hv-role``; see
+:data:`KIND_OPTIONS`) are refused, with exit status 2, when given explicitly for a run whose
+kinds all ignore them (:func:`check_kind_options`): the user asked for something that would
+silently do nothing. The same fields coming from ``--config``, ``--set`` or the defaults are
+not refused (a configuration file is shared between kinds; ``--set`` sets a field as given):
+``simulate`` says in its summary which of them the run ignores (:func:`ignored_fields`).
 """
 
 from __future__ import annotations
@@ -10,15 +24,78 @@ from __future__ import annotations
 import os
 import sys
 import tomllib
-from typing import Any, Callable
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import click
 
 from ..config import (AV_KIND_ALIASES, AV_KINDS, MODES, ROLES, SCENARIO_KINDS,
                       SHIELD_KINDS, SIMULATED_HV_KINDS, Config, ConfigError)
+from ..policies.kinds import AV, HV, KINDS
 
 #: Seed of the run the paper shows in its Figs. 2 and 3 (the default of the figure commands).
 PAPER_SEED = 996
+#: Largest run seed (``persuasive.simulation.check_seed``; numpy's SeedSequence takes more,
+#: the legacy streams do not).
+SEED_MAX = 2**32 - 1
+#: The defaults the help texts name (the paper's values).
+_DEFAULTS = Config()
+
+
+def kinds_text(kinds: Iterable[str], notes: Mapping[str, str] | None = None,
+               sep: str = ", ") -> str:
+    """``kinds`` in their registry's order, for a help text or a message; ``notes`` adds a
+    word in brackets after a kind (a kind it does not name is listed plain)."""
+    notes = notes or {}
+    return sep.join(f"{k} ({notes[k]})" if k in notes else k for k in kinds)
+
+
+def kinds_with(side: int, has_role: bool | None = None) -> tuple[str, ...]:
+    """The simulated kinds of one side (``policies.kinds.AV`` / ``HV``), in the order of the
+    configuration's registry (``AV_KINDS`` / ``SIMULATED_HV_KINDS``); ``has_role``: only those
+    that hold (True) or do not hold (False) a leader/follower role."""
+    names = AV_KINDS if side == AV else SIMULATED_HV_KINDS
+    return tuple(k for k in names if k in KINDS and side in KINDS[k].sides
+                 and (has_role is None or KINDS[k].has_role == has_role))
+
+
+class _RangeError(click.BadParameter):
+    """A bad integer option: ``--name = value is out of range; allowed: ...`` (the form of
+    every configuration error), without click's "Invalid value for" preamble."""
+
+    def format_message(self) -> str:
+        return self.message
+
+
+class Count(click.IntRange):
+    """An integer option in ``[min, max]`` (``max=None``: unbounded) whose every error, a
+    value out of range or no integer at all (``1e9``, ``x``), names the allowed range:
+    ``--episodes = 1e9 is out of range; allowed: integer in [1, 10000]``. ``why`` is added in
+    brackets (e.g. what the bound protects)."""
+
+    def __init__(self, min: int, max: int | None = None, why: str | None = None):
+        super().__init__(min=min, max=max)
+        self.why = why
+
+    def allowed(self) -> str:
+        """The allowed range, as the messages write it."""
+        text = (f"integer in [{self.min}, {self.max}]" if self.max is not None
+                else f"integer >= {self.min}")
+        return f"{text} ({self.why})" if self.why else text
+
+    def convert(self, value, param, ctx):
+        try:
+            return super().convert(value, param, ctx)
+        except click.BadParameter:
+            name = param.opts[0] if param is not None and param.opts else "value"
+            raise _RangeError(f"{name} = {value} is out of range; allowed: {self.allowed()}",
+                              ctx=ctx, param=param) from None
+
+
+def workers_type() -> Count:
+    """``--workers``: 1 to 8 processes per core (:func:`check_workers`'s bound)."""
+    cores = os.cpu_count() or 1
+    return Count(1, 8 * cores, f"8 per core, {cores} cores")
 
 
 def parse_set(values: tuple[str, ...]) -> dict[str, Any]:
@@ -55,14 +132,23 @@ RUN_FIELDS = {"av": "av.kind", "hv": "hv.kind", "hv_role": "hv.role", "pa": "rol
               "shield": "av.shield"}
 
 #: Help of ``--shield`` (one setting).
-SHIELD_HELP = ("Safety shield around the AV planner (docs/method.md §12): off, worst-case, "
-               "responsive [off in paper mode, worst-case in corrected mode].")
+SHIELD_HELP = (f"Safety shield around the AV planner (docs/method.md §12): "
+               f"{kinds_text(SHIELD_KINDS)} [{Config(mode='paper').shield} in paper mode, "
+               f"{Config(mode='corrected').shield} in corrected mode].")
 
 
 def shield_option(func: Callable) -> Callable:
     """``--shield`` (one setting), setting ``av.shield``."""
     return click.option("--shield", type=click.Choice(list(SHIELD_KINDS)), default=None,
                         help=SHIELD_HELP)(func)
+
+
+def scenario_option(help_text: str) -> Callable:
+    """``--scenario``: a kind of the scenario registry (``SCENARIO_KINDS``), setting nothing
+    itself (the command maps it to ``scenario.kind``); ``help_text`` is followed by the
+    kinds."""
+    return click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default=None,
+                        help=f"{help_text}: {kinds_text(SCENARIO_KINDS)}.")
 
 
 def run_explicit(options: dict[str, Any]) -> dict[str, Any]:
@@ -91,7 +177,9 @@ def config_options(func: Callable) -> Callable:
 
 
 class _PaHat(click.ParamType):
-    """A number or ``online`` (``mpc.p_a_hat``; the range is the configuration's check)."""
+    """A number or ``online`` (``mpc.p_a_hat``). Text that is neither is refused here with the
+    range; a number out of ``[0, 1]`` (NaN included) by the configuration's check, which
+    names the field and the same range."""
 
     name = "NUMBER|online"
 
@@ -101,7 +189,9 @@ class _PaHat(click.ParamType):
         try:
             return float(value)
         except ValueError:
-            self.fail(f"{value!r} is neither a number nor online", param, ctx)
+            name = param.opts[0] if param is not None and param.opts else "value"
+            raise _RangeError(f"{name} = {value} is out of range; allowed: a number in "
+                              "[0, 1] or online", ctx=ctx, param=param) from None
 
 
 PA_HAT = _PaHat()
@@ -113,26 +203,33 @@ INTERACTIONS_HELP = ("Repeated interactions with one human per seed (same human,
 
 
 def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable:
-    """The options that define one closed-loop run (shared by simulate, plot and animate)."""
+    """The options that define one closed-loop run (shared by simulate, plot and animate).
+
+    ``--pa``, ``--pa-hat`` and ``--hv-role`` are read by some kinds only: a command calls
+    :func:`check_kind_options` on the configurations it runs."""
+    d = _DEFAULTS
+    aliases = ", ".join(AV_KIND_ALIASES)
     options = [
         click.option("--av", type=click.Choice([*AV_KINDS, *AV_KIND_ALIASES]), default=None,
-                     help="AV planner [persuasive; mpc is its old name]: persuasive, passive, "
-                          "cv, lfg (the 2-LFG case), yield (docs/method.md §11)."),
+                     help=f"AV planner [{d.av.kind}; {aliases} is its old name]: "
+                          f"{kinds_text(AV_KINDS, {'lfg': 'the 2-LFG case'})} "
+                          "(docs/method.md §11)."),
         click.option("--hv", type=click.Choice(list(SIMULATED_HV_KINDS)), default=None,
-                     help="Human model [lfg]: lfg, stubborn, noisy, idm, aggressive, replay, "
-                          "adversary, deceptive, random."),
+                     help=f"Human model [{d.hv.kind}]: {kinds_text(SIMULATED_HV_KINDS)}."),
         click.option("--shield", type=click.Choice(list(SHIELD_KINDS)), default=None,
                      help=SHIELD_HELP),
         click.option("--hv-role", type=click.Choice(list(ROLES)), default=None,
-                     help="HV initial role [leader]."),
-        click.option("--pa", type=float, default=None, help="Human's p_a in [0, 1] [1.0]."),
+                     help=f"HV initial role [{d.hv.role}]; {KIND_OPTIONS['hv_role'].users()}."),
+        click.option("--pa", type=float, default=None,
+                     help=f"Human's p_a in [0, 1] [{d.roles.p_a:g}]; "
+                          f"{KIND_OPTIONS['pa'].users()}."),
         click.option("--pa-hat", type=PA_HAT, default=None,
                      help="AV's estimate of p_a in [0, 1], or online (a posterior over p_a, "
-                          "docs/method.md §13.9) [equal to --pa]."),
-        click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default=None,
-                     help="Geometry [intersection]: intersection, crossing, left-turn, merge."),
-        click.option("--seed", type=int, default=seed_default, show_default=True,
-                     help=seed_help),
+                          "docs/method.md §13.9) [equal to --pa]; "
+                          f"{KIND_OPTIONS['pa_hat'].users()}."),
+        scenario_option(f"Geometry [{d.scenario.kind}]"),
+        click.option("--seed", type=Count(0, SEED_MAX), default=seed_default,
+                     show_default=True, help=seed_help),
     ]
 
     def decorate(func: Callable) -> Callable:
@@ -142,6 +239,107 @@ def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable
         return func
 
     return decorate
+
+
+# -- options that only some kinds read ---------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class KindOption:
+    """A run option that only some kinds read, and which (``persuasive.policies``)."""
+
+    option: str  #: the option, e.g. "--pa-hat"
+    field: str  #: the dotted field it sets
+    av_kinds: tuple[str, ...]  #: the AV kinds that read it
+    hv_kinds: tuple[str, ...]  #: the human kinds that read it
+    what: str  #: what it is to those kinds, for the messages
+
+    def used_by(self, config: Config) -> bool:
+        """Whether a kind of ``config`` reads the field."""
+        if self.option == "--hv-role" and config.av.kind in self.av_kinds \
+                and config.av.role is not None:
+            return config.hv.kind in self.hv_kinds  # an LFG AV with its own role ignores it
+        return config.av.kind in self.av_kinds or config.hv.kind in self.hv_kinds
+
+    def users(self) -> str:
+        """Who reads it, in words: "read only by the lfg, noisy humans and the lfg AV
+        (...)"."""
+        parts = []
+        if self.hv_kinds:
+            parts.append(f"the {kinds_text(self.hv_kinds)} human"
+                         + ("s" if len(self.hv_kinds) > 1 else ""))
+        if self.av_kinds:
+            parts.append(f"the {kinds_text(self.av_kinds)} AV"
+                         + ("s" if len(self.av_kinds) > 1 else ""))
+        return f"read only by {' and '.join(parts)} ({self.what})"
+
+
+#: The run options only some kinds read (``persuasive.policies.policy_params``), by parameter
+#: name:
+#:
+#: - ``--pa-hat`` (``mpc.p_a_hat``): the persuasive planner's estimate of ``p_a``. The passive
+#:   planner carries it but its role transition is the identity whatever it is; no other AV
+#:   models the human's ``p_a``.
+#: - ``--pa`` (``roles.p_a``): the ``p_a`` of an LFG player of its own: the lfg and noisy
+#:   humans and the lfg AV (the stubborn human is the LFG with ``p_a = 0``). Without
+#:   ``--pa-hat`` it is also the persuasive AV's estimate, but that alone does not make it
+#:   used: the estimate's option is ``--pa-hat``, and a human with no ``p_a`` has none to give.
+#: - ``--hv-role`` (``hv.role``): the initial role of the humans that hold one (``has_role`` in
+#:   ``policies.kinds``) and, for an LFG AV without ``av.role``, the other role is the AV's
+#:   own. Paper mode's quirk Q3 also reads it as the persuasive planner's fallback tie role
+#:   against a human without roles; that quirk is no reason to offer the option there.
+KIND_OPTIONS: dict[str, KindOption] = {
+    "pa_hat": KindOption("--pa-hat", "mpc.p_a_hat", ("persuasive",), (),
+                         "its estimate of the human's p_a"),
+    "pa": KindOption("--pa", "roles.p_a", tuple(k for k in kinds_with(AV, True)
+                                                if k != "stubborn"),
+                     tuple(k for k in kinds_with(HV, True) if k != "stubborn"),
+                     "their own p_a; the persuasive AV's estimate is --pa-hat"),
+    "hv_role": KindOption("--hv-role", "hv.role", kinds_with(AV, True), kinds_with(HV, True),
+                          "the lfg AV starts in the other role"),
+}
+
+
+def _who(configs: Sequence[Config]) -> str:
+    avs = list(dict.fromkeys(c.av.kind for c in configs))
+    hvs = list(dict.fromkeys(c.hv.kind for c in configs))
+    return f"the {kinds_text(hvs, sep=' or ')} HV with the {kinds_text(avs, sep=' or ')} AV"
+
+
+def check_kind_options(options: Mapping[str, Any], configs: Sequence[Config]) -> None:
+    """Refuse (:class:`click.UsageError`, exit status 2) each option of :data:`KIND_OPTIONS`
+    given in ``options`` (not ``None``) that no kind of any of ``configs`` reads, naming the
+    option, the kinds that ignore it and the kinds that read it. ``configs``: every run the
+    command makes with these options (``plot profile`` without ``--single`` makes two)."""
+    for name, kind_option in KIND_OPTIONS.items():
+        value = options.get(name)
+        if value is None or any(kind_option.used_by(c) for c in configs):
+            continue
+        raise click.UsageError(f"{kind_option.option} = {value} is not used by "
+                               f"{_who(configs)}; it is {kind_option.users()}")
+
+
+def unread_options(config: Config) -> list[str]:
+    """The options of :data:`KIND_OPTIONS` (``"pa"``, ``"pa_hat"``, ``"hv_role"``) that none of
+    ``config``'s kinds reads, set or not. ``roles.p_a`` is read whenever it stands for the
+    persuasive AV's estimate (``mpc.p_a_hat`` unset)."""
+    estimate = KIND_OPTIONS["pa_hat"].used_by(config) and config.mpc.p_a_hat is None
+    return [name for name, kind_option in KIND_OPTIONS.items()
+            if not (kind_option.used_by(config) or (name == "pa" and estimate))]
+
+
+def ignored_fields(config: Config) -> list[str]:
+    """The fields of :data:`KIND_OPTIONS` that ``config`` sets away from their defaults but
+    that none of its kinds reads (from ``--config`` or ``--set``, which are not refused), as
+    ``"mpc.p_a_hat = online"``; for a summary to say that they are ignored."""
+    out = []
+    for name in unread_options(config):
+        section, _, key = KIND_OPTIONS[name].field.partition(".")
+        value = getattr(getattr(config, section), key)
+        if value != getattr(getattr(_DEFAULTS, section), key):
+            out.append(f"{KIND_OPTIONS[name].field} = "
+                       f"{value if isinstance(value, str) else f'{value:g}'}")
+    return out
 
 
 def check_workers(workers: int | None, n_tasks: int) -> int:
@@ -161,19 +359,21 @@ def check_workers(workers: int | None, n_tasks: int) -> int:
     return max(1, min(workers, n_tasks))
 
 
-def compile_notice() -> None:
-    """One line on stderr when the compiled kernels are not cached yet (first use)."""
+def compile_notice(*kernels) -> None:
+    """One line on stderr when the compiled kernels the command uses (default: the closed
+    loop's; see :func:`persuasive._compile.kernels_cached`) are not cached yet (first use)."""
     from .._compile import kernels_cached
 
-    if not kernels_cached():
+    if not kernels_cached(*kernels):
         click.echo("compiling the numerical kernels once (about 25 s; cached for later runs)",
                    err=True)
         sys.stderr.flush()
 
 
-def progress_bar(quiet: bool, rows: int | None = None) -> Callable[..., None] | None:
+def progress_bar(quiet: bool, rows: int | None = None,
+                 unit: str = "run") -> Callable[..., None] | None:
     """A progress callback drawing a tqdm bar on stderr (``None`` when ``quiet``):
-    ``update(done_runs, total_runs[, rows_done])``, rows shown when ``rows`` is given.
+    ``update(done, total[, rows_done])`` in ``unit`` s, rows shown when ``rows`` is given.
 
     The bar appears at the first update with runs left (a study resumed with nothing to run
     shows none). ``update.close()`` ends its line: a command calls it when it stops, whether
@@ -189,7 +389,7 @@ def progress_bar(quiet: bool, rows: int | None = None) -> Callable[..., None] | 
         if "bar" not in bar:
             if done >= total:
                 return  # nothing left to run: no bar
-            bar["bar"] = tqdm(total=total, initial=done, unit="run", file=sys.stderr,
+            bar["bar"] = tqdm(total=total, initial=done, unit=unit, file=sys.stderr,
                               dynamic_ncols=True, smoothing=0.1)
         b = bar["bar"]
         if rows is not None and rows_done is not None:

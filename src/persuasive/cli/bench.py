@@ -7,16 +7,16 @@ import json
 import click
 
 from ..config import AV_KINDS, SCENARIO_KINDS
-from ._common import compile_notice
+from ._common import Count, compile_notice, workers_type
 
 
 @click.command()
-@click.option("--runs", "n_runs", type=click.IntRange(1, 1000), default=10, show_default=True,
+@click.option("--runs", "n_runs", type=Count(1, 1000), default=10, show_default=True,
               help="Closed-loop runs (seeds 1..N, at most 1000) whose states are replayed.")
-@click.option("--repeats", type=click.IntRange(min=1), default=3, show_default=True,
-              help="Passes over those states.")
+@click.option("--repeats", type=Count(1, 100), default=3, show_default=True,
+              help="Passes over those states (at most 100: the medians settle long before).")
 @click.option("--full", is_flag=True, help="Also time 'reproduce all' (16,000 runs).")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
+@click.option("--workers", type=workers_type(), default=None,
               help="Workers for --full [all cores].")
 @click.option("--reference", is_flag=True, help="Also time the plain NumPy reference path.")
 @click.option("--sweep", "sweep", is_flag=True,

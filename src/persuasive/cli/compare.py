@@ -6,37 +6,61 @@ import json
 
 import click
 
-from ._common import (INTERACTIONS_HELP, build_config, check_workers, compile_notice,
-                      config_options, progress_bar)
+from ..config import AV_KINDS, ROLES, SHIELD_KINDS, SIMULATED_HV_KINDS, Config
+from ..studies.compare import DEFAULT_HV_KINDS
+from ._common import (INTERACTIONS_HELP, KIND_OPTIONS, SEED_MAX, Count, build_config,
+                      check_workers, compile_notice, config_options, kinds_text, progress_bar,
+                      scenario_option, workers_type)
+
+#: The human kinds left out by default (they need more than a configuration, e.g. replay's
+#: recording), named in the help.
+_NOT_DEFAULT = tuple(k for k in SIMULATED_HV_KINDS if k not in DEFAULT_HV_KINDS)
+
+
+def check_hv_role(hv_role: str | None, base: Config, avs, hvs) -> None:
+    """Refuse an explicit ``--hv-role`` that no compared kind reads (exit status 2): it is
+    used as soon as one human kind holds a role or one AV is the lfg player (those pairs start
+    from it; the others ignore it, as a configuration file's ``hv.role`` would be)."""
+    if hv_role is None:
+        return
+    option = KIND_OPTIONS["hv_role"]
+    if any(option.used_by(base.with_overrides({"av.kind": av, "hv.kind": hv}))
+           for av in avs for hv in hvs):
+        return
+    raise click.UsageError(f"--hv-role = {hv_role} is not used by the {kinds_text(hvs)} "
+                           f"HV{'s' * (len(hvs) > 1)} with the {kinds_text(avs)} "
+                           f"AV{'s' * (len(avs) > 1)}; it is {option.users()}")
 
 
 @click.command()
 @click.option("--av", "av_kinds", default=None, metavar="KINDS",
-              help="AV planners, comma-separated [all: persuasive,passive,cv,lfg,yield].")
+              help=f"AV planners, comma-separated [all: {kinds_text(AV_KINDS, sep=',')}].")
 @click.option("--hv", "hv_kinds", default=None, metavar="KINDS",
-              help="Human models, comma-separated [all but replay: "
-                   "lfg,stubborn,noisy,idm,aggressive,adversary,deceptive,random].")
+              help="Human models, comma-separated [all"
+                   + (f" but {kinds_text(_NOT_DEFAULT, sep=',')}" if _NOT_DEFAULT else "")
+                   + f": {kinds_text(DEFAULT_HV_KINDS, sep=',')}].")
 @click.option("--shield", "shields", default=None, metavar="SETTINGS",
-              help="Safety shields to compare on the same seeds, comma-separated, e.g. "
-                   "off,worst-case (docs/method.md §12) [the configuration's: off in paper "
-                   "mode, worst-case in corrected mode].")
-@click.option("--hv-role", type=click.Choice(["leader", "follower"]), default=None,
-              help="Initial role of the LFG-type humans [leader].")
-@click.option("--scenario", type=click.Choice(["intersection", "crossing", "left-turn",
-                                               "merge"]), default=None,
-              help="Geometry [intersection].")
-@click.option("--seeds", type=click.IntRange(min=1), default=200, show_default=True,
-              help="Seeds 1..N for every pair.")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help=f"Safety shields to compare on the same seeds, comma-separated, of "
+                   f"{kinds_text(SHIELD_KINDS)} (docs/method.md §12) [the "
+                   f"configuration's: {Config(mode='paper').shield} in paper mode, "
+                   f"{Config(mode='corrected').shield} in corrected mode].")
+@click.option("--hv-role", type=click.Choice(list(ROLES)), default=None,
+              help=f"Initial role of the humans that hold one [{Config().hv.role}]; "
+                   f"{KIND_OPTIONS['hv_role'].users()}.")
+@scenario_option(f"Geometry [{Config().scenario.kind}]")
+@click.option("--seeds", type=Count(1, SEED_MAX), default=200, show_default=True,
+              help="Seeds 1..N for every pair (at most 1,000,000 runs in all: seeds x pairs "
+                   "x interactions).")
+@click.option("--workers", type=workers_type(), default=None,
               help="Worker processes [all cores].")
 @config_options
 @click.option("--out", type=click.Path(file_okay=False), default=None,
               help="Comparison folder [results/compare-<grid hash>/]; rerunning resumes.")
 @click.option("--force", is_flag=True, help="Replace a folder holding another comparison.")
-@click.option("--timing-seeds", type=click.IntRange(min=1), default=3, show_default=True,
-              help="Seeds per pair whose AV decisions are timed (in this process).")
-@click.option("--interactions", type=click.IntRange(1, 1000), default=None,
-              help=INTERACTIONS_HELP)
+@click.option("--timing-seeds", type=Count(1, 1000), default=3, show_default=True,
+              help="Seeds per pair whose AV decisions are timed (in this process; never more "
+                   "than --seeds).")
+@click.option("--interactions", type=Count(1, 1000), default=None, help=INTERACTIONS_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the rows as one JSON list.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode, config_file,
@@ -46,9 +70,13 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
     Each pair runs on seeds 1..N with independent random streams per agent, so a seed gives
     the same initial state and the same human draws whatever the AV. Prints one row per pair
     with 95 % bootstrap intervals, then each AV's paired differences against persuasive.
+
+    A comparison holds at most 1,000,000 runs, each repeated interaction counted (seeds x AV
+    kinds x human kinds x shield settings x interactions), and the progress bar counts those
+    runs. --hv-role is refused when no compared human holds a role and no AV is the lfg
+    player.
     """
-    from ..config import AV_KINDS, SHIELD_KINDS, SIMULATED_HV_KINDS
-    from ..experiments import check_seeds
+    from .._files import check_output_folder
     from ..studies import compare as cmp
 
     base = build_config(config_file, sets, {"mode": mode, "hv.role": hv_role,
@@ -58,7 +86,11 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
     hvs = cmp.parse_kinds(hv_kinds, SIMULATED_HV_KINDS, "--hv", cmp.DEFAULT_HV_KINDS)
     shield_list = cmp.parse_kinds(shields, SHIELD_KINDS, "--shield", SHIELD_KINDS) \
         if shields is not None else None
-    check_seeds(seeds, len(avs) * len(hvs) * len(shield_list or (None,)), "--seeds", "pairs")
+    check_hv_role(hv_role, base, avs, hvs)
+    cmp.check_size(seeds, len(avs) * len(hvs) * len(shield_list or (None,)),
+                   cmp.n_interactions(base), "--seeds")
+    if out is not None:
+        check_output_folder(out, "comparison folder")  # before any work
     if base.simulation.streams == "legacy" and "lfg" in avs:
         click.echo("warning: simulation.streams = legacy: the human's draws depend on whether "
                    "the AV draws (the lfg AV does), so those runs are not paired", err=True)

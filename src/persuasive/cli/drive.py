@@ -14,7 +14,7 @@ import sys
 
 import click
 
-from ._common import compile_notice, shield_option
+from ._common import SEED_MAX, Count, compile_notice, shield_option
 
 #: Where trials go unless ``--out`` says otherwise.
 DEFAULT_OUT = "results/drive"
@@ -31,7 +31,7 @@ def _need_web_extra() -> None:
             missing.append(module)
     if missing:
         raise ConfigError(f"persuasive drive needs {', '.join(missing)}: install the web "
-                          "extra (pip install 'persuasive[web]')")
+                          "extra (pip install -e '.[web]' in the persuasive checkout)")
 
 
 @click.command()
@@ -39,14 +39,14 @@ def _need_web_extra() -> None:
               help="Address to listen on. Loopback by default; any other address (e.g. "
                    "0.0.0.0 for a lab network) gets a generated token, printed in the URL, "
                    "that every request must carry (403 without it).")
-@click.option("--port", type=click.IntRange(0, 65535), default=8765, show_default=True,
+@click.option("--port", type=Count(0, 65535), default=8765, show_default=True,
               help="Port (0: any free port).")
 @click.option("--study", "study_file", type=click.Path(dir_okay=False), default=None,
               help="Study file (TOML): consent, conditions, questions [built-in study].")
 @click.option("--out", default=DEFAULT_OUT, show_default=True,
               type=click.Path(file_okay=False),
               help="Folder for the trials and study summaries (created if missing).")
-@click.option("--seed", type=int, default=None,
+@click.option("--seed", type=Count(0, SEED_MAX), default=None,
               help="Base seed (practice uses it, condition j seed + 1 + j) [the study's].")
 @shield_option
 def drive(host: str, port: int, study_file: str | None, out: str, seed: int | None,

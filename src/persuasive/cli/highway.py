@@ -12,8 +12,14 @@ import json
 
 import click
 
-from ..config import AV_KIND_ALIASES, AV_KINDS
-from ._common import compile_notice
+from ..config import AV_KIND_ALIASES, AV_KINDS, SHIELD_KINDS, ConfigError
+from ._common import Count, compile_notice, kinds_text
+
+#: Most episodes one command runs (each twice: about 5-10 s a pair on one core, so up to a
+#: day): a slip of the keyboard (1e9) is refused instead of running for ever.
+MAX_EPISODES = 10_000
+#: Every episode's seed is below this, the last one's included (``envs.highway.run_highway``).
+SEED_LIMIT = 2**31 - 1
 
 
 def _yes(flag: bool) -> str:
@@ -25,22 +31,31 @@ def _num(value, digits: int = 2) -> str:
 
 
 @click.command()
-@click.option("--episodes", type=int, default=5, show_default=True,
+@click.option("--episodes", type=Count(1, MAX_EPISODES), default=5, show_default=True,
               help="Episodes, seeds SEED .. SEED + EPISODES - 1.")
 @click.option("--planner", type=click.Choice([*AV_KINDS, *AV_KIND_ALIASES]),
               default="persuasive", show_default=True,
-              help="The AV planner driving the ego (corrected mode).")
-@click.option("--seed", type=int, default=1, show_default=True,
-              help="Seed of the first episode (highway-env's reset seed).")
-@click.option("--shield", type=click.Choice(["off", "worst-case", "responsive"]), default=None,
-              help="Safety shield over every vehicle the ego can meet (docs/method.md §12) "
-                   "[worst-case].")
+              help=f"The AV planner driving the ego (corrected mode): {kinds_text(AV_KINDS)}.")
+@click.option("--seed", type=Count(0, SEED_LIMIT - 1), default=1, show_default=True,
+              help="Seed of the first episode (highway-env's reset seed; the last, "
+                   "SEED + EPISODES - 1, below 2^31 - 1).")
+@click.option("--shield", type=click.Choice(list(SHIELD_KINDS)), default=None,
+              help=f"Safety shield over every vehicle the ego can meet (docs/method.md §12): "
+                   f"{kinds_text(SHIELD_KINDS)} [worst-case].")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--video", type=click.Path(dir_okay=False), default=None,
               help="Write the planner's first episode as .mp4 or .gif (the folder must exist).")
 def highway(episodes, planner, seed, shield, as_json, video) -> None:
     """Drive highway-env's intersection ego with the planner, against its IDM traffic,
-    beside highway-env's own ego driver on the same seeds."""
+    beside highway-env's own ego driver on the same seeds.
+
+    At most 10,000 episodes (each runs twice), and every seed below 2^31 - 1: a count or
+    seed beyond is refused before highway-env is imported.
+    """
+    if seed + episodes > SEED_LIMIT:
+        raise ConfigError(f"--seed = {seed} is out of range; allowed: integer in "
+                          f"[0, {SEED_LIMIT - episodes}] for {episodes} episodes (every "
+                          f"episode's seed below {SEED_LIMIT})")
     from ..envs.highway import (CONTEST_RANGE_M, DEFAULT_DRIVER, run_highway, write_video)
 
     if video:

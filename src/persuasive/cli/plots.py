@@ -17,7 +17,8 @@ from typing import Callable
 import click
 from click.core import ParameterSource
 
-from ._common import PAPER_SEED, compile_notice, config_of, run_options
+from ._common import (PAPER_SEED, Count, check_kind_options, compile_notice, config_of,
+                      run_options)
 
 _SEED_HELP = f"Run seed [{PAPER_SEED}: the run shown in the paper's Figs. 2 and 3]."
 
@@ -53,7 +54,8 @@ def _check_from(source: str | None) -> None:
 
 def _runs(single: bool, run: dict):
     """The run the options describe (``single``), the run saved in ``--from``, or the LFG-AV
-    and persuasive-AV runs of Figs. 2-3."""
+    and persuasive-AV runs of Figs. 2-3. ``--pa``, ``--pa-hat`` or ``--hv-role`` that none of
+    the runs reads is refused (:func:`persuasive.cli._common.check_kind_options`)."""
     from ..simulation import load_record, simulate
 
     source = run.pop("source", None)
@@ -71,14 +73,17 @@ def _runs(single: bool, run: dict):
             raise click.UsageError("--run applies only to a fit's file (persuasive fit --out "
                                    "FILE.parquet)")
         return (load_record(source),)
-    compile_notice()
     if single:
-        return (simulate(config_of(run), run["seed"]),)
-    if run.get("av") is not None:
+        configs = [config_of(run)]
+    elif run.get("av") is not None:
         raise click.UsageError("--av applies only with --single (without it both the LFG AV "
                                "and the persuasive AV are plotted)")
-    return tuple(simulate(config_of({**run, "av": kind}), run["seed"])
-                 for kind in ("lfg", "persuasive"))
+    else:
+        configs = [config_of({**run, "av": kind}) for kind in ("lfg", "persuasive")]
+    # an option is refused only when neither run reads it (--pa-hat: the persuasive AV's)
+    check_kind_options(run, configs)
+    compile_notice()
+    return tuple(simulate(config, run["seed"]) for config in configs)
 
 
 def _out_option(help_text: str) -> Callable:
@@ -106,7 +111,7 @@ def _from_option(func: Callable) -> Callable:
 
 
 def _fit_run_option(func: Callable) -> Callable:
-    return click.option("--run", "fit_run", type=click.IntRange(min=0), default=None,
+    return click.option("--run", "fit_run", type=Count(0), default=None,
                         metavar="K", help="With --from a fit's file: the run to plot [0]; "
                                           "its smoothed role is drawn on the role row.")(func)
 
@@ -176,7 +181,7 @@ def plot_compare(results: str, out: str) -> None:
 
 @click.command()
 @run_options(seed_default=PAPER_SEED, seed_help=_SEED_HELP)
-@click.option("--fps", type=click.IntRange(min=1), default=10, show_default=True,
+@click.option("--fps", type=Count(1, 120), default=10, show_default=True,
               help="Frames per second (10 is real time).")
 @_from_option
 @_out_option("Animation file: .mp4 or .gif.")

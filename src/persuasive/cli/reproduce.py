@@ -7,19 +7,18 @@ from pathlib import Path
 
 import click
 
-from ._common import (build_config, check_workers, compile_notice, config_options,
-                      progress_bar, shield_option)
+from ._common import (SEED_MAX, Count, build_config, check_workers, compile_notice,
+                      config_options, progress_bar, scenario_option, shield_option,
+                      workers_type)
 
 
 @click.command()
 @click.argument("table", type=click.Choice(["table1", "table2", "all"]))
-@click.option("--seeds", type=click.IntRange(min=1), default=1000, show_default=True,
+@click.option("--seeds", type=Count(1, SEED_MAX), default=1000, show_default=True,
               help="Seeds 1..N per row (the published tables use 1000).")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
+@click.option("--workers", type=workers_type(), default=None,
               help="Worker processes [all cores; never more than the chunks of work].")
-@click.option("--scenario", type=click.Choice(["intersection", "crossing", "left-turn",
-                                               "merge"]), default=None,
-              help="Run the tables in another scenario [intersection, the paper's].")
+@scenario_option("Run the tables in another scenario [intersection, the paper's]")
 @shield_option
 @config_options
 @click.option("--out", type=click.Path(file_okay=False), default=None,
@@ -62,23 +61,16 @@ def reproduce(table, seeds, workers, scenario, shield, mode, config_file, sets, 
                                          for g in grids.values()))
     compile_notice()
     progress = progress_bar(quiet, n_rows)
-    offset = 0
-    results = []
-    try:
-        for t in tables:
-            def shifted(done, _total, _rows, offset=offset):
-                if progress is not None:
-                    progress(offset + done, total, (offset + done) // seeds)
-            results.append(ex.reproduce(t, seeds, workers, None, base, progress=shifted,
-                                        out=folders[t], force=force))
-            offset += len(grids[t])
+    try:  # every table in one call: one cluster of workers for the whole command
+        result = ex.reproduce(table, seeds, workers, None, base, progress=progress,
+                              out=folders, force=force)
     finally:
         if progress is not None:
             progress.close()  # type: ignore[attr-defined]
-    summaries = {t: r.summaries[t] for t, r in zip(tables, results)}
-    failures = [f for r in results for f in r.failures]
-    for t, r in zip(tables, results):
-        ex.save(r, t, folders[t])
+    summaries = result.summaries
+    failures = list(result.failures)
+    for t in tables:
+        ex.save(result, t, folders[t])
     for f in failures:
         click.echo(f"error: run failed: {f.describe()}", err=True)
     if as_json:
@@ -89,8 +81,7 @@ def reproduce(table, seeds, workers, scenario, shield, mode, config_file, sets, 
             click.echo(ex.to_markdown(summaries[t]))
             click.echo(f"{ex.verdict(summaries[t], base)}")
             click.echo(f"written to {folders[t]}/\n")
-        wall = sum(r.wall_time_s for r in results)
-        skipped, ran = sum(r.skipped for r in results), sum(r.ran for r in results)
+        wall, skipped, ran = result.wall_time_s, result.skipped, result.ran
         with_workers = f"with {workers} worker{'s' if workers > 1 else ''}"
         if not skipped:
             click.echo(f"{total - len(failures)} runs in {wall:.1f} s {with_workers}")

@@ -7,7 +7,10 @@ import time
 
 import click
 
-from ._common import INTERACTIONS_HELP, compile_notice, config_of, run_options
+from ..config import ROLES
+from ._common import (INTERACTIONS_HELP, KIND_OPTIONS, Count, check_kind_options,
+                      compile_notice, config_of, ignored_fields, run_options,
+                      unread_options)
 
 #: Per-step log formats ``--out`` writes, by extension.
 LOG_EXTENSIONS = (".parquet", ".csv")
@@ -31,14 +34,19 @@ def write_log(record, path: str) -> None:
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write the per-step log here: .parquet or .csv (the folder must exist).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-@click.option("--interactions", type=click.IntRange(1, 1000), default=None,
-              help=INTERACTIONS_HELP)
+@click.option("--interactions", type=Count(1, 1000), default=None, help=INTERACTIONS_HELP)
 def simulate(out, as_json, interactions, **run) -> None:
-    """Simulate one closed-loop run (two vehicles, one conflict)."""
+    """Simulate one closed-loop run (two vehicles, one conflict).
+
+    --pa, --pa-hat and --hv-role given for kinds that ignore them are refused (exit status
+    2); the same fields from --config or --set are run as given, and the summary line says
+    which of them the run ignores.
+    """
     from .._files import check_output_file
     from ..simulation import ARRIVAL_LABELS, simulate as simulate_run
 
     config = config_of(run)
+    check_kind_options(run, [config])
     if interactions is not None:
         config = config.with_overrides({"simulation.interactions": interactions})
     if (config.simulation.interactions or 1) > 1:
@@ -58,7 +66,7 @@ def simulate(out, as_json, interactions, **run) -> None:
         write_log(record, out)
     summary = record.summary()
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(json.dumps(json_summary(summary, config)))
         return
     o = record.outcome
     dt = config.simulation.dt_s
@@ -66,11 +74,8 @@ def simulate(out, as_json, interactions, **run) -> None:
     where = ""
     if o.first_at_line:
         where = f" (after step {o.idx_end}, t = {(o.idx_end + 1) * dt:.1f} s)"
-    pa_hat_text = f", p_a_hat = {config.p_a_hat:g}" if config.av.kind == "persuasive" else ""
-    human = f"{config.hv.kind} HV" + (f" starting as {config.hv.role}"
-                                      if config.hv.kind in ("lfg", "stubborn", "noisy") else "")
-    click.echo(f"{config.av.kind} AV, {human}, p_a = {config.roles.p_a:g}{pa_hat_text}, "
-               f"{config.scenario.kind}, seed {record.seed}, {config.mode} mode")
+    click.echo(f"{_agents(config)}, {config.scenario.kind}, seed {record.seed}, "
+               f"{config.mode} mode{_ignored(config)}")
     s0, v0 = record.hv_initial_state
     click.echo(f"HV initial state: s = {s0:.3f} m, v = {v0:.3f} m/s")
     click.echo(f"first at the crossing line: {line}{where}; "
@@ -97,24 +102,21 @@ def _interactions(config, seed: int, as_json: bool) -> None:
     elapsed = time.perf_counter() - t0
     summaries = [r.summary() for r in records]
     if as_json:
-        out = dict(summaries[-1])
+        out = json_summary(summaries[-1], config)
         out["interactions"] = len(records)
         out["by_interaction"] = {name: [s[name] for s in summaries] for name in BY_INTERACTION
                                  if name in summaries[0]}
         click.echo(json.dumps(out))
         return
-    online = config.p_a_online and config.av.kind == "persuasive"
+    online = config.p_a_online and KIND_OPTIONS["pa_hat"].used_by(config)
+    start = None
     if online:
         import numpy as np
 
-        a, b = config.p_a_prior
         w = records[0].p_a_prior
         start = float(w @ np.linspace(0.0, 1.0, w.size) / w.sum())
-    click.echo(f"{config.av.kind} AV, {config.hv.kind} HV starting as {config.hv.role}, "
-               f"p_a = {config.roles.p_a:g}, "
-               + (f"p_a_hat online (prior Beta({a:g}, {b:g}) on {config.p_a_grid} points, "
-                  f"mean {start:.4f})" if online else f"p_a_hat = {config.p_a_hat:g}")
-               + f", seed {seed}, {len(records)} interactions, {config.mode} mode")
+    click.echo(f"{_agents(config, start)}, seed {seed}, {len(records)} interactions, "
+               f"{config.mode} mode{_ignored(config)}")
     for r, s in zip(records, summaries):
         o = r.outcome
         text = (f"interaction {r.interaction + 1}: first at the line: "
@@ -124,3 +126,50 @@ def _interactions(config, seed: int, as_json: bool) -> None:
             text += f"; p_a_hat at the end {s['pa_hat_final']:.4f}"
         click.echo(text)
     click.echo(f"time: {elapsed:.3f} s")
+
+
+def _agents(config, online_start: float | None = None) -> str:
+    """The summary's agents: the AV, the human with its initial role and ``p_a`` where it
+    has them, and the persuasive AV's estimate (an online one with its prior; its mean over
+    the prior's grid, ``online_start``, where known)."""
+    roles = KIND_OPTIONS["hv_role"]
+    av, human = f"{config.av.kind} AV", f"{config.hv.kind} HV"
+    if config.av.kind in roles.av_kinds:  # an LFG AV: its own role, else the human's other
+        other = ROLES[1 - ROLES.index(config.hv.role)]
+        av += f" starting as {config.av.role or other}"
+    if config.hv.kind in roles.hv_kinds:
+        human += f" starting as {config.hv.role}"
+    parts = [av, human]
+    if KIND_OPTIONS["pa"].used_by(config):
+        parts.append(f"p_a = {config.roles.p_a:g}")
+    if KIND_OPTIONS["pa_hat"].used_by(config):
+        if config.p_a_online:
+            a, b = config.p_a_prior
+            mean = "" if online_start is None else f", mean {online_start:.4f}"
+            parts.append(f"p_a_hat online (prior Beta({a:g}, {b:g}) on {config.p_a_grid} "
+                         f"points{mean})")
+        else:
+            parts.append(f"p_a_hat = {config.p_a_hat:g}")
+    return ", ".join(parts)
+
+
+def json_summary(summary: dict, config) -> dict:
+    """The run's summary as ``--json`` prints it: what no kind of the run reads (``pa``,
+    ``pa_hat``, ``hv_role``; :func:`~persuasive.cli._common.unread_options`) is ``null``
+    rather than a value that played no part, and ``ignored_fields`` (only when there are any)
+    names the fields a configuration set that the run ignores. Otherwise it is
+    :meth:`RunRecord.summary <persuasive.record.RunRecord.summary>` as it is."""
+    out = dict(summary)
+    for name in unread_options(config):
+        out[name] = None
+    ignored = ignored_fields(config)
+    if ignored:
+        out["ignored_fields"] = ignored
+    return out
+
+
+def _ignored(config) -> str:
+    """``"; ignored, as no kind here reads them: ..."``, naming the fields set (by --config or
+    --set) that no kind of the run reads, or nothing."""
+    fields = ignored_fields(config)
+    return f"; ignored, as no kind here reads them: {', '.join(fields)}" if fields else ""

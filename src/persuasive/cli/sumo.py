@@ -14,8 +14,10 @@ from pathlib import Path
 
 import click
 
+from .._files import check_replaceable_folder
 from ..config import AV_KIND_ALIASES, AV_KINDS
-from ._common import compile_notice
+from ..envs.sumo import MAX_EPISODES, SCENARIOS
+from ._common import Count, check_workers, compile_notice, progress_bar, workers_type
 
 
 def _num(value, digits: int = 2) -> str:
@@ -43,12 +45,12 @@ def summary_lines(report) -> list[str]:
 
 
 @click.command()
-@click.option("--scenario", type=click.Choice(["intersection", "merge"]),
+@click.option("--scenario", type=click.Choice(list(SCENARIOS)),
               default="intersection", show_default=True,
               help="intersection: cross a priority road; merge: a highway on-ramp.")
-@click.option("--episodes", type=int, default=10, show_default=True,
-              help="Episodes, seeds SEED .. SEED + EPISODES - 1.")
-@click.option("--seed", type=int, default=1, show_default=True,
+@click.option("--episodes", type=Count(1, MAX_EPISODES), default=10, show_default=True,
+              help=f"Episodes, seeds SEED .. SEED + EPISODES - 1, at most {MAX_EPISODES}.")
+@click.option("--seed", type=Count(0, 2**31 - 2), default=1, show_default=True,
               help="Seed of the first episode (SUMO's --seed, the traffic's and the planner's).")
 @click.option("--planner", type=click.Choice([*AV_KINDS, *AV_KIND_ALIASES]),
               default="persuasive", show_default=True, help="The AV planner (corrected mode).")
@@ -60,37 +62,42 @@ def summary_lines(report) -> list[str]:
 @click.option("--ignore-foes", type=float, default=0.0, show_default=True,
               help="Fraction of SUMO's vehicles that never yield (jmIgnoreFoeProb, "
                    "jmIgnoreJunctionFoeProb = 1), in [0, 1].")
-@click.option("--workers", type=int, default=None,
+@click.option("--workers", type=workers_type(), default=None,
               help="Worker processes, one SUMO each [all cores].")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--out", type=click.Path(file_okay=False), default=None,
-              help="Write episodes, per-step logs and the summary into this folder.")
+              help="Write episodes, per-step logs and the summary into this folder (a new or "
+                   "empty one, or one to replace with --force).")
+@click.option("--force", is_flag=True, help="Replace an --out folder that holds other files.")
 @click.option("--video", type=click.Path(dir_okay=False), default=None,
               help="Draw the planner's first episode as .mp4 or .gif (the folder must exist).")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
 def sumo(scenario, episodes, seed, planner, shields, flow, ignore_foes, workers, as_json, out,
-         video) -> None:
+         force, video, quiet) -> None:
     """Drive an ego vehicle in Eclipse SUMO with the planner, against SUMO's own traffic,
     beside SUMO's own driver as the ego on the same seeds."""
     import shutil
 
-    from .._files import check_output_folder
     from ..envs import sumo as S
     from ..plots.files import check_animation_path
 
     shield_list = tuple(s.strip() for s in shields.split(",") if s.strip())
     S.check_study(scenario, episodes, seed, flow, ignore_foes, planner, shield_list, workers)
     if out:
-        check_output_folder(out)
+        check_replaceable_folder(out, force)
     if video:
         check_animation_path(video)
     S.sumo_binaries()  # the extra, before any work
-    if workers is not None:
-        from ._common import check_workers
-
-        workers = check_workers(workers, episodes)
-    compile_notice()
-    report, outputs, folder = S.run_study(scenario, episodes, seed, flow, ignore_foes, planner,
-                                          shield_list, workers, logs=bool(out or video))
+    workers = check_workers(workers, episodes)
+    compile_notice(*S.planner_kernels())
+    progress = progress_bar(quiet, unit="seed")
+    try:
+        report, outputs, folder = S.run_study(scenario, episodes, seed, flow, ignore_foes,
+                                              planner, shield_list, workers,
+                                              logs=bool(out or video), progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
     try:
         if video:
             _video(report, outputs, folder, video)
@@ -103,9 +110,12 @@ def sumo(scenario, episodes, seed, planner, shields, flow, ignore_foes, workers,
         data.update({"out": out, "video": video})
         click.echo(json.dumps(data))
         return
-    click.echo(f"SUMO {scenario}: {len(report.seeds)} episodes (seeds {report.seeds[0]}.."
-               f"{report.seeds[-1]}), {flow:g} veh/h per conflicting route, "
-               f"{ignore_foes:g} ignoring foes; {report.workers} workers, "
+    n = len(report.seeds)
+    seeds = f"seed {report.seeds[0]}" if n == 1 else f"seeds {report.seeds[0]}..{report.seeds[-1]}"
+    click.echo(f"SUMO {scenario}: {n} episode{'s' if n != 1 else ''} ({seeds}), "
+               f"{flow:g} veh/h per conflicting route, "
+               f"{ignore_foes:g} ignoring foes; {report.workers} "
+               f"worker{'s' if report.workers != 1 else ''}, "
                f"{report.wall_time_s:.1f} s")
     for line in summary_lines(report):
         click.echo(line)

@@ -9,7 +9,12 @@ from typing import Any
 
 import click
 
-from ._common import check_workers, compile_notice, progress_bar, shield_option
+from ._common import (Count, check_workers, compile_notice, progress_bar, shield_option,
+                      workers_type)
+
+#: Most runs in one chunk: a chunk's rows are held in one worker's memory until its part is
+#: written (the default is at most 250).
+MAX_CHUNK = 100_000
 
 _GRID_HELP = """Run every run of a grid of configurations times seeds, on Dask.
 
@@ -39,13 +44,13 @@ def _default_out(grid_path: str, digest: str) -> Path:
 @click.argument("grid_file", metavar="GRID.toml", type=click.Path(dir_okay=False))
 @click.option("--out", type=click.Path(file_okay=False), default=None,
               help="Sweep folder [results/sweep-<grid name>-<grid hash>/].")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
+@click.option("--workers", type=workers_type(), default=None,
               help="Worker processes of the local Dask cluster [all cores; never more than "
                    "the chunks to run]. Not with --scheduler.")
 @click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
               help="Use a running Dask scheduler (dask scheduler / dask worker) instead of "
                    "a local cluster.")
-@click.option("--chunk", type=click.IntRange(min=1), default=None,
+@click.option("--chunk", type=Count(1, MAX_CHUNK), default=None,
               help="Runs per chunk, one Parquet part each [about 32 chunks of 1 to 250 "
                    "runs; when resuming, the folder's].")
 @click.option("--force", is_flag=True,

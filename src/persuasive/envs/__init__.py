@@ -2,9 +2,10 @@
 
 - :mod:`~persuasive.envs.conflict`: :class:`ConflictEnv`, one vehicle driven by the agent,
   the other by the package's planner or a human model, over the closed loop of
-  :class:`persuasive.world.PythonWorld`. One id per scenario (:data:`ENV_IDS`):
+  :class:`persuasive.world.PythonWorld`. One id per scenario of the registry
+  (:data:`persuasive.scenarios.SCENARIOS`; :data:`ENV_IDS`), its kind in CamelCase:
   ``persuasive/Intersection-v0``, ``persuasive/Crossing-v0``, ``persuasive/LeftTurn-v0``,
-  ``persuasive/Merge-v0``.
+  ``persuasive/Merge-v0``; a new scenario gets its id with no edit here.
 - :mod:`~persuasive.envs.highway`: the planner driving highway-env's ego at its intersection,
   against highway-env's own traffic (``persuasive highway``).
 
@@ -14,19 +15,22 @@ when this module is imported, so with gymnasium >= 1.0, which no longer reads en
 either ``import persuasive.envs`` first or name the module in the id:
 ``gymnasium.make("persuasive.envs:persuasive/Intersection-v0")``.
 
-Needs the ``gym`` extra (``pip install 'persuasive[gym]'``) and, for highway-env, the
+Needs the ``gym`` extra (``pip install -e '.[gym]'`` in the checkout) and, for highway-env, the
 ``highway`` extra.
 """
 
 from __future__ import annotations
 
-#: The registered ids, by scenario kind (``[scenario] kind``).
-ENV_IDS = {
-    "intersection": "persuasive/Intersection-v0",
-    "crossing": "persuasive/Crossing-v0",
-    "left-turn": "persuasive/LeftTurn-v0",
-    "merge": "persuasive/Merge-v0",
-}
+from ..scenarios import SCENARIOS
+
+
+def env_id(scenario: str) -> str:
+    """The gymnasium id of a scenario kind: ``"left-turn"`` -> ``"persuasive/LeftTurn-v0"``."""
+    return "persuasive/" + "".join(part.capitalize() for part in scenario.split("-")) + "-v0"
+
+
+#: The registered ids, by scenario kind (``[scenario] kind``), in the registry's order.
+ENV_IDS = {scenario: env_id(scenario) for scenario in SCENARIOS}
 
 #: Where the environment class lives (gymnasium imports it when an id is first made).
 ENTRY_POINT = "persuasive.envs.conflict:ConflictEnv"
@@ -54,4 +58,4 @@ try:
 except ImportError:  # gymnasium is not installed: nothing to register with
     pass
 
-__all__ = ["ENV_IDS", "ConflictEnv", "register_envs"]
+__all__ = ["ENV_IDS", "ConflictEnv", "env_id", "register_envs"]

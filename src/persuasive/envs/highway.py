@@ -114,8 +114,8 @@ def _import_highway_env():
     try:
         import highway_env  # noqa: F401
     except ImportError:
-        raise ConfigError("persuasive highway needs highway-env: pip install "
-                          "'persuasive[highway]'") from None
+        raise ConfigError("persuasive highway needs highway-env: pip install -e '.[highway]' "
+                          "in the persuasive checkout") from None
     return highway_env
 
 

@@ -194,7 +194,7 @@ def spawn_tied(args: Sequence[str], **kwargs: Any) -> subprocess.Popen:
 def sumo_binaries() -> dict[str, str]:
     """Paths of the ``eclipse-sumo`` wheel's ``netconvert``, checked with libsumo's presence;
     :class:`ConfigError` (one line) when the ``sumo`` extra is missing."""
-    hint = "pip install 'persuasive[sumo]'"
+    hint = "pip install -e '.[sumo]' in the persuasive checkout"
     try:
         import sumo  # the eclipse-sumo wheel
         home = Path(sumo.SUMO_HOME)

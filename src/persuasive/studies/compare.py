@@ -80,16 +80,42 @@ def parse_kinds(text: str | Sequence[str] | None, allowed: Sequence[str], name: 
     return tuple(out)
 
 
+def check_size(seeds: Any, n_pairs: int, interactions: int = 1, name: str = "seeds") -> int:
+    """``seeds`` (seeds ``1..seeds`` for each of ``n_pairs`` pairs, each seed ``interactions``
+    runs with one human), or :class:`ConfigError` naming ``name`` and its allowed range: an
+    integer in ``[1, 2^32 - 1]`` giving at most ``persuasive.experiments.MAX_RUNS`` runs in
+    all, every interaction counted (they are summarised in memory). Pairs: AV kinds x human
+    kinds x shield settings."""
+    from ..experiments import MAX_RUNS, check_seeds
+
+    check_seeds(seeds, 0, name)  # no rows: only the integer range; the cap follows
+    n_pairs = max(1, n_pairs)
+    if seeds * n_pairs * interactions > MAX_RUNS:
+        most = MAX_RUNS // (n_pairs * interactions)
+        rows = f"{n_pairs} pairs" + (f" x {interactions} interactions" if interactions > 1
+                                     else "")
+        counted = ", every interaction counted" if interactions > 1 else ""
+        raise ConfigError(f"{name} = {seeds} is out of range; allowed: "
+                          f"{f'1..{most}' if most >= 1 else 'none'} for {rows} (at most "
+                          f"{MAX_RUNS} runs{counted}, summarised in memory; 'persuasive "
+                          "sweep' streams more to disk)")
+    return seeds
+
+
+def n_interactions(config: Config) -> int:
+    """The runs each seed of a pair makes (``simulation.interactions``, unset: 1)."""
+    return config.simulation.interactions or 1
+
+
 def comparison_grid(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str],
                     seeds: int, shields: Sequence[str] | None = None):
     """The sweep grid of a comparison: ``av.kind`` x ``av.shield`` (when ``shields`` is given)
-    x ``hv.kind`` x seeds ``1..seeds``, at most ``persuasive.experiments.MAX_RUNS`` runs (they
-    are summarised in memory)."""
-    from ..experiments import check_seeds
+    x ``hv.kind`` x seeds ``1..seeds``, at most ``persuasive.experiments.MAX_RUNS`` runs, the
+    repeated interactions of ``base`` counted (:func:`check_size`)."""
     from ..sweep import Grid
 
-    check_seeds(seeds, max(1, len(av_kinds) * len(hv_kinds) * len(shields or (None,))),
-                rows="pairs")
+    check_size(seeds, len(av_kinds) * len(hv_kinds) * len(shields or (None,)),
+               n_interactions(base))
     av_axes: dict[str, Any] = {"kind": list(av_kinds)}
     if shields:
         av_axes["shield"] = list(shields)
@@ -134,12 +160,20 @@ def run_comparison(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str
                    shields: Sequence[str] | None = None) -> Comparison:
     """Run and summarise a comparison (see the module docstring); returns a
     :class:`Comparison`. ``out`` defaults to ``results/compare-<grid digest>``; ``shields``:
-    the shield settings to compare (default: the base configuration's only)."""
+    the shield settings to compare (default: the base configuration's only). ``progress``
+    counts runs, every repeated interaction one: ``progress(done_runs, total_runs)``."""
     from .. import sweep
 
     base = comparison_base(base)
     grid = comparison_grid(base, av_kinds, hv_kinds, seeds, shields)
     folder = Path(out) if out is not None else Path("results") / f"compare-{grid.digest[:10]}"
+    k = n_interactions(base)
+    if progress is not None and k > 1:  # a grid row is one seed's k interactions
+        rows_progress = progress
+
+        def progress(done: int, total: int) -> None:
+            rows_progress(done * k, total * k)
+
     result = sweep.run(grid, folder, workers=workers, force=force, progress=progress,
                        what="comparison folder")
     runs = sweep.load(folder)
@@ -508,6 +542,6 @@ def load_summary(folder: str | Path) -> dict[str, Any]:
     return data
 
 
-__all__ = ["AV_KINDS", "Comparison", "DEFAULT_HV_KINDS", "JSON_KEYS", "comparison_grid",
-           "json_rows", "load_summary", "parse_kinds", "run_comparison", "summarize",
-           "to_markdown"]
+__all__ = ["AV_KINDS", "Comparison", "DEFAULT_HV_KINDS", "JSON_KEYS", "check_size",
+           "comparison_grid", "json_rows", "load_summary", "n_interactions", "parse_kinds",
+           "run_comparison", "summarize", "to_markdown"]

@@ -248,9 +248,14 @@ class Grid:
                 normal.append(value)
         kinds = {type(v) for v in normal}
         if len(kinds) > 1:
+            # an axis is one column of one type (the sweep's dataset, the plots' axes); values
+            # of different types, e.g. "online" beside 0.9 for mpc.p_a_hat, are cases
             names = " and ".join(sorted(_TYPE_NAMES.get(k, k.__name__) for k in kinds))
+            cases = " ".join(f"[[cases]] {json.dumps(name)} = {_show(v)}" for v in values[:4])
+            cases += " ..." if len(values) > 4 else ""
             raise ConfigError(f"grid: axes.{name} mixes value types ({names}); give values "
-                              "of one type")
+                              f"of one type, or run each value as a case of its own: {cases} "
+                              f"(and no axes.{name})")
         for i, value in enumerate(normal):
             if value in normal[:i]:
                 raise ConfigError(f"grid: axes.{name} holds {_show(values[i])} twice; "

@@ -12,7 +12,7 @@ AV's planner decides as in ``persuasive simulate``; the server is the clock (one
 - :mod:`.server`: the Starlette app (routes, token, origin and host rules) and running it;
 - ``static/``: the page (``index.html``, ``drive.js``, ``drive.css``), package data.
 
-The server needs the ``web`` extra (``pip install 'persuasive[web]'``: Starlette, uvicorn,
+The server needs the ``web`` extra (``pip install -e '.[web]'`` in the checkout: Starlette, uvicorn,
 websockets); the study module does not.
 """
 
