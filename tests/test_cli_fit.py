@@ -4,14 +4,18 @@ files, per participant, and bad input in one line with exit status 2, nothing wr
 from __future__ import annotations
 
 import json
+import math
+import os
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from persuasive import Config, simulate
 from persuasive.cli import main
-from persuasive.fitting import load_fitted_run
+from persuasive.config import ConfigError
+from persuasive.fitting import load_fitted_run, load_logs
 
 
 def run(capsys, *args):
@@ -187,3 +191,127 @@ def test_a_fit_is_deterministic(capsys, logs):
         payload.pop("seconds")
         reports.append(payload)
     assert reports[0] == reports[1]
+
+
+# -- issue 23: --sigma-min's range, intervals within their bounds, each run once, participants --
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "1e308", "1e-320", "1e200", "0", "-1",
+                                   "1e-10", "1.5"])
+def test_sigma_min_outside_its_range_is_one_line_exit_2(capsys, tmp_path, logs, value):
+    out_file = tmp_path / "fit.json"
+    code, out, err = run(capsys, "fit", logs[0], "--sigma-min", value, "--out", str(out_file))
+    assert code == 2 and out == "" and not out_file.exists()
+    assert err.startswith("error: --sigma-min = ") and err.count("\n") == 1, err
+    assert "allowed: [1e-09, 1] m/s^2" in err and "Traceback" not in err
+
+
+def test_sigma_min_at_the_ends_of_its_range_fits(capsys, logs):
+    code, out, _ = run(capsys, "fit", "--help")
+    assert code == 0 and "[1e-9, 1] m/s^2" in " ".join(out.split())
+    for value in ("1e-9", "1"):
+        code, out, err = run(capsys, "fit", *logs[:2], "--sigma-min", value, "--model", "lfg",
+                             "--json")
+        assert code == 0 and err == ""
+        fit = json.loads(out)["models"]["lfg"]
+        assert math.isfinite(fit["loglik"])
+        for e in fit["params"].values():
+            assert e["ci95"][0] <= e["estimate"] <= e["ci95"][1]
+        assert fit["params"]["sigma"]["ci95"][0] == float(value)
+
+
+def test_a_log_given_twice_is_refused(capsys, tmp_path, logs, monkeypatch):
+    src = Path(logs[0])
+    link = tmp_path / "link.parquet"
+    link.symlink_to(src)
+    hard = tmp_path / "hard.parquet"
+    os.link(src, hard)
+    monkeypatch.chdir(src.parent)
+    cases = [[logs[0], logs[0]], [src.name, f"./{src.name}"], [logs[0], logs[1], str(link)],
+             [str(hard), logs[0]], [f"../{src.parent.name}/{src.name}", logs[0]]]
+    out_file = tmp_path / "fit.json"
+    for args in cases:
+        code, out, err = run(capsys, "fit", *args, "--out", str(out_file))
+        assert code == 2 and out == "" and not out_file.exists(), args
+        assert err.startswith("error: log file ") and err.count("\n") == 1, err
+        assert "is the same file as" in err and "Traceback" not in err
+    with pytest.raises(ConfigError, match="is the same file as"):
+        load_logs([str(link), logs[0]])
+    assert len(load_logs(logs[:2])) == 2
+
+
+@pytest.fixture(scope="module")
+def trials(tmp_path_factory):
+    """Two participants' two trials each, saved as the drive page saves them."""
+    return _drive_trials(tmp_path_factory.mktemp("trials"))
+
+
+def _copy(src, dst, drop_trial: bool = False) -> str:
+    """``src`` under another name; ``drop_trial``: without the trial record, as trials were
+    saved before they stored their participant."""
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(src)
+    if drop_trial:
+        meta = dict(table.schema.metadata)
+        record = json.loads(meta[b"persuasive.run"])
+        del record["trial"]
+        meta[b"persuasive.run"] = json.dumps(record).encode()
+        table = table.replace_schema_metadata(meta)
+    pq.write_table(table, dst)
+    return str(dst)
+
+
+def test_a_trial_is_its_participants_whatever_its_file_is_called(capsys, tmp_path, trials):
+    import pyarrow.parquet as pq
+
+    p01a, p01b, p02a, p02b = trials
+    record = json.loads(pq.read_schema(p01a).metadata[b"persuasive.run"])
+    assert record["trial"] == {"participant": "P01", "session": "P01", "index": 1,
+                               "condition": Path(p01a).stem.split("-t01-")[1],
+                               "practice": False, "complete": True}
+    files = [_copy(p01a, tmp_path / "P02-t07-renamed.parquet"),  # P01's, named as P02's
+             _copy(p01b, tmp_path / "P01-t02-x.parquet"),
+             _copy(p02a, tmp_path / "session-a.parquet"),  # no trial name at all
+             _copy(p02b, tmp_path / "P03-t02-old.parquet", drop_trial=True)]  # old: its name
+    code, out, err = run(capsys, "fit", *files, "--per-participant", "--model", "stubborn",
+                         "--intervals", "none", "--json")
+    assert code == 0 and err == ""
+    groups = {g["participant"]: sorted(r["source"] for r in g["run_details"])
+              for g in json.loads(out)["groups"]}
+    assert groups == {"P01": sorted(files[:2]), "P02": [files[2]], "P03": [files[3]]}
+    # an old trial without a trial name has no participant at all
+    old = _copy(p02b, tmp_path / "old.parquet", drop_trial=True)
+    code, _, err = run(capsys, "fit", old, "--per-participant")
+    assert code == 2 and "is not a drive trial" in err and err.count("\n") == 1
+
+
+def test_every_interval_lies_within_its_parameters_range(capsys, trials):
+    from persuasive.fitting.estimate import BETA_MIN, SIGMA_MAX
+    from persuasive.fitting.idm import FITTED
+
+    code, out, err = run(capsys, "fit", *trials, "--json")
+    assert code == 0 and err == ""
+    payload = json.loads(out)
+    ranges = {"p_a": (0.0, 1.0), "pi0": (0.0, 1.0), "beta": (BETA_MIN, math.inf),
+              **{name: (lo, hi) for name, lo, hi, _ in FITTED}}
+    on_bound = 0
+    for model, fit in payload["models"].items():
+        # the IDM's sigma is in closed form, without the role models' upper bound
+        ranges["sigma"] = (payload["sigma_min"], math.inf if model == "idm" else SIGMA_MAX)
+        for name, e in fit["params"].items():
+            if e["method"] == "fixed":
+                continue
+            lo, hi = ranges[name]
+            value, low, high = (math.inf if x == "inf" else x
+                                for x in (e["estimate"], *e["ci95"]))
+            assert lo <= low <= value <= high <= hi, (model, name, e)
+            # an estimate on a bound says so, and the bound is its interval's end
+            side = "lower" if value == lo else "upper" if value == hi else None
+            if side is None:
+                assert "on the" not in e["method"], (model, name, e)
+            else:
+                on_bound += 1
+                assert e["method"].endswith(f"one-sided: on the {side} bound"), (model, name)
+                assert (low if side == "lower" else high) == value
+    assert on_bound >= 5  # these keyboard trials put several estimates on their bounds

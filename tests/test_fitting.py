@@ -16,12 +16,16 @@ import math
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from persuasive import Config, simulate
 from persuasive.config import ConfigError
 from persuasive.fitting import (evidence_of, fit_models, load_fitted_run, load_logs,
                                 read_log, write_fit_parquet)
-from persuasive.fitting.estimate import SIGMA_MIN, fit_role_model
+from persuasive.fitting.estimate import (DROP_ONE_SIDED, SIGMA_MAX, SIGMA_MIN, SIGMA_MIN_RANGE,
+                                         bound_side, check_sigma_min, fit_role_model,
+                                         profile_interval)
+from persuasive.fitting.idm import fit_idm
 from persuasive.fitting.evidence import Evidence, run_log_of
 from persuasive.fitting.filter import (filter_loglik, filter_posterior, filter_start,
                                        filter_step, role_transition, smooth_roles)
@@ -295,13 +299,15 @@ def test_p_a_of_a_reluctant_human_is_recovered_and_p_a_1_excluded():
     assert e.method == "profile"
     assert fit.exact and fit.theta["sigma"] == pytest.approx(SIGMA_MIN)
     assert any("exact data" in note for note in fit.notes)
-    assert fit.params["pi0"].value == 1.0 and fit.params["pi0"].method.endswith("one-sided")
+    assert fit.params["pi0"].value == 1.0 and fit.params["pi0"].high == 1.0
+    assert fit.params["pi0"].method == "profile, one-sided: on the upper bound"
 
 
 def test_a_willing_human_gets_a_one_sided_interval_at_p_a_1():
     _, ev = dataset(p_a=1.0, role="leader", runs=20)
     e = fit_role_model(ev, "lfg").params["p_a"]
-    assert e.value == 1.0 and e.high == 1.0 and e.method == "profile, one-sided"
+    assert e.value == 1.0 and e.high == 1.0
+    assert e.method == "profile, one-sided: on the upper bound"
     assert 0.6 < e.low < 1.0
 
 
@@ -435,3 +441,128 @@ def test_bad_logs_are_refused_in_one_line_naming_the_file(tmp_path):
         load_logs([str(good)], scenario="merge")
     with pytest.raises(ConfigError, match="no log"):
         load_logs([])
+
+
+# -- sigma_min and the intervals' bounds (issue 23) -----------------------------------------------
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf, 1e308, 1e200, 1.5, 1e-320,
+                                   1e-10, 0.0, -1e-3, True, "0.1", None])
+def test_sigma_min_outside_its_range_is_refused_by_every_fit(value):
+    _, ev = dataset(p_a=0.3, role="leader", runs=2)
+    calls = [lambda: check_sigma_min(value), lambda: fit_models(ev, ["lfg"], value),
+             lambda: fit_role_model(ev, "lfg", value), lambda: fit_idm(ev, value),
+             lambda: fit_models(ev, ["idm"], value, intervals=False)]
+    for call in calls:
+        with pytest.raises(ConfigError) as info:
+            call()
+        text = str(info.value)
+        assert text.startswith("sigma_min = ") and "allowed: [1e-09, 1] m/s^2" in text
+        assert "\n" not in text
+
+
+def test_sigma_min_at_the_ends_of_its_range():
+    assert check_sigma_min(1e-9) == 1e-9 and check_sigma_min(1) == 1.0
+    assert SIGMA_MIN_RANGE == (1e-9, 1.0)
+    # exact data (no noise): every role model that reproduces them gains exactly
+    # n log(1e-3 / 1e-9) from the lower floor, the shared constant of docs/method.md §13.4
+    _, ev = dataset(p_a=0.3, role="leader", runs=20)
+    at = {s: fit_role_model(ev, "lfg", s, intervals=False) for s in (SIGMA_MIN, 1e-9)}
+    assert all(f.exact and math.isfinite(f.loglik) for f in at.values())
+    assert at[1e-9].loglik - at[SIGMA_MIN].loglik == pytest.approx(
+        ev.n_steps * math.log(1e6), rel=1e-9)
+    assert at[1e-9].theta["p_a"] == pytest.approx(at[SIGMA_MIN].theta["p_a"], abs=1e-6)
+    # the top of the range: sigma keeps room below its own bound, and its interval runs forwards
+    fit = fit_role_model(ev, "lfg", 1.0)
+    s = fit.params["sigma"]
+    assert 1.0 <= s.low <= s.value <= s.high <= SIGMA_MAX
+
+
+def _quadratic(x0: float, scale: float, ell_hat: float):
+    """A profile log-likelihood with its maximum ell_hat at x0 and curvature 1 / scale^2."""
+    return lambda x: ell_hat - 0.5 * ((np.asarray(x) - x0) / scale) ** 2
+
+
+@pytest.mark.parametrize("x0,bound_side_", [(1.0, "upper"), (0.0, "lower")])
+def test_an_estimate_on_a_bound_gets_the_boundary_corrected_cutoff(x0, bound_side_):
+    # profile quadratic: the limit where 2 (ell_hat - prof) = c is x0 -+ scale sqrt(c), and
+    # the interpolation in the signed root is exact for it
+    scale, ell_hat = 0.1, -50.0
+    low, high, one = profile_interval(_quadratic(x0, scale, ell_hat), x0, ell_hat, 0.0, 1.0,
+                                      width=1.96 * scale)
+    assert one and bound_side(x0, 0.0, 1.0) == bound_side_
+    c271, c384 = chi2.ppf(0.90, 1), chi2.ppf(0.95, 1)
+    assert 2 * DROP_ONE_SIDED == pytest.approx(c271, rel=1e-12)  # 1/2 chi2(0) + 1/2 chi2(1)
+    if bound_side_ == "upper":
+        assert high == 1.0 and low == pytest.approx(1.0 - scale * math.sqrt(c271), abs=1e-9)
+        assert abs(low - (1.0 - scale * math.sqrt(c384))) > 0.01  # not the two-sided cutoff
+    else:
+        assert low == 0.0 and high == pytest.approx(scale * math.sqrt(c271), abs=1e-9)
+
+
+def test_an_interior_estimate_gets_the_two_sided_cutoff_and_stops_at_the_bounds():
+    ell_hat = 10.0
+    low, high, one = profile_interval(_quadratic(0.5, 0.1, ell_hat), 0.5, ell_hat, 0.0, 1.0,
+                                      width=0.196)
+    z = math.sqrt(chi2.ppf(0.95, 1))
+    assert not one and low == pytest.approx(0.5 - 0.1 * z, abs=1e-9)
+    assert high == pytest.approx(0.5 + 0.1 * z, abs=1e-9)
+    # near a bound the profile is searched up to it, never past it: a limit not reached before
+    # the bound is the bound (whatever the quadratic approximation's width says)
+    for width in (0.196, 5.0, None):
+        low, high, one = profile_interval(_quadratic(0.9, 0.1, ell_hat), 0.9, ell_hat, 0.0, 1.0,
+                                          width=width)
+        assert not one and high == 1.0 and low == pytest.approx(0.9 - 0.1 * z, abs=1e-9)
+
+
+@functools.lru_cache(maxsize=None)
+def _fast_idm_human():
+    """An IDM human whose desired speed (45 m/s) is above the fit's bound (30 m/s), on a road
+    where it reaches 20 m/s: the IDM's fit ends on the bound."""
+    cs = [Config(mode="corrected").with_overrides({
+        "hv.kind": "idm", "hv.idm.desired_speed_mps": 45.0, "hv.vehicle.v_max_mps": 20.0,
+        "simulation.accel_noise_mps2": 0.05, "mpc.p_a_hat": 1.0, "av.kind": av})
+        for av in ("persuasive", "passive")]
+    records = [simulate(cs[j % 2], 1 + j) for j in range(8)]
+    return evidence_of([run_log_of(r, f"run{j}") for j, r in enumerate(records)])
+
+
+def test_an_idm_estimate_on_its_bound_gets_a_profile_interval_inside_the_range():
+    from scipy.optimize import brentq, minimize
+
+    from persuasive.fitting.idm import FITTED, IDMObjective
+    from persuasive.fitting.models import IDM_NAMES
+
+    ev = _fast_idm_human()
+    fit = fit_idm(ev)
+    e = fit.params["desired_speed_mps"]
+    assert e.value == 30.0 and e.high == 30.0
+    assert e.method == "profile, one-sided: on the upper bound"
+    # the hand-computed profile: at each desired speed, Nelder-Mead over the other three
+    # smooth parameters (log scale), the gap parameters held as the fit holds them
+    p = ev.runs[0].config.hv.idm
+    obj = IDMObjective(ev, np.array([getattr(p, n) for n in IDM_NAMES], float), SIGMA_MIN)
+    y_hat = np.array([math.log(fit.theta[n]) if log else fit.theta[n]
+                      for n, _, _, log in FITTED])
+
+    def drop2(v0):
+        def neg(z):
+            y = y_hat.copy()
+            y[0], y[1:4] = math.log(v0), z
+            return -obj.loglik(y[None])[0]
+        res = minimize(neg, y_hat[1:4], method="Nelder-Mead",
+                       options={"xatol": 1e-6, "fatol": 1e-9, "maxfev": 800})
+        return 2.0 * (fit.loglik + res.fun)
+
+    c271 = brentq(lambda v: drop2(v) - chi2.ppf(0.90, 1), 15.0, 30.0, xtol=1e-3)
+    c384 = brentq(lambda v: drop2(v) - chi2.ppf(0.95, 1), 15.0, 30.0, xtol=1e-3)
+    assert c384 < c271 - 0.3  # the two cutoffs are told apart
+    # 0.1 %: the fit maximises each profile point by 8 Newton steps, the hand one by
+    # Nelder-Mead (they agree to 3e-5 here; the two cutoffs' limits differ by 2.6 %)
+    assert e.low == pytest.approx(c271, rel=1e-3)
+    # every interval within its parameter's range, and the gap scans reach the bounds
+    for name, lo, hi, _ in FITTED:
+        est = fit.params[name]
+        assert lo <= est.low <= est.value <= est.high <= hi, name
+    imp = fit.params["impatience_per_s"]
+    assert (imp.low, imp.high) == (0.0, 2.0) and "whole range" in imp.note

@@ -408,6 +408,61 @@ def test_closing_the_browser_mid_trial_keeps_a_partial_trial(server, browser):
     assert (frame["hv_accel_mps2"] == -1.0).all()  # half of u_min = -2 m/s^2
 
 
+# -- 4b. who drove a trial: stored in it --------------------------------------------------------
+
+
+def test_each_trial_stores_its_participant_so_a_renamed_trial_stays_theirs(tmp_path):
+    """Two sessions of one participant ID (the second one's files are ``P05-2-...``), run
+    through the session's own protocol: each trial's metadata names the participant and the
+    session, and ``persuasive fit`` reads the participant from there, not from the name."""
+    import asyncio
+    import shutil
+    import tomllib
+    from concurrent.futures import ThreadPoolExecutor
+
+    import pyarrow.parquet as pq
+
+    from persuasive.fitting import read_log
+    from persuasive.record import RECORD_METADATA
+    from persuasive.web.session import Hub, Session
+
+    data = tomllib.loads(STUDY_TOML)
+    data["base"]["simulation"]["n_steps"] = 3  # 0.3 s a trial
+    hub = Hub(study_from_dict(data), tmp_path)
+
+    async def session(participant: str) -> Session:
+        async def send(text: str) -> None:
+            pass
+
+        s = Session(hub, send)
+        s.start()
+        s.receive(json.dumps({"type": "begin", "participant": participant, "consent": True}))
+        s.receive(json.dumps({"type": "start"}))
+        await s.trial_task
+        await s.close()
+        return s
+
+    async def both():
+        return [await session("P05"), await session("P05")]
+
+    # a thread of its own: the browser tests leave Playwright's event loop running in this one
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        first, second = pool.submit(asyncio.run, both()).result()
+    assert (first.stem, second.stem) == ("P05", "P05-2")
+    for s in (first, second):
+        name = s.entries[0]["file"]
+        assert name.startswith(f"{s.stem}-t00-")
+        record = json.loads(pq.read_schema(tmp_path / name).metadata[RECORD_METADATA])
+        assert record["trial"] == {"participant": "P05", "session": s.stem, "index": 0,
+                                   "condition": s.entries[0]["condition"],
+                                   "practice": False, "complete": True}
+        # renamed as someone else's trial, or to no trial name at all: still P05's
+        for other in ("Q99-t01-renamed.parquet", "anything.parquet"):
+            shutil.copy(tmp_path / name, tmp_path / other)
+            assert read_log(tmp_path / other).participant == "P05"
+        assert read_log(tmp_path / name).participant == "P05"  # its name says "P05-2"
+
+
 # -- 5. counterbalancing and the study file ------------------------------------------------------
 
 

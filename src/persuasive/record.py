@@ -170,10 +170,14 @@ class RunRecord:
 
         return pd.DataFrame(self.log)
 
-    def save(self, path) -> None:
+    def save(self, path, extra: dict[str, Any] | None = None) -> None:
         """Write the per-step log as Parquet, atomically, with what :func:`load_record` needs
         to rebuild the record in the file's metadata: the configuration (TOML), the seed, the
-        random-stream layout, the last state and the package version."""
+        random-stream layout, the last state and the package version.
+
+        ``extra``: more JSON fields stored beside those (a ``drive`` trial stores ``trial``:
+        its participant, session, index and condition, which ``persuasive fit`` reads); they
+        may not replace the record's own (ValueError)."""
         import json
 
         import pyarrow as pa
@@ -185,6 +189,10 @@ class RunRecord:
         meta = {"config_toml": self.config.to_toml(), "seed": self.seed,
                 "streams": self.streams, "final_state": [float(x) for x in self.states[-1]],
                 "version": self.version}
+        clash = sorted(set(extra or {}) & set(meta))
+        if clash:
+            raise ValueError(f"extra metadata may not replace the record's own: {clash}")
+        meta.update(extra or {})
         table = table.replace_schema_metadata({**(table.schema.metadata or {}),
                                                RECORD_METADATA: json.dumps(meta)})
         atomic_write(path, lambda p: pq.write_table(table, p))

@@ -6,7 +6,9 @@ likelihood (one parameter set for all runs, or one per participant), prints the 
 95 % intervals and the comparison (log-likelihood, AIC, BIC), and optionally writes the report
 (``.json``) or the runs with the human's smoothed role per step (``.parquet``, drawn by
 ``persuasive plot profile --from FILE --run K``). Every input is checked before anything is
-written; a bad log ends the command with one line naming it and exit status 2.
+written; a bad log, a log given twice (also as another spelling of its path or a link) or a
+``--sigma-min`` outside [1e-9, 1] m/s^2 ends the command with one line naming it and exit
+status 2.
 """
 
 from __future__ import annotations
@@ -53,6 +55,9 @@ def _print_report(report, header: str) -> None:
         fit = report.fits[r["model"]]
         click.echo(f"{fit.model}: " + "; ".join(_estimate_text(k, v)
                                                 for k, v in fit.params.items()))
+        for k, v in fit.params.items():
+            if v.note:
+                click.echo(f"  note: {k}: {v.note}")
         for note in fit.notes:
             click.echo(f"  note: {note}")
     if report.role_model is not None:
@@ -109,12 +114,14 @@ def _notice_compile() -> None:
     import os
 
     from ._common import compile_notice
+    from ..fitting.evidence import human_views
     from ..fitting.models import hmm_loglik
 
+    # the fit's kernels live in two files; an edit to either recompiles that file's
     try:
-        index = hmm_loglik._cache._cache_file._index_path  # numba's cache layout
-        source = hmm_loglik.py_func.__code__.co_filename
-        cached = os.path.getmtime(index) >= os.path.getmtime(source)
+        cached = all(os.path.getmtime(k._cache._cache_file._index_path)  # numba's layout
+                     >= os.path.getmtime(k.py_func.__code__.co_filename)
+                     for k in (hmm_loglik, human_views))
     except (AttributeError, OSError):
         cached = False
     if cached:
@@ -135,18 +142,28 @@ def _mean_last(report) -> float:
     return float(report.p_leader[ev.starts[1:] - 1].mean())
 
 
+def _sigma_min(ctx, param, value):
+    """``--sigma-min`` in its range (``check_sigma_min`` says why), checked as the command
+    line is read, before anything is."""
+    from ..fitting.estimate import check_sigma_min
+
+    return check_sigma_min(value, "--sigma-min")
+
+
 @click.command()
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--model", "model", type=click.Choice(list(MODEL_CHOICES)), default="all",
               show_default=True, help="Human model to fit; all fits and compares them.")
 @click.option("--per-participant", is_flag=True,
-              help="One fit per participant of drive trials (<participant>-tNN-<condition>"
-                   ".parquet) instead of one for all runs.")
+              help="One fit per participant of drive trials (the participant each trial "
+                   "stores; trials older than that: their file name, <participant>-tNN-"
+                   "<condition>.parquet) instead of one for all runs.")
 @click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default=None,
               help="The model's scenario; logs of another are refused [the first log's].")
-@click.option("--sigma-min", type=click.FloatRange(min=0.0, min_open=True), default=1e-3,
-              show_default=True, metavar="M/S^2",
-              help="Floor of the acceleration noise (exact data end on it).")
+@click.option("--sigma-min", type=float, default=1e-3, show_default=True, metavar="M/S^2",
+              callback=_sigma_min,
+              help="Floor of the acceleration noise's standard deviation, in [1e-9, 1] m/s^2 "
+                   "(exact data end on it).")
 @click.option("--intervals", type=click.Choice(["all", "selected", "none"]), default="all",
               show_default=True, help="Which fitted models get 95 % intervals.")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
@@ -154,7 +171,12 @@ def _mean_last(report) -> float:
                    "(.parquet, for 'plot profile --from FILE --run K').")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
 def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_json) -> None:
-    """Fit human models to recorded driving (simulate --out logs, drive trials)."""
+    """Fit human models to recorded driving (simulate --out logs, drive trials).
+
+    Each log counts once: a file given twice (./x and x, a link) is refused. --sigma-min
+    [1e-9, 1] m/s^2: below, float rounding of a re-solved game would decide whether data are
+    exact; above, the floor is a third of a vehicle's acceleration range.
+    """
     from .._files import check_output_file
     from ..config import ConfigError
     from ..fitting import (OUT_EXTENSIONS, evidence_of, load_logs, report_dict,
@@ -169,8 +191,8 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
         for log in runs:
             if log.participant is None:
                 raise ConfigError(f"--per-participant: log file {log.source!r} is not a drive "
-                                  "trial (<participant>-tNN-<condition>.parquet written by "
-                                  "'persuasive drive')")
+                                  "trial (it names no participant: 'persuasive drive' stores "
+                                  "one in each trial it writes)")
     models = MODELS if model == "all" else (model,)
     ev = evidence_of(runs)
     if per_participant:

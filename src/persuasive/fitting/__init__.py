@@ -19,12 +19,12 @@ From Python::
 """
 
 from .comparison import FitReport, fit_models, smooth
-from .estimate import MODELS, SIGMA_MIN, Estimate, ModelFit
+from .estimate import MODELS, SIGMA_MIN, SIGMA_MIN_RANGE, Estimate, ModelFit, check_sigma_min
 from .evidence import Evidence, RunLog, evidence_of, load_logs, read_log
 from .output import (FIT_METADATA, OUT_EXTENSIONS, is_fit_file, load_fitted_run, report_dict,
                      write_fit_parquet, write_json)
 
 __all__ = ["Estimate", "Evidence", "FIT_METADATA", "FitReport", "MODELS", "ModelFit",
-           "OUT_EXTENSIONS", "RunLog", "SIGMA_MIN", "evidence_of", "fit_models",
-           "is_fit_file", "load_fitted_run", "load_logs", "read_log", "report_dict", "smooth",
-           "write_fit_parquet", "write_json"]
+           "OUT_EXTENSIONS", "RunLog", "SIGMA_MIN", "SIGMA_MIN_RANGE", "check_sigma_min",
+           "evidence_of", "fit_models", "is_fit_file", "load_fitted_run", "load_logs",
+           "read_log", "report_dict", "smooth", "write_fit_parquet", "write_json"]

@@ -10,13 +10,12 @@ once per participant of a ``drive`` study).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
-from .estimate import MODELS, SIGMA_MIN, ModelFit, _num, fit_role_model
+from .estimate import MODELS, SIGMA_MIN, ModelFit, _num, check_sigma_min, fit_role_model
 from .evidence import Evidence
 from .models import EMIT_LFG, EMIT_NOISY, smooth_runs
 
@@ -95,16 +94,18 @@ def fit_models(ev: Evidence, models: Sequence[str] = MODELS, sigma_min: float = 
                intervals: bool | Sequence[str] = True, group: str | None = None) -> FitReport:
     """Fit every model of ``models`` to the evidence; see the module docstring.
 
-    ``intervals``: True (every model), False (none: point estimates, for model selection in
-    bulk), or the names of the models that get them.
+    ``sigma_min``: the floor of the noise's standard deviation [m/s^2], in [1e-9, 1]
+    (:func:`persuasive.fitting.estimate.check_sigma_min` says why; another value raises
+    :class:`persuasive.config.ConfigError` naming it and the range). ``intervals``: True
+    (every model), False (none: point estimates, for model selection in bulk), or the names of
+    the models that get them.
     """
     from .idm import fit_idm
 
     unknown = [m for m in models if m not in MODELS]
     if unknown or not models:
         raise ValueError(f"unknown models {unknown}; allowed: {', '.join(MODELS)}")
-    if not math.isfinite(sigma_min) or sigma_min <= 0:
-        raise ValueError(f"sigma_min = {sigma_min!r} must be a positive number")
+    sigma_min = check_sigma_min(sigma_min)
 
     def wants(m: str) -> bool:
         return intervals if isinstance(intervals, bool) else m in intervals

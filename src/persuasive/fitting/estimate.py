@@ -15,18 +15,19 @@ IDM       the IDM's and its gap's          ``persuasive.fitting.idm``
 
 **Exact data.** Simulated runs without noise reproduce the LFG's accelerations to the last bit,
 so the likelihood grows without bound as ``sigma -> 0``. ``sigma`` is bounded below by
-``sigma_min`` (default 0.001 m/s^2: two accelerations closer than that count as the same);
-when the fit ends on that bound the data are *exact*: each emission is then, in effect, an
-indicator of "this role reproduces the logged acceleration", the likelihood in ``p_a`` is the
-probability of the role sequences that explain the actions, and the log-likelihoods of all
-models that reproduce the data share the constant ``n log(1 / (sigma_min sqrt(2 pi)))``, so
-comparisons stay meaningful.
+``sigma_min`` (default 0.001 m/s^2: two accelerations closer than that count as the same;
+allowed: [1e-9, 1] m/s^2, :func:`check_sigma_min`); when the fit ends on that bound the data
+are *exact*: each emission is then, in effect, an indicator of "this role reproduces the logged
+acceleration", the likelihood in ``p_a`` is the probability of the role sequences that explain
+the actions, and the log-likelihoods of all models that reproduce the data share the constant
+``n log(1 / (sigma_min sqrt(2 pi)))``, so comparisons stay meaningful.
 
-**Intervals** (95 %): profile likelihood, the other parameters maximised at every point. The
-interval is where twice the drop of the profile log-likelihood stays below the chi-square(1)
-quantile 3.84. When the estimate sits on a bound (``p_a = 1``, ``p_a = 0``, ``pi0`` in {0, 1},
-``sigma = sigma_min``, ``beta = inf``), the interval is one-sided from the signed root of the
-likelihood ratio, drop below ``1.645^2 / 2 = 1.35``, and reaches the bound.
+**Intervals** (95 %): profile likelihood, the other parameters maximised at every point, never
+past the parameter's bounds. An interior estimate's interval is where twice the drop of the
+profile log-likelihood stays below the chi-square(1) quantile 3.84; an estimate on a bound
+(``p_a = 1``, ``p_a = 0``, ``pi0`` in {0, 1}, ``sigma = sigma_min``, ``beta = inf``) gets the
+boundary-corrected cutoff 2.71 and an interval from that bound inwards
+(:func:`profile_interval` states the rule).
 
 **Comparison**: ``AIC = 2 k - 2 l``, ``BIC = k log n - 2 l`` (``n``: logged steps, ``k``: fitted
 parameters; ``pi0`` counts). The selected model has the smallest BIC.
@@ -35,24 +36,34 @@ parameters; ``pi0`` counts). The selected model has the smallest BIC.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..config import ConfigError
 from .evidence import Evidence
 from .models import EMIT_LFG, EMIT_NOISY, best_initial_role, hmm_loglik, hmm_loglik_serial
 from .optimize import hessian_at, maximise_rows
 
 #: Default lower bound of the noise's standard deviation [m/s^2] (exact data end on it).
 SIGMA_MIN = 1e-3
+#: The values ``sigma_min`` may take [m/s^2] (:func:`check_sigma_min` says why).
+SIGMA_MIN_RANGE = (1e-9, 1.0)
 #: Upper bound of the noise's standard deviation [m/s^2].
 SIGMA_MAX = 10.0
 #: Bounds of the noisy human's rationality [1/reward]; beta = inf is the LFG.
 BETA_MIN, BETA_MAX = 1e-3, 1e3
 #: Drop of the log-likelihood at a two-sided 95 % limit: chi2(1) quantile / 2.
 DROP_TWO_SIDED = 3.841458820694124 / 2.0
-#: Drop at a one-sided 95 % limit (estimate on a bound): 1.645^2 / 2.
-DROP_ONE_SIDED = 1.6448536269514722 ** 2 / 2.0
+#: Drop at the limit of an estimate on a bound: the 95 % quantile of 1/2 chi2(0) + 1/2 chi2(1)
+#: (the chi2(1) quantile at 90 %, 2.71 = 1.645^2), halved (:func:`profile_interval`).
+DROP_ONE_SIDED = 2.705543454095404 / 2.0
+#: An estimate this close to a bound, in the coordinate the fit moves, is on it.
+AT_BOUND_TOL = 1e-9
+#: A profile interval's bracket is narrowed (by 5 each round) at least twice, and further, up
+#: to NARROW_MAX rounds, while its ends' log-likelihoods differ by more than NARROW_SPAN.
+NARROW_MAX, NARROW_SPAN = 4, 0.25
 #: Human kinds a fit knows, in the order they are reported.
 MODELS = ("lfg", "stubborn", "noisy", "idm")
 #: Below this many step-rows a kernel call runs on one thread.
@@ -81,6 +92,47 @@ class Estimate:
         if self.note:
             out["note"] = self.note
         return out
+
+
+def check_sigma_min(value, name: str = "sigma_min") -> float:
+    """``value`` as a float if it is a valid ``sigma_min`` [m/s^2], else :class:`ConfigError`
+    (one line naming ``name`` and the allowed range).
+
+    Allowed: :data:`SIGMA_MIN_RANGE`, [1e-9, 1] m/s^2. Below, the floor stops being a property
+    of the data: a game re-solved on another machine can differ from the logged acceleration
+    by about 1e-15 m/s^2 (float64 rounding), and a floor within a few orders of magnitude of
+    that would call the same data exact on one machine and not on another; the floor's own
+    terms (``sigma_min^2`` in the IDM's closed form, ``((x - a) / sigma_min)^2`` for residuals
+    up to the accelerations' range) stay normal, finite floats with many orders to spare (at
+    1e-320 they are not: ``1 / sigma`` overflows and the log-likelihood is ``-inf``). Above,
+    the floor would call every model exact: 1 m/s^2 is a third of a vehicle's whole
+    acceleration range ([-2, 1] m/s^2 by default), and the fit's ``sigma`` must keep room
+    below its upper bound :data:`SIGMA_MAX` (at 1e200 its interval ran backwards).
+    """
+    lo, hi = SIGMA_MIN_RANGE
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    if ok:
+        value = float(value)
+        ok = math.isfinite(value) and lo <= value <= hi
+    if not ok:
+        raise ConfigError(f"{name} = {value!r} is out of range; allowed: [{lo:g}, {hi:g}] "
+                          "m/s^2")
+    return value
+
+
+def bound_side(x: float, lo: float, hi: float, tol: float = AT_BOUND_TOL) -> str | None:
+    """``"lower"`` or ``"upper"`` when ``x`` is on that bound of ``[lo, hi]`` (within
+    ``tol``), else None (:func:`profile_interval` states the rule)."""
+    if x - lo <= tol:
+        return "lower"
+    if hi - x <= tol:
+        return "upper"
+    return None
+
+
+def interval_method(method: str, side: str | None) -> str:
+    """An :class:`Estimate`'s ``method`` that says when the estimate is on a bound."""
+    return method if side is None else f"{method}, one-sided: on the {side} bound"
 
 
 def _num(x):
@@ -148,7 +200,7 @@ class RoleObjective:
             raise ValueError(f"not a hidden-role model: {model!r}")
         self.ev, self.model = ev, model
         self.emit = EMIT_NOISY if model == "noisy" else EMIT_LFG
-        self.sigma_min = sigma_min
+        self.sigma_min = sigma_min = check_sigma_min(sigma_min)
         self.lo = np.array([0.0, math.log(sigma_min), math.log(BETA_MIN), 0.0])
         self.hi = np.array([1.0, math.log(SIGMA_MAX), math.log(BETA_MAX), 1.0])
         self.calls = 0  #: kernel calls
@@ -207,6 +259,20 @@ class RoleObjective:
             return np.logaddexp(np.log(pi0) + a, np.log1p(-pi0) + b)
 
 
+def _clamp(x: float, lo: float, hi: float) -> float:
+    return float(min(max(x, lo), hi))
+
+
+def from_log(u: float, lo: float, hi: float) -> float:
+    """``exp(u)`` for a parameter in ``[lo, hi]`` fitted as ``u = log x``: on a bound the bound
+    itself (``exp(log 8)`` is 7.999999999999998), and never outside the range."""
+    if u <= math.log(lo):
+        return float(lo)
+    if u >= math.log(hi):
+        return float(hi)
+    return _clamp(math.exp(u), lo, hi)
+
+
 def initial_sigma(ev: Evidence, sigma_min: float) -> float:
     """A start for ``sigma``: the RMS of the smaller of the two roles' residuals per step."""
     r = np.min(np.abs(ev.accel[:, None] - ev.a_role), axis=1)
@@ -216,18 +282,35 @@ def initial_sigma(ev: Evidence, sigma_min: float) -> float:
 def profile_interval(prof, x_hat: float, ell_hat: float, lo_bound: float, hi_bound: float,
                      width: float | None = None, grid: np.ndarray | None = None,
                      grid_vals: np.ndarray | None = None,
-                     at_bound_tol: float = 1e-9) -> tuple[float, float, bool]:
-    """A 95 % profile-likelihood interval of one coordinate.
+                     at_bound_tol: float = AT_BOUND_TOL) -> tuple[float, float, bool]:
+    """A 95 % profile-likelihood interval of one coordinate, within ``[lo_bound, hi_bound]``.
+
+    **The rule.** The estimate ``x_hat`` is *on a bound* when it lies within ``at_bound_tol``
+    of it, in the coordinate the fit moves (``p_a``, ``pi0``, ``log sigma``, ``log beta``,
+    the log of the IDM's smooth parameters); the fits land exactly on a bound when their
+    maximum is there (their Newton steps are projected onto the bounds; an IDM gap parameter,
+    a step function, is moved onto a bound its plateau of equal likelihood reaches, and its
+    scan follows this rule too). An interior estimate's
+    interval is ``{x : 2 (ell_hat - prof(x)) <= 3.84}``, the chi-square(1) 95 % quantile. On
+    a bound the likelihood-ratio statistic of the true value is asymptotically
+    ``1/2 chi2(0) + 1/2 chi2(1)`` (Self and Liang 1987), whose 95 % quantile is 2.71
+    (``1.645^2``, :data:`DROP_ONE_SIDED`): the interval is ``{x : 2 (ell_hat - prof(x)) <=
+    2.71}``, from that bound inwards, so the bound is one of its ends (one-sided). Either way
+    the profile is searched up to the bounds and never past them: a limit it does not reach
+    before a bound is that bound, and every interval lies within ``[lo_bound, hi_bound]`` and
+    holds ``x_hat``.
 
     ``prof(values (m,)) -> (m,)``: the profile log-likelihood at several values, in one
     batch. Each limit is bracketed (from ``grid``/``grid_vals``, profile values already known;
     else around ``x_hat +- width``, the limits of the quadratic approximation; else walking out
-    to the bound), the bracket narrowed by two rounds of 4 points, and the limit interpolated
-    linearly. Both limits share each batch. Returns ``(low, high, one_sided)``: on a bound the
-    interval is one-sided (drop :data:`DROP_ONE_SIDED`) and reaches that bound.
+    to the bound), the bracket narrowed by rounds of 4 points (two, and up to
+    :data:`NARROW_MAX` while its ends differ by more than :data:`NARROW_SPAN` of
+    log-likelihood), and the limit interpolated linearly in the signed root of the likelihood
+    ratio. Both limits share each batch. Returns ``(low, high, on_bound)``.
     """
-    on = (x_hat - lo_bound <= at_bound_tol, hi_bound - x_hat <= at_bound_tol)
-    one_sided = on[0] or on[1]
+    side = bound_side(x_hat, lo_bound, hi_bound, at_bound_tol)
+    on = (side == "lower", side == "upper")
+    one_sided = side is not None
     target = ell_hat - (DROP_ONE_SIDED if one_sided else DROP_TWO_SIDED)
     ends = (lo_bound, hi_bound)
 
@@ -253,7 +336,11 @@ def profile_interval(prof, x_hat: float, ell_hat: float, lo_bound: float, hi_bou
             if sd.outer is None and abs(sd.inner - ends[sd.k]) <= at_bound_tol:
                 sd.result = ends[sd.k]
     while True:
-        todo = [sd for sd in sides if sd.result is None and sd.narrowed < 2]
+        # two rounds; more while a bracket still spans much of the drop (a wide first bracket
+        # where the quadratic approximation was poor), at most NARROW_MAX
+        todo = [sd for sd in sides if sd.result is None and (
+            sd.narrowed < 2 or (sd.narrowed < NARROW_MAX and sd.f_out is not None
+                                and sd.f_in - sd.f_out > NARROW_SPAN))]
         if not todo:
             break
         batch = []
@@ -291,21 +378,31 @@ def profile_interval(prof, x_hat: float, ell_hat: float, lo_bound: float, hi_bou
     for sd in sides:
         if sd.result is not None:
             out.append(float(sd.result))
-        elif not (np.isfinite(sd.f_in) and np.isfinite(sd.f_out)) or sd.f_in == sd.f_out:
+            continue
+        # linear in the signed root of the likelihood ratio, which is linear in x where the
+        # profile is quadratic
+        r_in, r_out = (math.sqrt(2.0 * max(ell_hat - f, 0.0)) for f in (sd.f_in, sd.f_out))
+        r_t = math.sqrt(2.0 * (ell_hat - target))
+        if not (math.isfinite(r_in) and math.isfinite(r_out)) or r_out <= r_in:
             out.append(float(0.5 * (sd.inner + sd.outer)))
         else:
-            out.append(float(sd.inner + (target - sd.f_in) * (sd.outer - sd.inner)
-                             / (sd.f_out - sd.f_in)))
-    return out[0], out[1], one_sided
+            out.append(float(sd.inner + (r_t - r_in) * (sd.outer - sd.inner) / (r_out - r_in)))
+    # the interpolation stays inside its bracket; the clamp only guards the rounding of x_hat
+    low = min(max(out[0], lo_bound), x_hat)
+    high = max(min(out[1], hi_bound), x_hat)
+    return low, high, one_sided
 
 
 def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
                    intervals: bool = True, start: dict | None = None) -> ModelFit:
     """Fit ``lfg``, ``stubborn`` or ``noisy`` to the evidence (see the module docstring).
 
-    ``start``: a parameter vector to try as a start as well (``noisy`` takes the ``lfg``
-    estimate, its ``beta = inf`` limit, so that it never fits worse than the LFG).
+    ``sigma_min``: the floor of ``sigma`` [m/s^2], in [1e-9, 1] (:func:`check_sigma_min`
+    raises :class:`persuasive.config.ConfigError` otherwise). ``start``: a parameter vector to
+    try as a start as well (``noisy`` takes the ``lfg`` estimate, its ``beta = inf`` limit, so
+    that it never fits worse than the LFG).
     """
+    sigma_min = check_sigma_min(sigma_min)
     obj = RoleObjective(ev, model, sigma_min)
     lo, hi, free = obj.lo, obj.hi, obj.free
     t0 = math.log(initial_sigma(ev, sigma_min))
@@ -343,7 +440,7 @@ def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
     x_hat[PI0] = float(pi0_hat[0])
     run_ll = obj.run_loglik(x_hat)
     p_hat = float(x_hat[P_A]) if model != "stubborn" else 0.0
-    sigma_hat = float(math.exp(x_hat[LOG_SIGMA]))
+    sigma_hat = from_log(float(x_hat[LOG_SIGMA]), sigma_min, SIGMA_MAX)
     beta_hat = float(obj.beta(x_hat[LOG_BETA:LOG_BETA + 1])[0]) if model == "noisy" else math.inf
     exact = bool(x_hat[LOG_SIGMA] <= lo[LOG_SIGMA] + 1e-9)
     theta = {"p_a": p_hat, "pi0": float(x_hat[PI0]), "sigma": sigma_hat, "beta": beta_hat}
@@ -404,11 +501,12 @@ def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
                                      half_width(c), P_GRID if c == P_A else None,
                                      grid_vals if c == P_A else None)
         if c == LOG_SIGMA:
-            a, b = math.exp(a), math.exp(b)
+            a, b = (from_log(v, sigma_min, SIGMA_MAX) for v in (a, b))
         elif c == LOG_BETA:
-            a = math.exp(a)
-            b = math.inf if b >= hi[LOG_BETA] else math.exp(b)
-        params[name] = Estimate(value, a, b, "profile, one-sided" if one else "profile")
+            a = from_log(a, BETA_MIN, BETA_MAX)
+            b = math.inf if b >= hi[LOG_BETA] else from_log(b, BETA_MIN, BETA_MAX)
+        side = bound_side(float(x_hat[c]), lo[c], hi[c]) if one else None
+        params[name] = Estimate(value, a, b, interval_method("profile", side))
     if model == "stubborn":
         params = {"p_a": Estimate(0.0, None, None, "fixed"), **params}
     k = {"lfg": 3, "stubborn": 2, "noisy": 4}[model]
@@ -416,5 +514,7 @@ def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
                     notes)
 
 
-__all__ = ["BETA_MAX", "BETA_MIN", "Estimate", "MODELS", "ModelFit", "RoleObjective",
-           "SIGMA_MIN", "fit_role_model", "initial_sigma", "profile_interval"]
+__all__ = ["AT_BOUND_TOL", "BETA_MAX", "BETA_MIN", "Estimate", "MODELS", "ModelFit",
+           "RoleObjective", "SIGMA_MIN", "SIGMA_MIN_RANGE", "bound_side", "check_sigma_min",
+           "fit_role_model", "from_log", "initial_sigma", "interval_method",
+           "profile_interval"]

@@ -27,6 +27,7 @@ game re-solved with the wrong one would be fitted without a warning.
 from __future__ import annotations
 
 import json
+import os
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -112,7 +113,8 @@ class RunLog:
     source: str  #: the file
     config: Config
     seed: int
-    participant: str | None  #: a drive trial's participant ID (from the file name)
+    #: a drive trial's participant ID (its metadata; older trials: the file name), else None
+    participant: str | None
     states: np.ndarray = field(repr=False)  #: (n, 4) measured s_av, v_av, s_hv, v_hv
     accel: np.ndarray = field(repr=False)  #: (n,) the HV's applied acceleration [m/s^2]
     meta: dict = field(repr=False, default_factory=dict)  #: the file's run-record metadata
@@ -195,10 +197,26 @@ def read_log(path: str | Path) -> RunLog:
             raise ConfigError(f"log file {name!r} has a non-finite value ({x[bad[0]]}) in "
                               f"{c} at step {int(bad[0])}; allowed: finite numbers")
         cols.append(x)
-    match = TRIAL_NAME.match(path.name)
-    participant = match.group("participant") if match and config.hv.kind == "person" else None
-    return RunLog(name, config, int(meta.get("seed", 0)), participant,
+    return RunLog(name, config, int(meta.get("seed", 0)), participant_of(meta, path, config),
                   np.stack(cols[:4], axis=1), cols[4], meta)
+
+
+def participant_of(meta: dict, path: str | Path, config: Config) -> str | None:
+    """Who drove a log: the participant ID a ``drive`` trial stores in its metadata
+    (``meta["trial"]["participant"]``), so that a renamed trial is still its participant's.
+    Trials written before the metadata held it fall back to their file name,
+    ``<participant>-tNN-<condition>.parquet`` (a person's log only): renamed, such a trial is
+    fitted as whoever its new name says. None for a log that is not a trial. Raises
+    :class:`ConfigError` for a trial record without a participant ID."""
+    trial = meta.get("trial")
+    if trial is not None:
+        participant = trial.get("participant") if isinstance(trial, dict) else None
+        if not isinstance(participant, str) or not participant:
+            raise ConfigError(f"log file {str(path)!r} holds a trial record without a "
+                              f"participant ID ({participant!r}); allowed: non-empty text")
+        return participant
+    match = TRIAL_NAME.match(Path(path).name)
+    return match.group("participant") if match and config.hv.kind == "person" else None
 
 
 def run_log_of(record, source: str = "") -> RunLog:
@@ -295,13 +313,33 @@ def evidence_of(logs: Sequence[RunLog]) -> Evidence:
                     P_av, dt)
 
 
+def check_distinct(paths: Sequence[str | Path]) -> None:
+    """:class:`ConfigError` when one file is given twice: a fit would count its run twice.
+    Files are compared as the file system sees them (device and inode), so ``./x`` and ``x``,
+    a symbolic or a hard link are the same file; a path that cannot be read is compared by its
+    resolved form (and refused later when it is read)."""
+    seen: dict[tuple, str] = {}
+    for p in paths:
+        try:
+            st = os.stat(p)
+            key: tuple = ("file", st.st_dev, st.st_ino)
+        except OSError:
+            key = ("path", str(Path(p).resolve()))
+        if key in seen:
+            raise ConfigError(f"log file {str(p)!r} is the same file as {seen[key]!r}: its "
+                              "run would count twice; give each log once")
+        seen[key] = str(p)
+
+
 def load_logs(paths: Sequence[str | Path], scenario: str | None = None) -> list[RunLog]:
     """Read every log; all must be of one scenario (``scenario``, a kind, or the first log's
-    kind and geometry). Raises :class:`ConfigError` naming the first bad file."""
+    kind and geometry) and none given twice (:func:`check_distinct`). Raises
+    :class:`ConfigError` naming the first bad file."""
     from concurrent.futures import ThreadPoolExecutor
 
     if not paths:
         raise ConfigError("no log to fit: give one or more Parquet logs")
+    check_distinct(paths)
     with ThreadPoolExecutor(max_workers=4) as pool:  # pyarrow reads without the GIL
         futures = [pool.submit(read_log, p) for p in paths]
         logs = [f.result() for f in futures]
@@ -326,5 +364,5 @@ def load_logs(paths: Sequence[str | Path], scenario: str | None = None) -> list[
     return logs
 
 
-__all__ = ["Evidence", "NEEDED_COLUMNS", "RunLog", "evidence_of", "human_view", "human_views",
-           "load_logs", "read_log", "run_log_of"]
+__all__ = ["Evidence", "NEEDED_COLUMNS", "RunLog", "check_distinct", "evidence_of", "human_view",
+           "human_views", "load_logs", "participant_of", "read_log", "run_log_of"]

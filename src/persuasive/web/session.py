@@ -41,10 +41,13 @@ there, the trial index and the condition's name):
 
 - ``<id>-tNN-<condition>.parquet``: a trial (``RunRecord.save``: the per-step log of
   ``simulate --out`` with its metadata, so ``plot --from``, ``animate --from`` and the
-  ``replay`` human read it), plus the person's input per step (``hv_key_up``, ``hv_key_down``,
-  ``hv_axis``, ``hv_input_source``, ``hv_command_mps2``, ``hv_command_age_ms``) and the
-  timings (``step_latency_ms``: from the tick, command in hand, to the state written to the
-  socket; ``step_compute_ms``: the step alone; ``tick_late_ms``: how late the tick fired);
+  ``replay`` human read it; the metadata also holds ``trial``: the participant ID, the session,
+  the trial's index and condition, whether it was practice and complete, so that ``persuasive
+  fit --per-participant`` knows who drove a trial whatever its file is called), plus the
+  person's input per step (``hv_key_up``, ``hv_key_down``, ``hv_axis``, ``hv_input_source``,
+  ``hv_command_mps2``, ``hv_command_age_ms``) and the timings (``step_latency_ms``: from the
+  tick, command in hand, to the state written to the socket; ``step_compute_ms``: the step
+  alone; ``tick_late_ms``: how late the tick fired);
 - ``<id>-tNN-<condition>-partial.parquet``: a trial cut short (the page closed, the server
   stopped), the steps taken so far;
 - ``<id>.json``: the study summary (participant, Latin-square row, order, conditions,
@@ -136,12 +139,19 @@ class Hub:
 
 
 class Trial:
-    """One trial of a session: its world, the person, its timings, and its file."""
+    """One trial of a session: its world, the person, its timings, and its file.
+
+    ``stem``: the session's file stem (the participant ID, or ``ID-2``, ... for a later session
+    of the same ID); ``participant``: the participant ID stored in the trial's metadata (the
+    stem when not given).
+    """
 
     def __init__(self, index: int, condition: Condition, practice: bool, stem: str,
-                 out_dir: Path, number: int, total: int):
+                 out_dir: Path, number: int, total: int, participant: str | None = None):
         self.index, self.condition, self.practice = index, condition, practice
         self.number, self.total = number, total
+        self.stem = stem
+        self.participant = stem if participant is None else participant
         self.config = condition.config
         self.seed = condition.seed
         self.n = self.config.simulation.n_steps
@@ -203,6 +213,12 @@ class Trial:
         rec.log["tick_late_ms"] = self.late_ms[:k].copy()
         return rec
 
+    def metadata(self, complete: bool) -> dict[str, Any]:
+        """Who drove this trial and which it is: stored in its file's metadata (``trial``)."""
+        return {"participant": self.participant, "session": self.stem, "index": self.index,
+                "condition": self.condition.name, "practice": self.practice,
+                "complete": complete}
+
     def save(self, complete: bool) -> dict[str, Any]:
         """Write the trial (``-partial`` when not ``complete``); returns its summary entry.
         Nothing is written for a trial that took no step. Runs in a worker thread."""
@@ -218,7 +234,7 @@ class Trial:
             return entry
         rec = self.record()
         name = self.name + ("" if complete else "-partial") + ".parquet"
-        rec.save(self.out_dir / name)
+        rec.save(self.out_dir / name, extra={"trial": self.metadata(complete)})
         entry["file"] = name
         o = rec.outcome
         entry["outcome"] = _json_safe({f: getattr(o, f) for f in OUTCOME_FIELDS})
@@ -413,7 +429,7 @@ class Session:
             return False
         condition, practice = self.plan[self.next_index]
         trial = Trial(self.next_index, condition, practice, self.stem, self.hub.out_dir,
-                      self.next_index + 1, len(self.plan))
+                      self.next_index + 1, len(self.plan), participant=self.participant)
         trial.human.input = self.input
         self.trial = trial
         self.state = "running"
