@@ -230,21 +230,23 @@ def test_belief_observation_is_the_planners_belief():
     np.testing.assert_array_equal(states, reference.states[:len(states)])
 
 
-# -- the README example: the planner as a policy through the env, bit for bit -------------
+# -- the guide's example: the planner as a policy through the env, bit for bit --------------
 
-def _readme_example() -> str:
-    """The README's Python block under "## gymnasium and highway-env"."""
+GUIDE = "docs/guide/gym-and-highway-env.md"
+
+
+def _guide_example() -> str:
+    """The first Python block of the gymnasium guide page."""
     import re
     from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    section = readme.split("## gymnasium and highway-env", 1)[1]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    page = (Path(__file__).resolve().parents[1] / GUIDE).read_text(encoding="utf-8")
+    return re.search(r"```python\n(.*?)```", page, re.S).group(1)
 
 
-def test_readme_example_runs():
+def test_guide_example_runs():
     namespace = {}
-    exec(compile(_readme_example(), "README.md", "exec"), namespace)
+    exec(compile(_guide_example(), GUIDE, "exec"), namespace)
     assert namespace["truncated"]  # the seed-996 run never has both vehicles clear
 
 

@@ -1,5 +1,8 @@
 """The README's promises, run as a user would: its opening commands, its command-line examples
-and its Python example (with the outputs written to a temporary folder)."""
+and its Python example (with the outputs written to a temporary folder).
+
+The configuration and grid files the README used to show live in the guide now; their checks
+are in ``tests/test_docs.py``, with the guide's examples and the docs' links."""
 
 import json
 import re
@@ -31,7 +34,7 @@ def test_readme_opens_with_the_two_commands_and_ci_runs_the_test_one():
 @pytest.mark.slow
 def test_command_line_examples_run(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    block = _block("## Use it", "sh").replace("\\\n", " ")  # join continued lines
+    block = _block("## A five-minute tour", "sh").replace("\\\n", " ")  # join continued lines
     commands = [line.split("  #")[0].strip() for line in block.splitlines()]
     commands = [c for c in commands if c.startswith(".venv/bin/persuasive ")]
     assert len(commands) >= 6
@@ -59,19 +62,3 @@ def test_python_example_runs(tmp_path, monkeypatch):
     assert namespace["plan"].feasible
     assert len(namespace["result"].runs) == 1400
 
-
-def test_configuration_and_grid_examples_are_valid(tmp_path):
-    import tomllib
-
-    from persuasive import Config, sweep
-
-    config = Config.from_dict(tomllib.loads(_block("## Configuration", "toml")))
-    assert (config.mode, config.hv.kind, config.scenario.kind) == ("corrected", "idm", "crossing")
-    assert config.vehicle_of("hv").length_m == 4.5
-    grid_file = tmp_path / "grid.toml"
-    grid_file.write_text(_block("## Sweeps on Dask", "toml"))
-    grid = sweep.Grid.from_toml(grid_file)
-    runs = list(grid.runs())
-    assert len(runs) == 4 * 5 * 200
-    # the README shows the example grid file
-    assert runs == list(sweep.Grid.from_toml(ROOT / "examples" / "sweep-persuasion.toml").runs())
