@@ -19,13 +19,13 @@ import subprocess
 import sys
 
 FIGURES = ("game_solve_us_median", "mpc_decision_ms_median", "mpc_decision_ms_p99",
-           "mpc_run_ms_median")
+           "mpc_run_ms_median", "shield_us_median", "shielded_decision_ms_median")
 
 SNIPPET = """
 import json, sys
 from persuasive.bench import bench
 r = bench(n_runs={runs}, repeats=3)
-print(json.dumps({{k: r[k] for k in {figures!r}}}))
+print(json.dumps({{k: r[k] for k in {figures!r} if k in r}}))
 """
 
 
@@ -52,6 +52,8 @@ def main() -> None:
     print(f"{'figure':28} {'old':>10} {'new':>10} {'new/old':>8}   ({args.rounds} rounds, medians)")
     summary = {}
     for fig in FIGURES:
+        if not all(fig in r for r in results["old"] + results["new"]):
+            continue  # a figure one of the trees does not measure
         old = statistics.median(r[fig] for r in results["old"])
         new = statistics.median(r[fig] for r in results["new"])
         summary[fig] = {"old": old, "new": new, "ratio": new / old}

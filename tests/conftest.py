@@ -25,6 +25,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
+from persuasive._processes import descendants
 from persuasive.packing import discounts, pack
 from persuasive.scenarios import build_scenario
 from persuasive.config import Config
@@ -74,19 +75,6 @@ def gone():
         return False
 
     return check
-
-
-def descendants(pid: int) -> list[int]:
-    """Every process below ``pid`` (its children, theirs, ...)."""
-    kids = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                if int(_stat(int(entry.name))[1]) == pid:
-                    kids.append(int(entry.name))
-            except (OSError, IndexError, ValueError):
-                continue
-    return kids + [d for k in kids for d in descendants(k)]
 
 
 @pytest.fixture

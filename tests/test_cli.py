@@ -3,14 +3,15 @@
 import json
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
-from persuasive.cli.simulate import json_summary
 from persuasive.cli import main
+from persuasive.cli.simulate import json_summary
 from persuasive.simulation import simulate
 from persuasive.config import Config
 
@@ -672,3 +673,28 @@ def test_json_summary_gives_no_value_for_what_no_kind_reads(capsys):
     assert main(["simulate", "--pa-hat", "0.9", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["pa_hat"] == 0.9 and "ignored_fields" not in data
+
+
+def test_ctrl_c_silences_what_libraries_log_while_the_command_tears_down():
+    """An interrupt mid-study can make Dask log a cancelled gather with a traceback (seen once
+    in tests/test_processes.py): after Ctrl-C the user gets one line, so library logging is
+    off until the command has ended, and on again afterwards."""
+    import logging
+    import os
+    import signal
+
+    from persuasive.cli import _interruptible
+
+    noisy = logging.getLogger("distributed.scheduler")
+    during = []
+    with pytest.raises(KeyboardInterrupt):
+        with _interruptible():
+            assert noisy.isEnabledFor(logging.ERROR)
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(5)  # the handler raises here
+            except KeyboardInterrupt:
+                during.append(noisy.isEnabledFor(logging.ERROR))
+                raise
+    assert during == [False]  # off while the interrupted command tears down
+    assert noisy.isEnabledFor(logging.ERROR)  # on again for the next one

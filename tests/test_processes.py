@@ -26,6 +26,7 @@ from pathlib import Path
 import pytest
 
 from persuasive import _processes
+from persuasive._processes import descendants
 from persuasive.sweep.runner import local_client, map_bounded
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
@@ -171,8 +172,6 @@ def _interrupt(tmp_path: Path, argv: list[str], ready, env_extra=None):
                 break
             time.sleep(0.05)
         assert proc.poll() is None, "the command ended before it was interrupted"
-        from conftest import descendants
-
         below = descendants(proc.pid)
         t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)

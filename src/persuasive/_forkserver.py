@@ -20,7 +20,7 @@ import time
 import types
 from pathlib import Path
 
-from ._processes import MAIN_ENV, PARENT_ENV, SCRATCH_ENV
+from ._processes import MAIN_ENV, PARENT_ENV, SCRATCH_ENV, children
 
 _PR_SET_PDEATHSIG = 1
 #: This process, the server; a worker (a process forked by it) is not one.
@@ -40,24 +40,9 @@ def parent_death_signal(sig: int) -> None:
             pass
 
 
-def _children() -> list[int]:
-    me = str(os.getpid())
-    kids = []
-    for entry in os.listdir("/proc") if os.path.isdir("/proc") else ():
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat", "rb") as fh:
-                    fields = fh.read().rsplit(b")", 1)[1].split()
-            except OSError:
-                continue
-            if fields[1].decode() == me:
-                kids.append(int(entry))
-    return kids
-
-
 def _on_command_death(signum: int = signal.SIGTERM, frame=None) -> None:
     """The command is gone: kill the workers, wait for them, remove its scratch, exit."""
-    kids = _children()
+    kids = children(os.getpid())
     for pid in kids:
         try:
             os.kill(pid, signal.SIGKILL)

@@ -115,6 +115,28 @@ def scratch_dir(prefix: str) -> Path:
     return Path(tempfile.mkdtemp(prefix=prefix, dir=scratch_root()))
 
 
+def children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (read from ``/proc``; none where there is no
+    ``/proc``)."""
+    kids = []
+    for entry in os.listdir("/proc") if os.path.isdir("/proc") else ():
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat", "rb") as fh:
+                    ppid = int(fh.read().rsplit(b")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            if ppid == pid:
+                kids.append(int(entry))
+    return kids
+
+
+def descendants(pid: int) -> list[int]:
+    """Every process below ``pid``: its children, theirs, and so on."""
+    kids = children(pid)
+    return kids + [d for k in kids for d in descendants(k)]
+
+
 def _keeper(fn: Callable[[], Any]) -> Any:
     """Run ``fn`` in this module's daemon thread, which lives as long as the process: the
     fork server's parent-death signal is tied to the thread that starts it."""
@@ -184,5 +206,5 @@ def server_pid() -> int | None:
     return getattr(forkserver._forkserver, "_forkserver_pid", None)  # noqa: SLF001
 
 
-__all__ = ["PRELOAD", "SERVER_ENV", "context", "remove_scratch", "scratch_dir", "scratch_root",
+__all__ = ["PRELOAD", "SERVER_ENV", "children", "context", "descendants", "remove_scratch", "scratch_dir", "scratch_root",
            "server_pid", "start_method"]

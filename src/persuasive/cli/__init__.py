@@ -10,6 +10,7 @@ results are written to temporary files (or folders) first, then renamed.
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import signal
 import sys
@@ -98,6 +99,9 @@ def _on_interrupt(signum, frame) -> None:
 
         remove_scratch()
         os._exit(130)
+    # the command stops: what Dask and tornado log while it tears down (a cancelled gather,
+    # a callback of the interrupted wait) is noise, not the one line the user gets
+    logging.disable(logging.CRITICAL)
     raise KeyboardInterrupt
 
 
@@ -115,6 +119,8 @@ def _interruptible() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        if _on_interrupt.count:
+            logging.disable(logging.NOTSET)
 
 
 def _interrupted(exc: BaseException) -> bool:
