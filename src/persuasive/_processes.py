@@ -74,6 +74,7 @@ _lock = threading.RLock()
 _scratch: Path | None = None
 _scratch_owner = 0
 _jobs: queue.SimpleQueue | None = None
+_jobs_pid = 0
 
 
 def start_method() -> str:
@@ -140,10 +141,10 @@ def descendants(pid: int) -> list[int]:
 def _keeper(fn: Callable[[], Any]) -> Any:
     """Run ``fn`` in this module's daemon thread, which lives as long as the process: the
     fork server's parent-death signal is tied to the thread that starts it."""
-    global _jobs
+    global _jobs, _jobs_pid
     with _lock:
-        if _jobs is None:
-            _jobs = queue.SimpleQueue()
+        if _jobs is None or _jobs_pid != os.getpid():  # a forked child has no keeper thread
+            _jobs, _jobs_pid = queue.SimpleQueue(), os.getpid()
             threading.Thread(target=_keep, args=(_jobs,), name="persuasive-forkserver-parent",
                              daemon=True).start()
         box: list = []
