@@ -413,7 +413,11 @@ def _run_cli(args, capsys):
     (["--flow", "0"], "--flow"), (["--ignore-foes", "1.5"], "--ignore-foes"),
     (["--episodes", "0"], "--episodes"), (["--shield", "maybe"], "--shield"),
     (["--seed", "-1"], "--seed"), (["--workers", "0"], "--workers"),
-    (["--scenario", "roundabout"], "roundabout")])
+    (["--scenario", "roundabout"], "roundabout"),
+    # counts name their range whatever the mistake (1e9 was "not a valid integer")
+    (["--episodes", "1e9"], "--episodes = 1e9 is out of range; allowed: integer in [1, 10000]"),
+    (["--episodes", "100000000"], "allowed: integer in [1, 10000]"),
+    (["--workers", "x"], "--workers = x is out of range; allowed: integer in [1, ")])
 def test_bad_input_is_one_line_exit_2(args, name, capsys, tmp_path):
     out = tmp_path / "res"
     rc, stdout, err = _run_cli([*args, "--out", str(out)], capsys)
@@ -421,6 +425,51 @@ def test_bad_input_is_one_line_exit_2(args, name, capsys, tmp_path):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and name in lines[0] and "Traceback" not in err
     assert not out.exists()
+
+
+def test_an_out_folder_holding_files_is_refused_before_any_work(capsys, tmp_path,
+                                                                 monkeypatch):
+    """``--out`` replaces the folder as a whole: a folder holding files is refused (exit 2,
+    its files untouched) unless --force, and the current folder always (it could not be
+    replaced: the whole study used to run first, then fail). Checked before SUMO starts."""
+    monkeypatch.setattr(S, "run_study", lambda *a, **k: pytest.fail("the study started"))
+    full = tmp_path / "full"
+    (full / "sub").mkdir(parents=True)
+    (full / "keep.txt").write_text("mine")
+    (full / "sub" / "also.txt").write_text("mine too")
+    rc, stdout, err = _run_cli(["--episodes", "1", "--out", str(full)], capsys)
+    assert rc == 2 and stdout == ""
+    assert err.strip() == (f"error: results folder {str(full)!r} holds other files; choose "
+                           "another --out or pass --force to replace it")
+    assert (full / "keep.txt").read_text() == "mine"
+    assert (full / "sub" / "also.txt").read_text() == "mine too"
+    for here in (".", str(tmp_path)):
+        monkeypatch.chdir(tmp_path)
+        rc, stdout, err = _run_cli(["--episodes", "1", "--out", here, "--force"], capsys)
+        assert rc == 2 and "it holds the current folder" in err
+        assert len(err.strip().splitlines()) == 1
+    assert (full / "keep.txt").exists()
+
+
+@pytest.mark.slow
+def test_one_episode_reads_as_one_and_cached_kernels_give_no_notice(capsys, tmp_path):
+    """After a first run has cached the planner's kernels, the command says nothing about
+    compiling (it used to on every run: it looked at kernels SUMO never uses), and one
+    episode is "1 episode (seed 1)". --force replaces a folder holding files."""
+    out = tmp_path / "res"
+    out.mkdir()
+    (out / "old.txt").write_text("old")
+    from persuasive.cli import main
+
+    assert main(["sumo", "--episodes", "1", "--workers", "1", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["sumo", "--episodes", "1", "--workers", "1", "--quiet", "--out", str(out),
+                 "--force"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err == ""
+    assert cap.out.startswith("SUMO intersection: 1 episode (seed 1), 300 veh/h")
+    assert "1 worker," in cap.out.splitlines()[0]
+    assert not (out / "old.txt").exists() and (out / "episodes.parquet").is_file()
 
 
 def _leftovers():
