@@ -90,8 +90,10 @@ def kill_mid_run(tmp_path):
         temp = tmp_path / "killed-tmp"
         temp.mkdir()
         env = dict(os.environ, TMPDIR=str(temp))
-        proc = subprocess.Popen([sys.executable, "-m", "persuasive", *argv], env=env,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        err_path = tmp_path / "killed-stderr.txt"
+        with open(err_path, "w") as err:
+            proc = subprocess.Popen([sys.executable, "-m", "persuasive", *argv], env=env,
+                                    stdout=subprocess.DEVNULL, stderr=err)
         deadline = time.monotonic() + 240
         try:
             while time.monotonic() < deadline and proc.poll() is None:
@@ -99,10 +101,12 @@ def kill_mid_run(tmp_path):
                 if started() and len(descendants(proc.pid)) >= 2 + workers:
                     break
                 time.sleep(0.1)
-            assert proc.poll() is None, "the command ended before it was killed"
+            assert proc.poll() is None, ("the command ended before it was killed: "
+                                         + err_path.read_text()[-1000:])
             below = descendants(proc.pid)
         finally:
-            os.kill(proc.pid, signal.SIGKILL)
+            if proc.poll() is None:
+                os.kill(proc.pid, signal.SIGKILL)
             proc.wait()
         return below, temp
 

@@ -171,7 +171,8 @@ def _interrupt(tmp_path: Path, argv: list[str], ready, env_extra=None):
             if ready(err_path.read_text()):
                 break
             time.sleep(0.05)
-        assert proc.poll() is None, "the command ended before it was interrupted"
+        assert proc.poll() is None, ("the command ended before it was interrupted: "
+                                     + err_path.read_text()[-1000:])
         below = descendants(proc.pid)
         t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)
@@ -229,3 +230,19 @@ def test_ctrl_c_mid_study_stops_within_a_second_and_leaves_nothing(tmp_path, arg
     assert len(below) >= 4 and all(gone(pid) for pid in below)
     assert list(temp.iterdir()) == []
     assert not (out / "summary.json").exists() and not (out / "episodes.parquet").exists()
+
+
+def test_a_deep_temporary_folder_still_gets_a_fork_server(tmp_path):
+    """A TMPDIR too deep for a Unix socket's path (108 bytes) used to end every sweep with
+    "af_unix path too long": the server's socket then goes to a short folder of its own,
+    which the command removes at exit."""
+    deep = tmp_path / ("d" * 60) / ("e" * 40)
+    deep.mkdir(parents=True)
+    code = ("import os, tempfile; from persuasive.sweep.runner import local_client\n"
+            "with local_client(1) as c:\n"
+            "    print(sorted(c.run(lambda: 6 * 7).values()))\n")
+    run = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, TMPDIR=str(deep)),
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.strip() == "[42]"
+    assert list(deep.iterdir()) == []  # the scratch folder is gone with the command

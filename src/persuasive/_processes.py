@@ -167,11 +167,35 @@ def _keep(jobs: queue.SimpleQueue) -> None:
         done.set()
 
 
+#: The longest path a Unix socket may have here (``sun_path`` holds 108 bytes on Linux, 104 on
+#: macOS, the final NUL included).
+_SOCKET_PATH_MAX = 103
+#: What multiprocessing adds to its folder for the fork server's socket:
+#: ``/pymp-XXXXXXXX/listener-XXXXXXXX``.
+_SOCKET_SUFFIX = 32
+
+
+def _short_socket_folder() -> None:
+    """Give multiprocessing a short folder for the fork server's socket when the temporary
+    folder's path is too long for one (a deep ``TMPDIR``: "AF_UNIX path too long"). The
+    folder is a ``pymp-`` folder in ``/tmp``, removed at exit, or by the fork server when the
+    command is killed, as multiprocessing's own would be."""
+    from multiprocessing import process
+
+    config = process.current_process()._config  # noqa: SLF001 - where get_temp_dir looks
+    if "tempdir" in config or len(tempfile.gettempdir()) + _SOCKET_SUFFIX <= _SOCKET_PATH_MAX:
+        return
+    short = Path(tempfile.mkdtemp(prefix="pymp-", dir="/tmp"))
+    config["tempdir"] = str(short)
+    atexit.register(_remove_scratch, short, os.getpid())
+
+
 def _start_server(scratch: Path) -> int:
     """Start the fork server unless it runs (in the keeper thread, which runs one job at a
     time); its pid."""
     from multiprocessing import forkserver, spawn
 
+    _short_socket_folder()
     forkserver.set_forkserver_preload(list(PRELOAD))
     data = spawn.get_preparation_data("persuasive-worker")
     main = {"path": data.get("init_main_from_path"), "name": data.get("init_main_from_name")}
