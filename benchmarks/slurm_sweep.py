@@ -22,9 +22,11 @@ through the same client API.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
 from persuasive import sweep
+from persuasive.sweep.runner import local_client
 
 
 def _slurm_client(args: argparse.Namespace):
@@ -51,13 +53,6 @@ def _slurm_client(args: argparse.Namespace):
     return cluster, client
 
 
-def _local_client():
-    from distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None)
-    return cluster, Client(cluster)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("grid", help="grid TOML file (see 'persuasive sweep --help')")
@@ -81,12 +76,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     grid = sweep.Grid.from_toml(args.grid)  # fails here, before any job is submitted
-    cluster, client = _local_client() if args.smoke else _slurm_client(args)
-    try:
+    with contextlib.ExitStack() as stack:
+        if args.smoke:  # the project's own local cluster: two workers from the fork server
+            client = stack.enter_context(local_client(2))
+        else:
+            cluster, client = _slurm_client(args)
+            stack.callback(cluster.close)
+            stack.callback(client.close)  # closed first
         summary = sweep.run(grid, args.out, client=client, chunk=args.chunk, force=args.force)
-    finally:
-        client.close()
-        cluster.close()
     print(f"{summary.finished} of {summary.runs} runs in {args.out}/runs/ "
           f"({summary.ran} run now, {summary.skipped} earlier, {summary.wall_time_s:.0f} s)")
     if summary.failures:

@@ -79,21 +79,24 @@ def gone():
 
 @pytest.fixture
 def kill_mid_run(tmp_path):
-    """``kill_mid_run(argv, started, workers=2)``: start ``persuasive argv`` with a ``TMPDIR``
-    of its own, SIGKILL it once ``started()`` holds and its workers run, and return the
+    """``kill_mid_run(argv, started, workers=2, group=False)``: start ``persuasive argv``
+    with a ``TMPDIR`` of its own, SIGKILL it (``group``: its whole process group, as
+    ``kill -9 -PGID`` would) once ``started()`` holds and its workers run, and return the
     processes it had below it and its ``TMPDIR``."""
     import signal
     import subprocess
     import sys
 
-    def run(argv: list[str], started, workers: int = 2) -> tuple[list[int], Path]:
+    def run(argv: list[str], started, workers: int = 2,
+            group: bool = False) -> tuple[list[int], Path]:
         temp = tmp_path / "killed-tmp"
         temp.mkdir()
         env = dict(os.environ, TMPDIR=str(temp))
         err_path = tmp_path / "killed-stderr.txt"
         with open(err_path, "w") as err:
             proc = subprocess.Popen([sys.executable, "-m", "persuasive", *argv], env=env,
-                                    stdout=subprocess.DEVNULL, stderr=err)
+                                    stdout=subprocess.DEVNULL, stderr=err,
+                                    start_new_session=group)
         deadline = time.monotonic() + 240
         try:
             while time.monotonic() < deadline and proc.poll() is None:
@@ -105,7 +108,9 @@ def kill_mid_run(tmp_path):
                                          + err_path.read_text()[-1000:])
             below = descendants(proc.pid)
         finally:
-            if proc.poll() is None:
+            if group:
+                os.killpg(proc.pid, signal.SIGKILL)
+            elif proc.poll() is None:
                 os.kill(proc.pid, signal.SIGKILL)
             proc.wait()
         return below, temp

@@ -366,10 +366,12 @@ def scheduler_address(tmp_path_factory):
     info = folder / "scheduler.json"
     procs = []
 
-    def start(*args):
+    def start(*args):  # Dask's own files in the fixture's folder, not in TMPDIR
         procs.append(subprocess.Popen([sys.executable, "-m", "dask", *args], cwd=folder,
                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                      start_new_session=True))
+                                      start_new_session=True,
+                                      env=dict(os.environ,
+                                               DASK_TEMPORARY_DIRECTORY=str(folder))))
 
     try:
         start("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",

@@ -83,6 +83,11 @@ def _in_worker() -> None:
         os._exit(1)
 
 
+# A process group of its own: a signal to the command's group (a shell's kill -9 -PGID, a
+# terminal's Ctrl-C) then reaches the command, not the server, which is left to clean up
+# after it. Its workers are in this group too: a Ctrl-C reaches them through the command,
+# which kills them at once.
+os.setpgid(0, 0)
 signal.signal(signal.SIGTERM, _on_command_death)
 parent_death_signal(signal.SIGTERM)
 if os.getppid() != _COMMAND:  # the command died before the line above
