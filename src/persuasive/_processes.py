@@ -171,7 +171,7 @@ def _keep(jobs: queue.SimpleQueue) -> None:
 #: macOS, the final NUL included).
 _SOCKET_PATH_MAX = 103
 #: What multiprocessing adds to its folder for the fork server's socket:
-#: ``/pymp-XXXXXXXX/listener-XXXXXXXX``.
+#: ``/pymp-<8 characters>/listener-<8 characters>``.
 _SOCKET_SUFFIX = 32
 
 
