@@ -1,9 +1,10 @@
 """Kill (or interrupt) a running command N times under CPU load; check nothing outlives it.
 
     python benchmarks/kill_loop.py [--times 20] [--load 2] [--command reproduce|sumo]
-                                   [--signal kill|int]
+                                   [--signal kill|int] [--workers 2]
 
-Each round starts ``persuasive reproduce table2`` (or ``persuasive sumo``) with two workers and
+Each round starts ``persuasive reproduce table2`` (or ``persuasive sumo``) with two workers
+(``--workers``) and
 a ``TMPDIR`` of its own, waits until its workers run, sends it SIGKILL (or SIGINT, Ctrl-C),
 and checks that within 10 s every process that was below it (the fork server,
 multiprocessing's resource tracker, the workers) has ended and its ``TMPDIR`` is empty; with
@@ -43,18 +44,19 @@ def burn() -> None:  # pragma: no cover - a load process
         pass
 
 
-def one_round(command: str, folder: Path, sig: int = signal.SIGKILL) -> tuple[bool, str, float]:
+def one_round(command: str, folder: Path, sig: int = signal.SIGKILL,
+              workers: int = 2) -> tuple[bool, str, float]:
     temp = folder / "tmp"
     temp.mkdir(parents=True)
     out = folder / "out"
     if command == "reproduce":
-        argv = ["reproduce", "table2", "--seeds", "400", "--workers", "2", "--quiet",
+        argv = ["reproduce", "table2", "--seeds", str(200 * workers), "--workers", str(workers), "--quiet",
                 "--out", str(out)]
 
         def started() -> bool:
             return any((out / "runs").glob("*.parquet"))
     else:
-        argv = ["sumo", "--episodes", "20", "--workers", "2", "--quiet", "--out", str(out)]
+        argv = ["sumo", "--episodes", str(10 * workers), "--workers", str(workers), "--quiet", "--out", str(out)]
 
         def started() -> bool:
             return any(not p.name.startswith("sumo-net-")
@@ -64,7 +66,7 @@ def one_round(command: str, folder: Path, sig: int = signal.SIGKILL) -> tuple[bo
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and proc.poll() is None:
-        if started() and len(descendants(proc.pid)) >= 4:
+        if started() and len(descendants(proc.pid)) >= 2 + workers:
             break
         time.sleep(0.1)
     if proc.poll() is not None:
@@ -93,6 +95,7 @@ def main() -> None:
     parser.add_argument("--load", type=int, default=2, help="busy processes beside it")
     parser.add_argument("--command", choices=["reproduce", "sumo"], default="reproduce")
     parser.add_argument("--signal", choices=["kill", "int"], default="kill")
+    parser.add_argument("--workers", type=int, default=2, help="the command's worker processes")
     args = parser.parse_args()
     sig = signal.SIGKILL if args.signal == "kill" else signal.SIGINT
     burners = [multiprocessing.get_context("spawn").Process(target=burn, daemon=True)
@@ -103,7 +106,7 @@ def main() -> None:
     clean, times = 0, []
     try:
         for i in range(args.times):
-            ok, what, to_exit = one_round(args.command, root / str(i), sig)
+            ok, what, to_exit = one_round(args.command, root / str(i), sig, args.workers)
             clean += ok
             times.append(to_exit)
             print(f"round {i + 1}: {'clean' if ok else 'LEFT SOMETHING'}: {what}", flush=True)
@@ -114,7 +117,8 @@ def main() -> None:
     after = (f"; exit after Ctrl-C: median {statistics.median(times):.2f} s, largest "
              f"{max(times):.2f} s" if sig == signal.SIGINT else "")
     print(f"{clean} of {args.times} rounds clean ({args.command}, SIG{args.signal.upper()}, "
-          f"{args.load} busy processes beside it, {os.cpu_count()} cores){after}")
+          f"{args.workers} workers, {args.load} busy processes beside it, {os.cpu_count()} cores)"
+          f"{after}")
     sys.exit(0 if clean == args.times else 1)
 
 
