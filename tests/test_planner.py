@@ -95,14 +95,15 @@ def test_the_hvs_own_speed_limit_is_checked():
 
 @pytest.mark.parametrize("kind", ["persuasive", "passive", "lfg"])
 def test_accel_is_plan_without_the_plan(kind):
-    # the many-vehicle adapter's entry point: the same accelerations, belief and draws as
-    # plan() on the same states, call after call
+    # the many-vehicle adapter's entry point: the same proposals (before the shield, which
+    # the adapter applies once over all vehicles), belief and draws as plan() on the same
+    # states, call after call
     config = Config(mode="corrected").with_overrides({"av.kind": kind})
     record = simulate(config, 21)
     full, lean = Planner(config, seed=3), Planner(config, seed=3)
     for s_av, v_av, s_hv, v_hv in record.states[:-1]:
         a = lean.accel((s_av, v_av), (s_hv, v_hv))
-        assert a == full.plan((s_av, v_av), (s_hv, v_hv)).accel_mps2
+        assert a == full.plan((s_av, v_av), (s_hv, v_hv)).proposed_accel_mps2
         np.testing.assert_equal(lean.belief_hv_leader, full.belief_hv_leader)  # NaN: lfg
     with pytest.raises(ConfigError, match="Q3"):
         Planner(Config(mode="paper")).accel((-20.0, 4.0), (-22.0, 4.3))

@@ -208,6 +208,11 @@ def _crossing_row(other=X.Limits(5.0, 1.8, -9.0, 2.6, 0.0, 13.89)):
     return cfg, ego, other
 
 
+def _filter(v, a, s_R, s_H, v_H, C, kind=1.0):
+    """The one filter (shield_filter) with the exact kinematics and fresh scratch."""
+    return sh.shield_filter(kind, a, v, 0.1, s_R, s_H, v_H, C, np.zeros(3), np.empty((0, 3)))
+
+
 def test_shield_many_equals_the_single_shield():
     cfg, ego, other = _crossing_row()
     rng = np.random.default_rng(5)
@@ -217,12 +222,12 @@ def test_shield_many_equals_the_single_shield():
                                  rng.uniform(-4.5, 2.6))
         c = X.Conflict(0, X.CROSSING, s_r, s_h, v_h, (-4.9, 4.9), (-4.9, 4.9), other)
         s_R, s_H, v_H, C = X.conflict_arrays([c], cfg, ego)
-        assert sh.shield_step_many(v_r, a, 0.1, s_R, s_H, v_H, C) == \
+        assert _filter(v_r, a, s_R, s_H, v_H, C) == \
             sh.shield_step(s_R[0], v_r, a, 0.1, s_H[0], v_H[0], C[0])
 
 
 def _many_by_hand(v, a, s_R, s_H, v_H, C):
-    """The rule of shield_step_many written out: the first of "a then brake", "a then go",
+    """The rule of shield_filter written out: the first of "a then brake", "a then go",
     "brake", "go" certified against every vehicle with the same fallback."""
     u_min, u_max = C[0, sh.C_R_UMIN], C[0, sh.C_R_UMAX]
     for first, fb, verdict in ((a, u_min, sh.ADMITTED), (a, u_max, sh.ADMITTED),
@@ -243,7 +248,7 @@ def test_shield_many_needs_one_fallback_for_all():
                          rng.uniform(0, 13.89), (-4.9, 4.9), (-4.9, 4.9), other)
               for j in range(3)]
         s_R, s_H, v_H, C = X.conflict_arrays(cs, cfg, ego)
-        got = sh.shield_step_many(v, a, 0.1, s_R, s_H, v_H, C)
+        got = _filter(v, a, s_R, s_H, v_H, C)
         first, code = _many_by_hand(v, a, s_R, s_H, v_H, C)
         assert got[1] == code
         if code != sh.UNCERTIFIED:
@@ -261,7 +266,7 @@ def test_go_is_never_certified_behind_a_leader():
     s_R, s_H, v_H, C = X.conflict_arrays([c], cfg, ego)
     v = 3.361317352812848
     assert not sh._gap_holds(s_R[0], v, 2.6, 0.1, 2.6, s_H[0], v_H[0], C[0])
-    a, code = sh.shield_step_many(v, 2.6, 0.1, s_R, s_H, v_H, C)
+    a, code = _filter(v, 2.6, s_R, s_H, v_H, C)
     assert code != sh.GO and not (code == sh.ADMITTED and a == 2.6 and not sh.certified(
         s_R[0], v, 2.6, 0.1, -4.5, s_H[0], v_H[0], C[0], *sh.human_window(s_H[0], v_H[0], C[0])))
 

@@ -11,8 +11,9 @@ code, as a user pays it):
   (:meth:`Planner.plan`: for the persuasive MPC, the human-view prediction, the branch MPC with
   its re-solves, the belief update), replayed along the runs' states, milliseconds;
 - ``mpc_run_ms_median``: one whole closed-loop run (61 steps) with :func:`simulate`;
-- ``shield_us_median`` / ``_p99``: the safety shield alone (``persuasive.safety.shield``, the
-  worst-case kind) around the decision each state's run took, microseconds; and
+- ``shield_us_median`` / ``_p99``: the safety shield alone (the worst-case kind, as the
+  Python worlds and ``Planner`` call it: ``persuasive.safety.filter.ShieldFilter.one``, call
+  overhead included) around the decision each state's run took, microseconds; and
   ``shielded_decision_ms_median`` / ``_p99``: the planner's decision with the shield on (the
   MPC then also checks its candidates against the shield and tracks its confidence in the
   human model, docs/method.md §12.3), replayed along the same states;
@@ -103,25 +104,24 @@ def _decision_times_ns(config: Config, runs: list, repeats: int) -> tuple[np.nda
 
 
 def _shield_times_ns(config: Config, runs: list, repeats: int) -> np.ndarray:
-    """The worst-case shield around each state's logged AV acceleration."""
+    """The worst-case shield around each state's logged AV acceleration, as every Python
+    world applies it (:meth:`persuasive.safety.filter.ShieldFilter.one`)."""
     from .record import static_setup
-    from .safety.shield import N_CONFLICT, conflict_vector, shield_step
+    from .safety.filter import ShieldFilter
 
     shielded = config.with_overrides({"av.shield": "worst-case"})
     _, P_av, P_hv, _ = static_setup(shielded)
-    C = np.empty(N_CONFLICT)
-    conflict_vector(P_av, P_hv, C)
-    dt = config.simulation.dt_s
-    cases = [(float(r[0]), float(r[1]), float(a), float(r[2]), float(r[3]))
+    one = ShieldFilter.closed_loop(P_av, P_hv, config.simulation.dt_s).one
+    cases = [((float(r[0]), float(r[1])), float(a), (float(r[2]), float(r[3])))
              for run in runs for r, a in zip(run.states[:-1], run.log["av_accel_mps2"])]
-    for s_av, v_av, a, s_hv, v_hv in cases[:20]:  # warm-up
-        shield_step(s_av, v_av, a, dt, s_hv, v_hv, C)
+    for x_R, a, x_H in cases[:20]:  # warm-up
+        one(a, x_R, x_H)
     times = []
     clock = time.perf_counter_ns
     for _ in range(repeats):
-        for s_av, v_av, a, s_hv, v_hv in cases:
+        for x_R, a, x_H in cases:
             t = clock()
-            shield_step(s_av, v_av, a, dt, s_hv, v_hv, C)
+            one(a, x_R, x_H)
             times.append(clock() - t)
     return np.array(times)
 

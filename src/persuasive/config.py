@@ -223,9 +223,15 @@ class MPCParams:
     p_a_prior: tuple[float, float] | None = None
     #: online only: points of the grid over p_a on [0, 1] (integer in [2, 101]); unset means 21
     p_a_grid: int | None = None
-    # With the shield on (``av.shield``; docs/method.md §12.3), the planner knows about it:
-    #: candidates whose first step the shield would reject count as infeasible
+    # The planner's own features that anticipate the shield (docs/method.md §12.3); settings of
+    # the planner, not of the shield, so that a planner whose proposals another loop filters
+    # (an outside simulator's per-vehicle planners) is the same planner:
+    #: with a shield on (``av.shield``), candidates whose first step it would reject count as
+    #: infeasible
     shield_aware: bool = True
+    #: the model-confidence filter: track how well the model explains the human and plan for
+    #: the worst case when it does not; unset means on exactly when a shield is on
+    confidence_filter: bool | None = None
     #: below this model confidence P(model) the planner stops persuading and only takes
     #: candidates that yield before the conflict or cross it whatever the human does [-]; 0: never
     confidence_threshold: float = 0.2
@@ -256,6 +262,8 @@ class MPCParams:
         if self.p_a_grid is not None:
             _in_range("mpc.p_a_grid", self.p_a_grid, 2, 101, integer=True)
         _flag("mpc.shield_aware", self.shield_aware)
+        if self.confidence_filter is not None:
+            _flag("mpc.confidence_filter", self.confidence_filter)
         _in_range("mpc.confidence_threshold", self.confidence_threshold, 0.0, 1.0)
         _in_range("mpc.confidence_accel_std_mps2", self.confidence_accel_std_mps2, 0.0,
                   lo_open=True)
@@ -645,6 +653,14 @@ class Config:
         if self.av.shield is not None:
             return self.av.shield
         return "off" if self.mode == "paper" else "worst-case"
+
+    @property
+    def confidence_filter(self) -> bool:
+        """The planner's model-confidence filter is on: ``mpc.confidence_filter`` as set,
+        else on exactly when a shield is (:attr:`shield`), as before the setting existed."""
+        if self.mpc.confidence_filter is not None:
+            return self.mpc.confidence_filter
+        return self.shield != "off"
 
     @property
     def p_a_online(self) -> bool:

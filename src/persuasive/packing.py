@@ -44,8 +44,8 @@ CONFLICT, MIN_DIST, MIN_DIST_SQ = _slots("CONFLICT", "MIN_DIST", "MIN_DIST_SQ")
 LANE_SHARED = _slots("LANE_SHARED")[0]
 # The safety shield (docs/method.md §12): its kind (``persuasive.safety.shield.SHIELD_*``), the
 # responsive human's response time [s]; the MPC's use of it (candidates the shield rejects are
-# infeasible: 0/1) and its model-confidence filter (threshold, acceleration width [m/s^2],
-# switching probability per step)
+# infeasible: 0/1) and its model-confidence filter (threshold, 0 when the filter is off;
+# acceleration width [m/s^2], switching probability per step)
 SHIELD, SHIELD_RESPONSE, SHIELD_AWARE, CONF_THRESHOLD, CONF_STD, CONF_SWITCH = _slots(
     "SHIELD", "SHIELD_RESPONSE", "SHIELD_AWARE", "CONF_THRESHOLD", "CONF_STD", "CONF_SWITCH")
 
@@ -146,7 +146,8 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     shared[SHIELD_RESPONSE] = config.av.shield_response_s
     mpc = config.mpc
     shared[SHIELD_AWARE] = float(mpc.shield_aware)
-    shared[CONF_THRESHOLD] = mpc.confidence_threshold
+    # the filter's own switch (Config.confidence_filter): a threshold of 0 never trusts less
+    shared[CONF_THRESHOLD] = mpc.confidence_threshold if config.confidence_filter else 0.0
     shared[CONF_STD] = mpc.confidence_accel_std_mps2
     shared[CONF_SWITCH] = mpc.confidence_switch
     out = []

@@ -38,7 +38,7 @@ from .policies import kind_of, policy_params, state_size
 from .policies.planners import ONLINE_STATE, PRM_ONLINE
 from .policies.step import policy_init, policy_step_buffers
 from .roles import FOLLOWER, LEADER
-from .safety.shield import N_CONFLICT, VERDICTS, conflict_vector, shield_step
+from .safety.filter import ShieldFilter
 from .scenarios import build_scenario
 
 State = tuple[float, float]
@@ -114,9 +114,8 @@ class Planner:
         self._state = np.zeros(state_size(self._prm, self._spec.kind))
         self._online = self._state.shape[0] > kd.STATE_SIZE
         self._k = 0
-        self._conflict = np.empty(N_CONFLICT)
-        conflict_vector(self._P_av, self._P_hv, self._conflict)
-        self._shielded = self.config.shield != "off"
+        self._shield = ShieldFilter.closed_loop(self._P_av, self._P_hv,
+                                                self.config.simulation.dt_s)
         self._tie_given = self.config.effective_quirks.q3_tie_break_leak and \
             self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE)
         self._prm0 = self._prm.copy()
@@ -184,22 +183,27 @@ class Planner:
             raise ConfigError("human_role is required with quirk Q3 (paper mode); "
                               "allowed: leader | follower")
         role = -1 if human_role is None else (LEADER if human_role == "leader" else FOLLOWER)
-        accel, proposed, verdict = self._step(x_R, x_H, role)
-        return self._plan(accel, proposed, verdict)
+        proposed = self._step(x_R, x_H, role)
+        # decide, then filter: the same shield as every world applies (persuasive.safety.filter)
+        accel, code = self._shield.one(proposed, x_R, x_H)
+        return self._plan(accel, proposed, ShieldFilter.name(code))
 
     def accel(self, av: State, hv: State) -> float:
-        """The acceleration [m/s^2] :meth:`plan` returns for the same states, with the same
-        update of the belief and the stored prediction, but without the :class:`Plan`
-        around it and without checking the states: for a caller that plans many times per
-        step and passes finite states with speeds inside the vehicles' limits (the adapter
-        for outside simulators, ``persuasive.envs.external``). Not with quirk Q3 on."""
+        """The acceleration [m/s^2] the planner *proposes* at the same states as :meth:`plan`
+        (its ``proposed_accel_mps2``), with the same update of the belief and the stored
+        prediction, but before the shield, without the :class:`Plan` around it and without
+        checking the states: for a caller that plans against many vehicles and applies the
+        one shield over all of them itself, and that passes finite states with speeds inside
+        the vehicles' limits (the adapter for outside simulators, ``persuasive.envs.external``).
+        Not with quirk Q3 on."""
         if self._tie_given:
             raise ConfigError("Planner.accel cannot take the human's role (quirk Q3, paper "
                               "mode); use Planner.plan")
-        return self._step((float(av[0]), float(av[1])), (float(hv[0]), float(hv[1])), -1)[0]
+        return self._step((float(av[0]), float(av[1])), (float(hv[0]), float(hv[1])), -1)
 
-    def _step(self, x_R: State, x_H: State, role: int) -> tuple[float, float, str | None]:
-        """One decision: ``(applied, proposed, verdict)``; advances the kept state."""
+    def _step(self, x_R: State, x_H: State, role: int) -> float:
+        """One decision, before the shield: the proposed acceleration; advances the kept
+        state."""
         if self._spec.needs_game:
             predict_buffers(x_H[0], x_H[1], x_R[0], x_R[1], self._P_hv, self._P_av, self._disc,
                             *self._hv, *self._av, self._idx, self._q_values, self.work)
@@ -214,12 +218,7 @@ class Planner:
             self._P_av, self._P_hv, self._disc, self.config.simulation.dt_s, self._diag,
             *self._ahead_a, *self._ahead_b, self._ahead, self._log, self.work)
         self._k += 1
-        proposed, verdict = float(accel), None
-        if self._shielded:
-            accel, code = shield_step(x_R[0], x_R[1], proposed, self.config.simulation.dt_s,
-                                      x_H[0], x_H[1], self._conflict)
-            verdict = VERDICTS[code]
-        return float(accel), proposed, verdict
+        return float(accel)
 
     def _plan(self, accel: float, proposed: float, verdict: str | None) -> Plan:
         n = self.config.library.n_samples

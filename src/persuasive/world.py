@@ -38,7 +38,8 @@ from .policies import kinds as kd
 from .policies.step import policy_init, policy_role, policy_step
 from .record import (W_AV_A, W_AV_PROPOSED, W_AV_S, W_AV_V, W_HV_A, W_HV_S, W_HV_V, W_SHIELD,
                      WORLD_LOG, make_record, setup)
-from .safety.shield import N_CONFLICT, conflict_vector, shield_step
+from .safety.filter import ShieldFilter
+from .safety.shield import N_CONFLICT, conflict_vector, shield_filter
 
 
 # -- measuring and advancing (shared by both loops) --------------------------------------------
@@ -112,9 +113,12 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
     policy_init(av_kind, av_prm, av_st, P_av[slot.PRIOR_L])
     policy_init(hv_kind, hv_prm, hv_st, P_hv[slot.PRIOR_L])
     need_game, need_av_lib, av_uses_libs = needs[0], needs[1], needs[2]
-    shielded = P_av[slot.SHIELD] != slot.SHIELD_OFF
-    conflict = np.empty(N_CONFLICT)
-    conflict_vector(P_av, P_hv, conflict)
+    # the shield (one conflict): decide, then filter (persuasive.safety.filter)
+    shield_kind = P_av[slot.SHIELD]
+    conflict = np.empty((1, N_CONFLICT))
+    conflict_vector(P_av, P_hv, conflict[0])
+    sh_s_R, sh_s_H, sh_v_H = np.zeros(1), np.zeros(1), np.zeros(1)
+    sh_lead, sh_window = np.zeros(3), np.empty((1, 3))
     no_draws = np.zeros(2)
     x = np.empty(4)
     x[:] = x0
@@ -150,10 +154,10 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
                            P_av, P_hv, disc, dt, diag, lib_h1a, lib_h1b, ahead, av_log[k], work)
         row = world_log[k]
         row[W_AV_PROPOSED] = a_av
-        row[W_SHIELD] = -1.0
-        if shielded:
-            a_av, verdict = shield_step(ms_av, mv_av, a_av, dt, ms_hv, mv_hv, conflict)
-            row[W_SHIELD] = verdict
+        sh_s_R[0], sh_s_H[0], sh_v_H[0] = ms_av, ms_hv, mv_hv
+        a_av, verdict = shield_filter(shield_kind, a_av, mv_av, dt, sh_s_R, sh_s_H, sh_v_H,
+                                      conflict, sh_lead, sh_window)
+        row[W_SHIELD] = verdict
         if timed:
             av_time_ns[k] = (_clock_ns() - t1) + (t_libs if av_uses_libs else 0)
         row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
@@ -266,9 +270,7 @@ class PythonWorld:
         self.n_steps = n = config.simulation.n_steps
         self.dt = config.simulation.dt_s
         self.games = GameCache(s.P_av, s.P_hv, s.disc)
-        self.conflict = np.empty(N_CONFLICT)
-        conflict_vector(s.P_av, s.P_hv, self.conflict)
-        self.shielded = s.P_av[slot.SHIELD] != slot.SHIELD_OFF
+        self.shield = ShieldFilter.closed_loop(s.P_av, s.P_hv, self.dt)
         st = s.streams
         for policy, side, draws, rng in ((self.av, kd.AV, st.draws_av, st.av_rng),
                                          (self.hv, kd.HV, st.draws_hv, st.hv_rng)):
@@ -311,10 +313,9 @@ class PythonWorld:
         t1 = time.perf_counter_ns()
         a_av = float(self.av.act(obs))
         row = self.world_log[k]
-        row[W_AV_PROPOSED], row[W_SHIELD] = a_av, -1.0
-        if self.shielded:  # the same filter as the compiled loop, after any AV policy
-            a_av, verdict = shield_step(ms_av, mv_av, a_av, self.dt, ms_hv, mv_hv, self.conflict)
-            row[W_SHIELD] = verdict
+        row[W_AV_PROPOSED] = a_av
+        # the same filter as the compiled loop, after any AV policy
+        a_av, row[W_SHIELD] = self.shield.one(a_av, (ms_av, mv_av), (ms_hv, mv_hv))
         own = t_game if getattr(self.av, "needs_game", False) else 0
         self.av_ms[k] = (time.perf_counter_ns() - t1 + own) / 1e6
         self.av_log[k, :len(self.av.log_columns)] = _last_log(self.av)

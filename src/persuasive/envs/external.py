@@ -16,7 +16,8 @@ for every simulator (:class:`ExternalPlanner`):
 - **the most cautious answer**: the lowest of their accelerations, and an IDM gap to a vehicle
   ahead in the ego's own lane (``config.hv.idm``, the ego's ``v_max`` as desired speed);
   without a conflict, full throttle up to ``v_max``;
-- **the shield over all of them** (``persuasion.safety.shield.shield_step_many``): the
+- **the shield over all of them** (``persuasive.safety.shield.shield_filter``, the filter
+  every world applies, through :class:`persuasive.safety.filter.ShieldFilter`): the
   acceleration is admitted only if one fallback (brake or go) stays certified against every
   conflicting vehicle and every vehicle ahead in the lane at once, otherwise that fallback is
   applied. A vehicle ahead in the lane is a *follow* conflict: the ego is already in the
@@ -46,6 +47,7 @@ import numpy as np
 from ..config import Config
 from ..packing import SHIELD_KIND_IDS
 from ..safety import shield as sh
+from ..safety.filter import ShieldFilter
 
 #: Kinds of conflict: the paths cross once; the other joins the ego's lane (a merge); the
 #: other is ahead in the ego's lane (follow).
@@ -151,8 +153,10 @@ class ExternalPlanner:
         self._human = Limits.of(config, "hv")
         self._planners: dict[Hashable, Any] = {}
         self._made = 0
-        # the per-vehicle planners do not shield: the shield runs once, over all vehicles
-        self._planner_config = config.with_overrides({"av.shield": "off"})
+        # the per-vehicle planners are the closed loop's planner (the same configuration,
+        # features that anticipate the shield included); they only propose (Planner.accel):
+        # the one shield filters once, over all vehicles
+        self._shield = ShieldFilter(SHIELD_KIND_IDS[config.shield], 0.0)
         from ..record import static_setup
 
         self._clear_m = float(static_setup(config)[0].hv.clear_s)
@@ -163,7 +167,7 @@ class ExternalPlanner:
         if planner is None:
             from ..planner import Planner
 
-            planner = self._planners[key] = Planner(self._planner_config,
+            planner = self._planners[key] = Planner(self.config,
                                                     seed=self.seed * 1000 + self._made)
             self._made += 1
         return planner
@@ -208,25 +212,28 @@ class ExternalPlanner:
         if leader is not None:
             a = min(a, idm_follow(self.config, v, leader))
         a = min(max(a, ego.u_min_mps2), ego.u_max_mps2)
-        proposed, verdict = a, None
-        if self.config.shield != "off":
-            a, verdict = self.shield(v, proposed, conflicts, dt_s, shield_lead_m)
+        proposed = a
+        a, verdict = self.shield(v, proposed, conflicts, dt_s, shield_lead_m)
         return Decision(float(a), float(proposed), verdict, len(accels), len(conflicts))
 
     def shield(self, ego_v_mps: float, proposed_mps2: float, conflicts: Sequence[Conflict],
                dt_s: float, shield_lead_m: float | Callable[[float], float] = 0.0
-               ) -> tuple[float, str]:
+               ) -> tuple[float, str | None]:
         """The shield alone (no planning): ``(acceleration to apply [m/s^2], verdict)`` for
         the proposal ``proposed_mps2`` at speed ``ego_v_mps`` among ``conflicts``, as
-        :meth:`act` applies it (``shield_lead_m``: as there)."""
+        :meth:`act` applies it (``shield_lead_m``: as there; verdict None: no shield,
+        ``config.shield = "off"``)."""
+        a = float(proposed_mps2)
+        if not self._shield.on:
+            return a, None
         ego = self.ego
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
         s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
-        a = float(proposed_mps2)
         lead = shield_lead_m if callable(shield_lead_m) else (lambda _: float(shield_lead_m))
-        a, code = sh.shield_step_many(v, a, dt_s, s_R, s_H, v_H, C, lead(a),
-                                      lead(ego.u_min_mps2), lead(ego.u_max_mps2))
-        return float(a), sh.VERDICTS[code]
+        self._shield.dt_s = float(dt_s)
+        a, code = self._shield.among(a, v, s_R, s_H, v_H, C,
+                                     (lead(a), lead(ego.u_min_mps2), lead(ego.u_max_mps2)))
+        return a, ShieldFilter.name(code)
 
 
 def idm_follow(config: Config, v: float, leader: tuple[float, float]) -> float:

@@ -915,9 +915,9 @@ MAX_EPISODES = 10_000
 def planner_kernels() -> tuple:
     """The compiled functions the planner's decisions run (for the first-use notice)."""
     from ..policies.step import policy_step_buffers
-    from ..safety.shield import shield_step_many
+    from ..safety.shield import shield_filter
 
-    return policy_step_buffers, shield_step_many
+    return policy_step_buffers, shield_filter
 
 
 def check_study(scenario: str, episodes: int, seed: int, flow_veh_h: float,

@@ -14,14 +14,16 @@
 The persuasive and passive planners hold the belief ``q`` on the human's role and the stored
 one-step prediction of the human per role (§6 step 6).
 
-**Knowing the shield** (docs/method.md §12.3; only with ``av.shield`` on): with
-``mpc.shield_aware``, a candidate whose first acceleration the shield would reject is not
-feasible, so the planner does not persuade itself into a corner the shield then brakes it out
-of. The MPC planners also track their confidence in the human model
-(``persuasive.safety.confidence``); below ``mpc.confidence_threshold`` they stop trying to
-persuade: only candidates that stand before the conflict at their end (yield smoothly) or
+**Knowing the shield** (docs/method.md §12.3), two settings of the planner, not of the
+shield (a planner whose proposals another loop filters is the same planner): with
+``mpc.shield_aware`` and a shield on (``av.shield``), a candidate whose first acceleration
+the shield would reject is not feasible, so the planner does not persuade itself into a
+corner the shield then brakes it out of. With ``mpc.confidence_filter`` (unset: on exactly
+when a shield is) the persuasive and passive planners track their confidence in the human
+model (``persuasive.safety.confidence``); below ``mpc.confidence_threshold`` they stop trying
+to persuade: only candidates that stand before the conflict at their end (yield smoothly) or
 that the worst-case shield certifies to cross whatever the human does remain (when none does,
-the shield-admitted ones). With the ``responsive`` shield, which trusts the human to brake in
+the shield-admitted ones, or all without a shield). With the ``responsive`` shield, which trusts the human to brake in
 time, this is what protects the AV from a human the model does not explain.
 """
 
@@ -87,12 +89,14 @@ def shield_allowed(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib,
                    P_av: np.ndarray, P_hv: np.ndarray, robust: bool,
                    allowed: np.ndarray) -> int:
     """Which candidates may count as feasible, into ``allowed`` (docs/method.md §12.3); returns
-    how many. Without the shield (or with ``mpc.shield_aware`` off) all of them; otherwise those
-    whose first acceleration the shield admits; ``robust`` (the model does not explain the
-    human): only those that stand before the conflict at their end or that the worst-case
-    shield certifies to cross now, whatever the shield's own kind (if none, as before)."""
+    how many. ``robust`` (the confidence filter, ``mpc.confidence_filter``: the model does not
+    explain the human): only those that stand before the conflict at their end or that the
+    worst-case shield certifies to cross now, whatever the shield's own kind, on or off (if
+    none, as if not robust). Otherwise, with a shield on and ``mpc.shield_aware``, those whose
+    first acceleration the shield admits; without, all of them."""
     n_traj = allowed.shape[0]
-    if P_av[slot.SHIELD] == slot.SHIELD_OFF or P_av[slot.SHIELD_AWARE] == 0.0:
+    aware = P_av[slot.SHIELD] != slot.SHIELD_OFF and P_av[slot.SHIELD_AWARE] != 0.0
+    if not aware and not robust:
         allowed[:] = True
         return n_traj
     C = np.empty(N_CONFLICT)
@@ -112,6 +116,9 @@ def shield_allowed(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib,
         C[C_KIND] = kind
         if count > 0:
             return count
+    if not aware:
+        allowed[:] = True
+        return n_traj
     t_in, t_out, past = human_window(s_H, v_H, C)
     for c in range(n_traj):
         allowed[c] = admissible(s_R, v_R, lib_r.A[0, c], dt, s_H, v_H, C, t_in, t_out, past)
@@ -143,7 +150,7 @@ def mpc_step(st: np.ndarray, prm: np.ndarray, persuade: bool, s_R: float, v_R: f
     initial role; without Q3, the most likely HV role under ``q`` (ties: L). ``diag``, ``log``,
     ``lib_h1a``, ``lib_h1b``, ``ahead``: see :func:`persuasive.mpc.decide`.
     """
-    tracking = (P_av[slot.SHIELD] != slot.SHIELD_OFF and P_av[slot.CONF_THRESHOLD] > 0.0)
+    tracking = P_av[slot.CONF_THRESHOLD] > 0.0  # the confidence filter (mpc.confidence_filter)
     online = persuade and prm[PRM_ONLINE] > 0.0  # a posterior over p_a (persuasive.online)
     p_hat = prm[PRM_P_A_HAT]
     if st[READY] == 0.0:

@@ -59,9 +59,12 @@ a safe one. The ``responsive`` kind is *not* a guarantee against every human: it
 human does anything for ``rho`` seconds and then brakes at its ``u_min`` (the frontier between
 safety and persuasion, docs/method.md §12.5).
 
-The kernels take a **conflict vector** ``C`` (``N_CONFLICT`` floats, :func:`conflict_vector`)
-so that the closed loop (one conflict, from the scenario) and the adapter for outside
-simulators (one per other vehicle: ``persuasive.envs.external``) share them.
+**One filter in one place.** :func:`shield_filter` is the only entry point that applies the
+shield: every loop and adapter (the compiled closed loop, the Python loop, ``Planner``, the
+adapter for outside simulators) first lets its policy propose, then calls it (through
+:class:`persuasive.safety.filter.ShieldFilter` from Python). It takes one **conflict vector**
+``C`` (``N_CONFLICT`` floats, :func:`conflict_vector`) per other vehicle: the closed loop has
+one, from the scenario; an outside simulator one per vehicle (``persuasive.envs.external``).
 """
 
 from __future__ import annotations
@@ -82,8 +85,8 @@ from ..kinematics import saturated_step
  C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX) = range(16)
 N_CONFLICT = 16
 
-#: Verdicts of :func:`shield_step` (the world logs them per step).
-ADMITTED, BRAKE, GO, UNCERTIFIED = 0, 1, 2, 3
+#: Verdicts of :func:`shield_filter` (the world logs them per step); ``OFF``: no shield.
+ADMITTED, BRAKE, GO, UNCERTIFIED, OFF = 0, 1, 2, 3, -1
 VERDICTS = ("admitted", "brake", "go", "uncertified")
 
 #: Margin on every compared time, against the AV [s]: far below anything physical, far above
@@ -356,80 +359,84 @@ def yields_before(s: float, v: float, C: np.ndarray) -> bool:
     return reach_time(s, v, C[C_R_UMIN], C[C_R_LO], C[C_R_VMIN], C[C_R_VMAX]) == _INF
 
 
-@njit(cache=True, _nrt=False)
-def _fallback(s_R: float, v_R: float, dt: float, s_H: float, v_H: float, C: np.ndarray,
-              t_in_H: float, t_out_H: float, past: bool) -> tuple[float, int]:
-    u_min, u_max = C[C_R_UMIN], C[C_R_UMAX]
-    if certified(s_R, v_R, u_min, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past):
-        return u_min, BRAKE
-    if certified(s_R, v_R, u_max, dt, u_max, s_H, v_H, C, t_in_H, t_out_H, past):
-        return u_max, GO
-    # no certified fallback (a state outside the invariant set): the one whose possible
-    # overlap starts latest, or is shortest (ties: brake)
-    sb, lb = threat(s_R, v_R, u_min, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past)
-    sg, lg = threat(s_R, v_R, u_max, dt, u_max, s_H, v_H, C, t_in_H, t_out_H, past)
-    return (u_max if _worse(sb, lb, sg, lg) else u_min), UNCERTIFIED
-
-
-@njit(cache=True, _nrt=False)
-def shield_step(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
-                C: np.ndarray) -> tuple[float, int]:
-    """The shield around one proposed acceleration ``a``: ``(applied acceleration, verdict)``
-    (``ADMITTED``, ``BRAKE``, ``GO`` or ``UNCERTIFIED``; module docstring)."""
-    t_in_H, t_out_H, past = human_window(s_H, v_H, C)
-    if admissible(s_R, v_R, a, dt, s_H, v_H, C, t_in_H, t_out_H, past):
-        return a, ADMITTED
-    return _fallback(s_R, v_R, dt, s_H, v_H, C, t_in_H, t_out_H, past)
-
-
 @njit(cache=True)
-def shield_step_many(v_R: float, a: float, dt: float, s_R: np.ndarray, s_H: np.ndarray,
-                     v_H: np.ndarray, C: np.ndarray, lead_a: float = 0.0,
-                     lead_brake: float = 0.0, lead_go: float = 0.0) -> tuple[float, int]:
-    """The shield against several other vehicles at once (one conflict each: ``s_R[j]`` the
-    AV's position in conflict ``j``'s coordinates, ``s_H[j], v_H[j]`` the other's, ``C[j]``
-    its conflict vector). A trajectory is certified only with one fallback against all of
-    them: ``a`` is admitted if "``a``, then ``F``" is certified against every vehicle for
-    ``F = BRAKE`` or for ``F = GO``; otherwise ``BRAKE`` or ``GO`` if certified against all.
+def shield_filter(kind: float, a: float, v_R: float, dt: float, s_R: np.ndarray,
+                  s_H: np.ndarray, v_H: np.ndarray, C: np.ndarray, lead: np.ndarray,
+                  window: np.ndarray) -> tuple[float, int]:
+    """**The** filter: every loop and adapter applies the shield through this one entry point
+    (the closed loop with one conflict, an outside simulator with one per other vehicle),
+    after its policy has proposed ``a``; returns ``(applied acceleration, verdict)``.
 
-    ``lead_a``, ``lead_brake``, ``lead_go`` [m]: how much further along its path the AV is
-    taken when its first step is ``a``, ``u_min`` or ``u_max`` (0: the exact kinematics). A
-    simulator that integrates differently from the exact step (highway-env's Euler step,
+    ``kind``: the shield's kind (``persuasive.packing.SHIELD_*``; ``SHIELD_OFF``: ``a`` is
+    applied as proposed, verdict :data:`OFF`). Conflict ``j`` (of ``n = len(s_R)``, none at
+    all: admitted): ``s_R[j]`` the AV's position in its coordinates, ``s_H[j], v_H[j]`` the
+    other vehicle's state, ``C[j]`` its conflict vector (:func:`conflict_vector`). A
+    trajectory is certified only with one fallback against all of them: ``a`` is admitted if
+    "``a``, then ``F``" is certified against every vehicle for ``F = BRAKE`` or for
+    ``F = GO``; otherwise ``BRAKE`` or ``GO`` if certified against all; otherwise
+    (``UNCERTIFIED``) the fallback whose first possible overlap, over all the vehicles,
+    starts latest, or whose overlaps are shortest in all (ties: brake).
+
+    ``lead`` ``(3,)`` [m]: how much further along its path the AV is taken when its first
+    step is ``a``, ``u_min`` or ``u_max`` (zeros: the exact kinematics). A simulator that
+    integrates differently from the exact step (highway-env's Euler step,
     :func:`persuasive.envs.highway.euler_shift`) hands in how much further its vehicle rolls
-    to a stop after that first step than the exact kinematics say."""
+    to a stop after that first step than the exact kinematics say. ``window``: scratch for the
+    humans' windows, ``(n, 3)`` or larger (the caller keeps it, so that a step allocates
+    nothing; a smaller one is replaced by a new one)."""
+    if kind == slot.SHIELD_OFF:
+        return a, OFF
     n = s_R.shape[0]
     if n == 0:
         return a, ADMITTED
-    t_in = np.empty(n)
-    t_out = np.empty(n)
-    past = np.empty(n, np.bool_)
+    if window.shape[0] < n:
+        window = np.empty((n, 3))
     for j in range(n):
-        t_in[j], t_out[j], past[j] = human_window(s_H[j], v_H[j], C[j])
+        t_in, t_out, past = human_window(s_H[j], v_H[j], C[j])
+        window[j, 0], window[j, 1], window[j, 2] = t_in, t_out, 1.0 if past else 0.0
     u_min, u_max = C[0, C_R_UMIN], C[0, C_R_UMAX]
-    for first, fb, verdict, lead in ((a, u_min, ADMITTED, lead_a), (a, u_max, ADMITTED, lead_a),
-                                     (u_min, u_min, BRAKE, lead_brake),
-                                     (u_max, u_max, GO, lead_go)):
+    for i in range(4):
+        first = a if i < 2 else (u_min if i == 2 else u_max)
+        fb = u_min if i == 0 or i == 2 else u_max
+        shift = lead[0] if i < 2 else lead[i - 1]
         ok = True
         for j in range(n):
-            if not certified(s_R[j] + lead, v_R, first, dt, fb, s_H[j], v_H[j], C[j], t_in[j],
-                             t_out[j], past[j]):
+            if not certified(s_R[j] + shift, v_R, first, dt, fb, s_H[j], v_H[j], C[j],
+                             window[j, 0], window[j, 1], window[j, 2] != 0.0):
                 ok = False
                 break
         if ok:
-            return first, verdict
-    # no fallback certified against all: the one whose first possible overlap, over all the
-    # vehicles, starts latest, or whose overlaps are shortest in all (ties: brake)
+            return first, (ADMITTED if i < 2 else (BRAKE if i == 2 else GO))
     sb, lb, sg, lg = _INF, 0.0, _INF, 0.0
     for j in range(n):
-        s, length = threat(s_R[j] + lead_brake, v_R, u_min, dt, u_min, s_H[j], v_H[j], C[j],
-                           t_in[j], t_out[j], past[j])
+        past = window[j, 2] != 0.0
+        s, length = threat(s_R[j] + lead[1], v_R, u_min, dt, u_min, s_H[j], v_H[j], C[j],
+                           window[j, 0], window[j, 1], past)
         sb, lb = min(sb, s), lb + length
-        s, length = threat(s_R[j] + lead_go, v_R, u_max, dt, u_max, s_H[j], v_H[j], C[j],
-                           t_in[j], t_out[j], past[j])
+        s, length = threat(s_R[j] + lead[2], v_R, u_max, dt, u_max, s_H[j], v_H[j], C[j],
+                           window[j, 0], window[j, 1], past)
         sg, lg = min(sg, s), lg + length
     return (u_max if _worse(sb, lb, sg, lg) else u_min), UNCERTIFIED
 
 
-__all__ = ["ADMITTED", "BRAKE", "GO", "N_CONFLICT", "TIME_MARGIN_S", "UNCERTIFIED", "VERDICTS",
-           "admissible", "certified", "conflict_vector", "go_certified", "human_window",
-           "profile_reach", "reach_time", "shield_step", "shield_step_many", "yields_before"]
+@njit(cache=True)
+def shield_step(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
+                C: np.ndarray) -> tuple[float, int]:
+    """:func:`shield_filter` against one other vehicle at ``(s_H, v_H)``, the AV at
+    ``(s_R, v_R)``, conflict vector ``C`` (its kind from ``C``): ``(applied acceleration,
+    verdict)``. A convenience for one-off questions (it allocates); the loops keep their
+    buffers and call :func:`shield_filter`."""
+    return shield_filter(C[C_KIND], a, v_R, dt, np.full(1, s_R), np.full(1, s_H),
+                         np.full(1, v_H), C.reshape(1, C.shape[0]), np.zeros(3),
+                         np.empty((1, 3)))
+
+
+def verdict_name(code: int) -> str | None:
+    """The name of verdict ``code`` (:data:`VERDICTS`); None for :data:`OFF` (no shield)."""
+    return None if code == OFF else VERDICTS[code]
+
+
+__all__ = ["ADMITTED", "BRAKE", "GO", "N_CONFLICT", "OFF", "TIME_MARGIN_S", "UNCERTIFIED",
+           "VERDICTS", "admissible", "certified", "conflict_vector", "go_certified",
+           "human_window", "profile_reach", "reach_time", "shield_filter", "shield_step",
+           "verdict_name", "yields_before"]

@@ -1,0 +1,88 @@
+"""The shield as every loop and adapter applies it: decide, then filter (docs/method.md §12.2).
+
+A step of any world is the same two halves: the AV's policy *decides* (proposes an
+acceleration from what it measured), then the shield *filters* the proposal through its one
+compiled entry point, :func:`persuasive.safety.shield.shield_filter`, which returns the
+acceleration to apply and a verdict. The compiled closed loop (``persuasive.world.run_loop``)
+calls that entry point directly; everything in Python (the Python loop, ``Planner``, the
+adapter for outside simulators and through it highway-env and SUMO) calls it through a
+:class:`ShieldFilter`, which holds the shield's kind (its one encoding: the packed
+``SHIELD_*`` id), the step and the buffers, so that a step allocates nothing and every check
+the shield makes is written once.
+
+The planner's own features that anticipate the shield are settings of the planner, not of the
+shield (``mpc.shield_aware``, ``mpc.confidence_filter``): an outside simulator's per-vehicle
+planners are the same planner as in the closed loop; they only leave the filtering to the one
+shield over all the vehicles.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .. import packing as slot
+from .shield import N_CONFLICT, OFF, conflict_vector, shield_filter, verdict_name
+
+
+class ShieldFilter:
+    """The shield of one AV: ``kind`` (``persuasive.packing.SHIELD_*``, or its name), applied
+    every ``dt_s`` seconds. :meth:`one` filters against the closed loop's one other vehicle
+    (its conflict vector from :meth:`closed_loop`); :meth:`among` against any number of
+    outside vehicles at once."""
+
+    __slots__ = ("kind", "dt_s", "on", "_C", "_s_R", "_s_H", "_v_H", "_lead", "_window")
+
+    def __init__(self, kind: float | str, dt_s: float, conflict: np.ndarray | None = None):
+        self.kind = float(slot.SHIELD_KIND_IDS[kind] if isinstance(kind, str) else kind)
+        self.dt_s = float(dt_s)
+        self.on = self.kind != slot.SHIELD_OFF  #: False: every proposal is applied as is
+        self._C = (np.zeros((1, N_CONFLICT)) if conflict is None
+                   else np.asarray(conflict, float).reshape(1, N_CONFLICT))
+        self._s_R, self._s_H, self._v_H = np.zeros(1), np.zeros(1), np.zeros(1)
+        self._lead = np.zeros(3)
+        self._window = np.empty((1, 3))
+
+    @classmethod
+    def closed_loop(cls, P_av: np.ndarray, P_hv: np.ndarray, dt_s: float) -> ShieldFilter:
+        """The filter of a two-vehicle world from its packed parameters (kind ``P_av[SHIELD]``,
+        the conflict vector of the two paths)."""
+        C = np.empty(N_CONFLICT)
+        conflict_vector(P_av, P_hv, C)
+        return cls(P_av[slot.SHIELD], dt_s, C)
+
+    def one(self, proposed: float, x_R: Sequence[float], x_H: Sequence[float]
+            ) -> tuple[float, int]:
+        """Filter ``proposed`` with the AV at ``x_R = (s, v)`` and the other vehicle at
+        ``x_H`` (the conflict given at construction): ``(applied, verdict code)``."""
+        if not self.on:
+            return proposed, OFF
+        self._s_R[0], self._s_H[0], self._v_H[0] = x_R[0], x_H[0], x_H[1]
+        a, code = shield_filter(self.kind, proposed, x_R[1], self.dt_s, self._s_R, self._s_H,
+                                self._v_H, self._C, self._lead, self._window)
+        return float(a), int(code)
+
+    def among(self, proposed: float, v_R: float, s_R: np.ndarray, s_H: np.ndarray,
+              v_H: np.ndarray, C: np.ndarray, lead: Sequence[float] = (0.0, 0.0, 0.0)
+              ) -> tuple[float, int]:
+        """Filter ``proposed`` at AV speed ``v_R`` against ``n`` other vehicles (``s_R[j],
+        s_H[j], v_H[j], C[j]``: :func:`~persuasive.safety.shield.shield_filter`; ``lead``
+        too): ``(applied, verdict code)``."""
+        if not self.on:
+            return proposed, OFF
+        n = s_R.shape[0]
+        if self._window.shape[0] < n:
+            self._window = np.empty((n, 3))
+        self._lead[:] = lead
+        a, code = shield_filter(self.kind, proposed, v_R, self.dt_s, s_R, s_H, v_H, C,
+                                self._lead, self._window)
+        return float(a), int(code)
+
+    @staticmethod
+    def name(code: int) -> str | None:
+        """A verdict's name ("admitted", "brake", "go", "uncertified"; None: no shield)."""
+        return verdict_name(code)
+
+
+__all__ = ["ShieldFilter"]
