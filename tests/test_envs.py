@@ -144,7 +144,8 @@ def test_reward_is_the_papers_step_reward_from_the_logged_states(controlled):
     """Full throttle against an opponent that does not yield: the pair comes within the
     safety distance, so the collision term is exercised too."""
     other = "persuasive" if controlled == "hv" else "aggressive"
-    env = gym.make("persuasive/Intersection-v0", controlled=controlled, other_kind=other)
+    env = gym.make("persuasive/Intersection-v0", controlled=controlled, other_kind=other,
+                   config={"mode": "paper"})  # no shield: the pair may come close
     steps = _episode(env, [1.0] * 61, 1)
     record = env.unwrapped.record()
     states, c = record.states, env.unwrapped.config
@@ -164,8 +165,10 @@ def test_reward_is_the_papers_step_reward_from_the_logged_states(controlled):
 
 def test_terminates_on_collision():
     """The agent's AV at full throttle against the aggressive human (full throttle, never
-    yields): they collide, and the episode ends at the first step whose footprints overlap."""
-    env = gym.make("persuasive/Intersection-v0", controlled="av", other_kind="aggressive")
+    yields): they collide, and the episode ends at the first step whose footprints overlap
+    (paper mode: without the shield, which would brake the agent's AV)."""
+    env = gym.make("persuasive/Intersection-v0", controlled="av", other_kind="aggressive",
+                   config={"mode": "paper"})
     steps = _episode(env, [1.0] * 61, 2)
     *_, (_, _, terminated, truncated, info) = steps
     assert terminated and not truncated and info["collision"]
@@ -173,6 +176,25 @@ def test_terminates_on_collision():
     overlap = env.unwrapped.scenario.collides(record.states[:, 0], record.states[:, 2])
     assert overlap[-1] and not overlap[:-1].any()
     assert len(steps) - 1 < 61
+
+
+def test_the_default_is_the_planners_shielded_configuration():
+    """gym.make's default is Planner()'s: corrected mode with the worst-case shield. A human
+    agent at full throttle never hits the AV (in paper mode, the paper's unshielded loop, it
+    does in some of the same seeds)."""
+    env = gym.make("persuasive/Intersection-v0", disable_env_checker=True)
+    config = env.unwrapped.config
+    assert config.mode == "corrected" and config.shield == "worst-case"
+    assert config == Planner().config.with_overrides({"scenario.kind": "intersection"})
+    paper = gym.make("persuasive/Intersection-v0", disable_env_checker=True,
+                     config={"mode": "paper"})
+    hits = {}
+    for name, e in (("default", env), ("paper", paper)):
+        hits[name] = 0
+        for seed in range(20):
+            *_, (_, _, terminated, _, info) = _episode(e, [1.0] * 61, seed)
+            hits[name] += bool(info["collision"])
+    assert hits["default"] == 0 and hits["paper"] > 0, hits
 
 
 def test_terminates_when_both_have_cleared():

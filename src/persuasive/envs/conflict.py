@@ -106,8 +106,8 @@ class DecidedPolicy:
 
 
 def _as_config(config: Config | dict | str | Path | None) -> Config:
-    if config is None:
-        return Config()
+    if config is None:  # Planner()'s default: corrected mode, the worst-case shield on
+        return Config(mode="corrected")
     if isinstance(config, Config):
         return config
     if isinstance(config, dict):
@@ -127,8 +127,10 @@ class ConflictEnv(gym.Env):
     ----------
     config : Config, dict or str, optional
         All parameters (a :class:`~persuasive.config.Config`, a dict as in a TOML file, or a
-        TOML file name); default ``Config()`` (paper mode, as ``simulate``). The registered
-        id's scenario replaces ``scenario.kind``.
+        TOML file name); default ``Config(mode="corrected")``, as :class:`~persuasive.Planner`:
+        the worst-case shield filters the AV's accelerations, the planner's or the agent's
+        (``{"mode": "paper"}`` runs the paper's unshielded closed loop, as ``simulate``'s
+        default). The registered id's scenario replaces ``scenario.kind``.
     scenario : str, optional
         Scenario kind (set by the registered id).
     controlled : {"hv", "av"}
