@@ -5,6 +5,7 @@ anticipate the shield are its own settings."""
 from __future__ import annotations
 
 import ast
+import math
 from pathlib import Path
 
 import numpy as np
@@ -94,7 +95,7 @@ def test_the_filter_off_passes_every_proposal():
 
 
 def test_the_filter_among_no_vehicles_admits_and_grows_its_scratch():
-    filt = ShieldFilter("worst-case", 0.1)
+    filt = ShieldFilter("worst-case", 0.1, -4.5)
     empty = np.zeros(0)
     assert filt.among(0.7, 5.0, empty, empty, empty, np.zeros((0, sh.N_CONFLICT))) == \
         (0.7, sh.ADMITTED)
@@ -105,7 +106,7 @@ def test_the_filter_among_no_vehicles_admits_and_grows_its_scratch():
     s_R, s_H, v_H, C = X.conflict_arrays(conflicts, config, ego)
     got = filt.among(1.0, 6.0, s_R, s_H, v_H, C)
     # one fresh filter per call: the scratch kept from a larger call changes nothing
-    assert got == ShieldFilter("worst-case", 0.1).among(1.0, 6.0, s_R, s_H, v_H, C)
+    assert got == ShieldFilter("worst-case", 0.1, -4.5).among(1.0, 6.0, s_R, s_H, v_H, C)
     assert filt.among(1.0, 6.0, s_R[:1], s_H[:1], v_H[:1], C[:1]) == \
         sh.shield_step(s_R[0], 6.0, 1.0, 0.1, s_H[0], v_H[0], C[0])
 
@@ -172,3 +173,84 @@ def test_outside_simulators_plan_with_the_closed_loops_planner():
         assert (decision.accel_mps2, decision.verdict) == (plan.accel_mps2, plan.shield_verdict)
         differs += unaware.accel((s_av, v_av), (s_hv, v_hv)) != plan.proposed_accel_mps2
     assert differs > 0  # the planner without its shield features is another planner here
+
+
+# -- non-finite proposals ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_non_finite_proposal_is_never_admitted(bad):
+    """NaN compares false everywhere, so the reach times once took it as a constant speed and
+    admitted it: the filter now applies a fallback (finite) in every state."""
+    config = Config(mode="corrected")
+    filt, C = _closed_loop_filter(config)
+    rng = np.random.default_rng(11)
+    u_min, u_max = C[sh.C_R_UMIN], C[sh.C_R_UMAX]
+    seen = set()
+    for _ in range(300):
+        x_R = (rng.uniform(-40.0, 10.0), rng.uniform(0.0, 8.0))
+        x_H = (rng.uniform(-40.0, 10.0), rng.uniform(0.0, 8.0))
+        a, code = filt.one(bad, x_R, x_H)
+        assert code in (sh.BRAKE, sh.GO, sh.UNCERTIFIED) and a in (u_min, u_max)
+        seen.add(code)
+    assert {sh.BRAKE, sh.GO} <= seen
+    among = ShieldFilter("worst-case", 0.1, -4.5)
+    empty = np.zeros(0)
+    assert among.among(bad, 5.0, empty, empty, empty, np.zeros((0, sh.N_CONFLICT))) == \
+        (-4.5, sh.BRAKE)
+    off, _ = _closed_loop_filter(config.with_overrides({"av.shield": "off"}))
+    with pytest.raises(ValueError, match=r"non-finite acceleration .* \(av\.shield = off\)"):
+        off.one(bad, (-20.0, 4.0), (-20.0, 4.0))
+
+
+class _Proposer:
+    """An AV policy that proposes NaN at step 5 and full throttle otherwise."""
+
+    log_columns = ()
+    needs_game = False
+
+    def reset(self, context, rng):
+        self.k = -1
+
+    def act(self, observation):
+        self.k += 1
+        return math.nan if self.k == 5 else 1.0
+
+
+def test_no_world_propagates_a_non_finite_state():
+    from persuasive.world import PythonWorld
+
+    config = Config(mode="corrected")
+    world = PythonWorld(config, 3, av=_Proposer())
+    while not world.done:
+        world.step()
+    record = world.record()
+    assert np.isfinite(record.states).all()
+    assert math.isnan(record.log["av_proposed_accel_mps2"][5])
+    assert record.log["shield_verdict"][5] in (sh.BRAKE, sh.GO, sh.UNCERTIFIED)
+    assert np.isfinite(record.log["av_accel_mps2"]).all()
+    bare = PythonWorld(config.with_overrides({"av.shield": "off"}), 3, av=_Proposer())
+    with pytest.raises(ValueError, match="non-finite"):
+        while not bare.done:
+            bare.step()
+    assert np.isfinite(bare.states[:bare.k + 1]).all()
+
+    class NaNHuman(_Proposer):
+        def act(self, observation):
+            return math.nan
+
+    human = PythonWorld(config, 3, hv=NaNHuman())
+    with pytest.raises(ValueError, match="human's policy returned a non-finite"):
+        human.step()
+
+
+def test_the_adapter_replaces_a_non_finite_proposal():
+    config = Config(mode="corrected")
+    planner = X.ExternalPlanner(config)
+    c = X.Conflict(0, X.CROSSING, -12.76, -15.0, 4.0, (-4.9, 4.9), (-4.9, 4.9))
+    a, verdict = planner.shield(5.0, math.nan, [c], 0.1)
+    assert math.isfinite(a) and verdict in ("brake", "go", "uncertified")
+    bare = X.ExternalPlanner(config.with_overrides({"av.shield": "off"}))
+    with pytest.raises(ValueError, match="non-finite"):
+        bare.shield(5.0, math.nan, [c], 0.1)
+    assert bare.shield(5.0, 0.5, [c], 0.1) == (0.5, None)

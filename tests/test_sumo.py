@@ -210,7 +210,8 @@ def _crossing_row(other=X.Limits(5.0, 1.8, -9.0, 2.6, 0.0, 13.89)):
 
 def _filter(v, a, s_R, s_H, v_H, C, kind=1.0):
     """The one filter (shield_filter) with the exact kinematics and fresh scratch."""
-    return sh.shield_filter(kind, a, v, 0.1, s_R, s_H, v_H, C, np.zeros(3), np.empty((0, 3)))
+    return sh.shield_filter(kind, a, v, 0.1, -4.5, s_R, s_H, v_H, C, np.zeros(3),
+                            np.empty((0, 3)))
 
 
 def test_shield_many_equals_the_single_shield():

@@ -23,6 +23,7 @@ to ``x_{k+1}``. The run never stops early.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -155,9 +156,11 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
         row = world_log[k]
         row[W_AV_PROPOSED] = a_av
         sh_s_R[0], sh_s_H[0], sh_v_H[0] = ms_av, ms_hv, mv_hv
-        a_av, verdict = shield_filter(shield_kind, a_av, mv_av, dt, sh_s_R, sh_s_H, sh_v_H,
-                                      conflict, sh_lead, sh_window)
+        a_av, verdict = shield_filter(shield_kind, a_av, mv_av, dt, P_av[slot.U_MIN], sh_s_R,
+                                      sh_s_H, sh_v_H, conflict, sh_lead, sh_window)
         row[W_SHIELD] = verdict
+        if not (math.isfinite(a_av) and math.isfinite(a_hv)):  # never propagated
+            raise ValueError("a policy's acceleration is not finite (and no shield replaced it)")
         if timed:
             av_time_ns[k] = (_clock_ns() - t1) + (t_libs if av_uses_libs else 0)
         row[W_AV_S], row[W_AV_V], row[W_HV_S], row[W_HV_V] = ms_av, mv_av, ms_hv, mv_hv
@@ -308,6 +311,9 @@ class PythonWorld:
         t_game = time.perf_counter_ns() - t0
         obs = Observation(k, k * self.dt, (ms_av, mv_av), (ms_hv, mv_hv), game)
         a_hv = float(self.hv.act(obs))
+        if not math.isfinite(a_hv):  # no world propagates a non-finite state
+            raise ValueError(f"the human's policy returned a non-finite acceleration "
+                             f"({a_hv!r}) at step {k}")
         self.hv_log[k, :len(self.hv.log_columns)] = _last_log(self.hv)
         obs.human_role = int(getattr(self.hv, "role", -1))
         t1 = time.perf_counter_ns()

@@ -133,6 +133,9 @@ class Decision:
     conflicts: int  #: vehicles the shield checked
 
 
+_NO_CONFLICT = (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, sh.N_CONFLICT)))
+
+
 class ExternalPlanner:
     """The ego's planner against many outside vehicles (module docstring).
 
@@ -156,7 +159,7 @@ class ExternalPlanner:
         # the per-vehicle planners are the closed loop's planner (the same configuration,
         # features that anticipate the shield included); they only propose (Planner.accel):
         # the one shield filters once, over all vehicles
-        self._shield = ShieldFilter(SHIELD_KIND_IDS[config.shield], 0.0)
+        self._shield = ShieldFilter(SHIELD_KIND_IDS[config.shield], 0.0, self.ego.u_min_mps2)
         from ..record import static_setup
 
         self._clear_m = float(static_setup(config)[0].hv.clear_s)
@@ -225,7 +228,7 @@ class ExternalPlanner:
         ``config.shield = "off"``)."""
         a = float(proposed_mps2)
         if not self._shield.on:
-            return a, None
+            return self._shield.among(a, 0.0, *_NO_CONFLICT)[0], None  # refuses a NaN
         ego = self.ego
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
         s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)

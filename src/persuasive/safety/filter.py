@@ -18,6 +18,7 @@ shield over all the vehicles.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -32,11 +33,15 @@ class ShieldFilter:
     (its conflict vector from :meth:`closed_loop`); :meth:`among` against any number of
     outside vehicles at once."""
 
-    __slots__ = ("kind", "dt_s", "on", "_C", "_s_R", "_s_H", "_v_H", "_lead", "_window")
+    __slots__ = ("kind", "dt_s", "u_brake", "on", "_C", "_s_R", "_s_H", "_v_H", "_lead",
+                 "_window")
 
-    def __init__(self, kind: float | str, dt_s: float, conflict: np.ndarray | None = None):
+    def __init__(self, kind: float | str, dt_s: float, u_brake: float,
+                 conflict: np.ndarray | None = None):
         self.kind = float(slot.SHIELD_KIND_IDS[kind] if isinstance(kind, str) else kind)
         self.dt_s = float(dt_s)
+        #: the AV's braking fallback [m/s^2] for a non-finite proposal among no vehicle
+        self.u_brake = float(u_brake)
         self.on = self.kind != slot.SHIELD_OFF  #: False: every proposal is applied as is
         self._C = (np.zeros((1, N_CONFLICT)) if conflict is None
                    else np.asarray(conflict, float).reshape(1, N_CONFLICT))
@@ -50,17 +55,20 @@ class ShieldFilter:
         the conflict vector of the two paths)."""
         C = np.empty(N_CONFLICT)
         conflict_vector(P_av, P_hv, C)
-        return cls(P_av[slot.SHIELD], dt_s, C)
+        return cls(P_av[slot.SHIELD], dt_s, P_av[slot.U_MIN], C)
 
     def one(self, proposed: float, x_R: Sequence[float], x_H: Sequence[float]
             ) -> tuple[float, int]:
         """Filter ``proposed`` with the AV at ``x_R = (s, v)`` and the other vehicle at
-        ``x_H`` (the conflict given at construction): ``(applied, verdict code)``."""
+        ``x_H`` (the conflict given at construction): ``(applied, verdict code)``. Raises
+        ValueError for a non-finite proposal without a shield (nothing can replace it, and no
+        world propagates a non-finite state)."""
         if not self.on:
-            return proposed, OFF
+            return _unfiltered(proposed)
         self._s_R[0], self._s_H[0], self._v_H[0] = x_R[0], x_H[0], x_H[1]
-        a, code = shield_filter(self.kind, proposed, x_R[1], self.dt_s, self._s_R, self._s_H,
-                                self._v_H, self._C, self._lead, self._window)
+        a, code = shield_filter(self.kind, proposed, x_R[1], self.dt_s, self.u_brake,
+                                self._s_R, self._s_H, self._v_H, self._C, self._lead,
+                                self._window)
         return float(a), int(code)
 
     def among(self, proposed: float, v_R: float, s_R: np.ndarray, s_H: np.ndarray,
@@ -68,21 +76,28 @@ class ShieldFilter:
               ) -> tuple[float, int]:
         """Filter ``proposed`` at AV speed ``v_R`` against ``n`` other vehicles (``s_R[j],
         s_H[j], v_H[j], C[j]``: :func:`~persuasive.safety.shield.shield_filter`; ``lead``
-        too): ``(applied, verdict code)``."""
+        too): ``(applied, verdict code)``; a non-finite proposal as in :meth:`one`."""
         if not self.on:
-            return proposed, OFF
+            return _unfiltered(proposed)
         n = s_R.shape[0]
         if self._window.shape[0] < n:
             self._window = np.empty((n, 3))
         self._lead[:] = lead
-        a, code = shield_filter(self.kind, proposed, v_R, self.dt_s, s_R, s_H, v_H, C,
-                                self._lead, self._window)
+        a, code = shield_filter(self.kind, proposed, v_R, self.dt_s, self.u_brake, s_R, s_H,
+                                v_H, C, self._lead, self._window)
         return float(a), int(code)
 
     @staticmethod
     def name(code: int) -> str | None:
         """A verdict's name ("admitted", "brake", "go", "uncertified"; None: no shield)."""
         return verdict_name(code)
+
+
+def _unfiltered(proposed: float) -> tuple[float, int]:
+    if not math.isfinite(proposed):
+        raise ValueError(f"the AV's policy proposed a non-finite acceleration ({proposed!r}) "
+                         "and no shield replaces it (av.shield = off)")
+    return proposed, OFF
 
 
 __all__ = ["ShieldFilter"]

@@ -360,16 +360,19 @@ def yields_before(s: float, v: float, C: np.ndarray) -> bool:
 
 
 @njit(cache=True)
-def shield_filter(kind: float, a: float, v_R: float, dt: float, s_R: np.ndarray,
-                  s_H: np.ndarray, v_H: np.ndarray, C: np.ndarray, lead: np.ndarray,
-                  window: np.ndarray) -> tuple[float, int]:
+def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
+                  s_R: np.ndarray, s_H: np.ndarray, v_H: np.ndarray, C: np.ndarray,
+                  lead: np.ndarray, window: np.ndarray) -> tuple[float, int]:
     """**The** filter: every loop and adapter applies the shield through this one entry point
     (the closed loop with one conflict, an outside simulator with one per other vehicle),
     after its policy has proposed ``a``; returns ``(applied acceleration, verdict)``.
 
     ``kind``: the shield's kind (``persuasive.packing.SHIELD_*``; ``SHIELD_OFF``: ``a`` is
-    applied as proposed, verdict :data:`OFF`). Conflict ``j`` (of ``n = len(s_R)``, none at
-    all: admitted): ``s_R[j]`` the AV's position in its coordinates, ``s_H[j], v_H[j]`` the
+    applied as proposed, verdict :data:`OFF`). A **non-finite proposal** (NaN, an infinity) is
+    never admitted: one of the fallbacks below applies (its verdict; the caller's log keeps the
+    proposal), and with no conflict at all the AV's braking fallback ``u_brake`` [m/s^2]
+    (``BRAKE``). Conflict ``j`` (of ``n = len(s_R)``; none at all: a finite proposal is
+    admitted): ``s_R[j]`` the AV's position in its coordinates, ``s_H[j], v_H[j]`` the
     other vehicle's state, ``C[j]`` its conflict vector (:func:`conflict_vector`). A
     trajectory is certified only with one fallback against all of them: ``a`` is admitted if
     "``a``, then ``F``" is certified against every vehicle for ``F = BRAKE`` or for
@@ -386,16 +389,17 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, s_R: np.ndarray,
     nothing; a smaller one is replaced by a new one)."""
     if kind == slot.SHIELD_OFF:
         return a, OFF
+    proposal_ok = math.isfinite(a)  # a non-finite proposal is never admitted: a fallback
     n = s_R.shape[0]
     if n == 0:
-        return a, ADMITTED
+        return (a, ADMITTED) if proposal_ok else (u_brake, BRAKE)
     if window.shape[0] < n:
         window = np.empty((n, 3))
     for j in range(n):
         t_in, t_out, past = human_window(s_H[j], v_H[j], C[j])
         window[j, 0], window[j, 1], window[j, 2] = t_in, t_out, 1.0 if past else 0.0
     u_min, u_max = C[0, C_R_UMIN], C[0, C_R_UMAX]
-    for i in range(4):
+    for i in range(0 if proposal_ok else 2, 4):
         first = a if i < 2 else (u_min if i == 2 else u_max)
         fb = u_min if i == 0 or i == 2 else u_max
         shift = lead[0] if i < 2 else lead[i - 1]
@@ -426,9 +430,9 @@ def shield_step(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: fl
     ``(s_R, v_R)``, conflict vector ``C`` (its kind from ``C``): ``(applied acceleration,
     verdict)``. A convenience for one-off questions (it allocates); the loops keep their
     buffers and call :func:`shield_filter`."""
-    return shield_filter(C[C_KIND], a, v_R, dt, np.full(1, s_R), np.full(1, s_H),
-                         np.full(1, v_H), C.reshape(1, C.shape[0]), np.zeros(3),
-                         np.empty((1, 3)))
+    return shield_filter(C[C_KIND], a, v_R, dt, C[C_R_UMIN], np.full(1, s_R),
+                         np.full(1, s_H), np.full(1, v_H), C.reshape(1, C.shape[0]),
+                         np.zeros(3), np.empty((1, 3)))
 
 
 def verdict_name(code: int) -> str | None:
