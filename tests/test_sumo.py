@@ -141,6 +141,52 @@ def test_projector_routes_and_conflicts():
     assert d.ego_occupancy[1] == pytest.approx(c.ego_occupancy[1] + sum(slack), abs=1e-12)
 
 
+def test_route_coordinates_are_sumos_own():
+    """On junction lanes SUMO's lane length and the shape's length differ (1.00064 here, as
+    measured on a SUMO junction): a vehicle that moves v dt in SUMO's lane positions must move
+    exactly v dt in the shield's coordinates, also across lanes, and the conflict is carried
+    over from the centre line by the exact map (the crossing at 6.6 m into the junction's
+    shape is 6.6 * 1.00064 m into its SUMO length)."""
+    scale = 1.00064
+    shapes = {"A_0": [(0.0, -50.0), (0.0, -5.0)], ":J_0_0": [(0.0, -5.0), (0.0, 5.0)],
+              "B_0": [(0.0, 5.0), (0.0, 50.0)], "W_0": [(-50.0, 1.6), (-5.0, 1.6)],
+              ":J_1_0": [(-5.0, 1.6), (5.0, 1.6)], "E_0": [(5.0, 1.6), (50.0, 1.6)]}
+    links = {"A_0": [("B_0", False, True, True, ":J_0_0", "m", "s", 10.0)],
+             ":J_0_0": [("B_0", True, True, False, "", "M", "s", 0.0)],
+             "W_0": [("E_0", True, True, True, ":J_1_0", "M", "s", 10.0)],
+             ":J_1_0": [("E_0", True, True, False, "", "M", "s", 0.0)]}
+
+    def length(lane):
+        shape = float(np.sum(np.hypot(*np.diff(np.array(shapes[lane]), axis=0).T)))
+        return shape * scale if lane.startswith(":") else shape
+
+    pr = S.Projector(("A", "B"), EGO, lambda ln: links.get(ln, []), shapes.__getitem__, length)
+    ego = pr.ego
+    # moving 3 m from 44 m on A_0 (45 m long) ends 2 m into the junction lane, 3 m further
+    assert ego.arc(":J_0_0", 2.0) - ego.arc("A_0", 44.0) == pytest.approx(3.0, abs=1e-12)
+    assert ego.arc("B_0", 1.0) - ego.arc(":J_0_0", 9.0) == \
+        pytest.approx(10.0 * scale - 9.0 + 1.0, abs=1e-12)
+    lim = X.Limits(5.0, 1.8, -9.0, 2.6, 0.0, 13.89)
+    car = S.VehicleState("c", ("W", "E"), "W_0", 30.0, 0, 0, 90, 10.0, 5.0, 1.8, lim)
+    probe = S.VehicleState("ego", ("A", "B"), "A_0", 40.0, 0, 0, 0, 8.0, 5.0, 1.8, lim)
+    (c,) = S.conflicts_of(pr, probe, [car], 7.5)
+    geo = pr.geometry(("W", "E"), (5.0, 1.8))
+    assert geo.ego_at_m == pytest.approx(45.0 + 6.6 * scale, abs=0.06)
+    assert c.ego_s_m == pytest.approx(37.5 - geo.ego_at_m, abs=1e-12)
+    # an interval end at the centre line's arc x is at the route coordinate of x
+    line_geo = X.route_conflict(ego.line, pr.route(("W", "E")).line, EGO, (5.0, 1.8),
+                                S.LATERAL_MARGIN_M, S.LONG_MARGIN_M)
+
+    def sumo_of(x):  # the ego route's map, written out: A_0, the junction lane, B_0
+        return x if x <= 45.0 else (45.0 + (x - 45.0) * scale if x <= 55.0
+                                    else 45.0 + 10.0 * scale + (x - 55.0))
+
+    for end in (0, 1):
+        at_line = line_geo.ego_at_m + line_geo.ego_occupancy[end]
+        assert geo.ego_at_m + geo.ego_occupancy[end] == pytest.approx(sumo_of(at_line),
+                                                                      abs=1e-9)
+
+
 def test_ego_at_rest_is_not_shifted_twice():
     """SUMO's stopping step may take the ego up to slack[0] past the exact braking motion, and
     the adapter places it slack[0] further along: at rest right before its interval, shifted
@@ -384,6 +430,16 @@ def test_shielded_ego_stays_certified_where_it_once_collided(nets, seed):
     r = S.run_episode("intersection", seed, "persuasive/worst-case", 900.0, 0.3,
                       nets["intersection"]).result
     assert not r.collision and r.uncertified == 0 and r.ego_steps > 0
+
+
+@pytest.mark.slow
+def test_merge_stays_certified_on_junction_lanes(nets):
+    """Merge, 300 veh/h, the yield planner, seed 214: with the shape's arc length as the
+    shield's coordinate (0.064 % longer than SUMO's on the junction lane) the ego moved
+    further than the shield assumed and 13 steps were uncertified with nothing appearing
+    from nowhere; in SUMO's own coordinate none is."""
+    r = S.run_episode("merge", 214, "yield/worst-case", 300.0, 0.0, nets["merge"]).result
+    assert r.ego_steps > 0 and r.uncertified == 0 and not r.collision
 
 
 @pytest.mark.slow

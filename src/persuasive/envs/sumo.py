@@ -353,20 +353,49 @@ def horizon_s(config: Config) -> float:
 
 @dataclass
 class Route:
-    """A route's lanes, its centre line and each lane's start along it [m] and scale (the
-    centre line's length over SUMO's lane length)."""
+    """A route's lanes, its centre line and, per lane, ``(start in SUMO's coordinate, start
+    along the centre line, scale)`` [m, m, -] (scale: the lane shape's length over SUMO's
+    lane length, which differ on junction lanes, e.g. by 0.064 %).
+
+    **The route's coordinate is SUMO's own**: a vehicle at ``lane_pos_m`` on a lane is at
+    that lane's start plus ``lane_pos_m``, the sum of SUMO's lane lengths before it, so that
+    a vehicle that moves ``v dt`` in SUMO moves exactly ``v dt`` in the shield's coordinates.
+    The geometry (where the footprints can touch) is found on the centre line and carried
+    over by :meth:`from_line`, the exact piecewise-linear map between the two."""
 
     edges: tuple[str, ...]
     lanes: tuple[str, ...]
     line: Polyline
-    offsets: dict[str, tuple[float, float]]
+    offsets: dict[str, tuple[float, float, float]]
 
     def arc(self, lane: str, lane_pos_m: float) -> float | None:
-        """Arc length of a point at ``lane_pos_m`` on ``lane`` (``None``: not on this route)."""
+        """The route coordinate of a point at ``lane_pos_m`` on ``lane`` (``None``: not on
+        this route)."""
         entry = self.offsets.get(lane)
         if entry is None:
             return None
-        return entry[0] + lane_pos_m * entry[1]
+        return entry[0] + lane_pos_m
+
+    def line_start(self, lane: str) -> float:
+        """Where ``lane`` starts along the centre line [m]."""
+        return self.offsets[lane][1]
+
+    def from_line(self, s_m: float) -> float:
+        """The route coordinate of the point at arc length ``s_m`` of the centre line
+        (beyond either end, the line's length continues at scale 1)."""
+        starts = [(e[1], e[0], e[2]) for e in self.offsets.values()]
+        line_at, sumo_at, scale = starts[0]
+        for entry in starts[1:]:
+            if entry[0] > s_m:
+                break
+            line_at, sumo_at, scale = entry
+        if s_m < 0.0:
+            return s_m
+        last_line, last_sumo, last_scale = starts[-1]
+        end_line = self.line.length_m
+        if s_m > end_line:
+            return last_sumo + (end_line - last_line) / last_scale + (s_m - end_line)
+        return sumo_at + (s_m - line_at) / scale
 
 
 class Projector:
@@ -406,12 +435,14 @@ class Projector:
                 lane = step
                 if not step.startswith(":"):
                     break
-        points, offsets, start = [], {}, 0.0
+        points, offsets, start, sumo_start = [], {}, 0.0, 0.0
         for lane in lanes:
             pts = np.asarray(self._shape(lane), float).reshape(-1, 2)
             seg = float(np.sum(np.hypot(*np.diff(pts, axis=0).T)))
-            offsets[lane] = (start, seg / float(self._length(lane)))
+            length = float(self._length(lane))
+            offsets[lane] = (sumo_start, start, seg / length)
             start += seg
+            sumo_start += length
             points.append(pts if not points else pts[1:] if np.allclose(pts[0], points[-1][-1])
                           else pts)
         route = Route(edges, tuple(lanes), Polyline.of(np.concatenate(points)), offsets)
@@ -431,7 +462,7 @@ class Projector:
         if shared:
             lane = shared[0]
             ie, io = ego.lanes.index(lane), other.lanes.index(lane)
-            a0, b0 = ego.offsets[lane][0], other.offsets[lane][0]
+            a0, b0 = ego.line_start(lane), other.line_start(lane)
             if ie > 0 and io > 0 and ego.lanes[ie - 1] != other.lanes[io - 1]:
                 geo = route_conflict(ego.line, other.line, self.ego_size, other_size,
                                      LATERAL_MARGIN_M, LONG_MARGIN_M, merge_at=(a0, b0))
@@ -441,6 +472,7 @@ class Projector:
         else:
             geo = route_conflict(ego.line, other.line, self.ego_size, other_size,
                                  LATERAL_MARGIN_M, LONG_MARGIN_M)
+        geo = None if geo is None else in_route_coordinates(geo, ego, other)
         self._conflicts[key] = geo
         return geo
 
@@ -462,6 +494,20 @@ class Projector:
             entry = (self.route(edges), geo, widened)
         self._seen[key] = entry
         return entry
+
+
+def in_route_coordinates(geo: RouteConflict, ego: Route, other: Route) -> RouteConflict:
+    """``geo``, found along the two centre lines, in the routes' own coordinates
+    (:class:`Route`): the conflict points and every interval end carried over by the exact
+    map (monotone, so an interval stays the interval of the same points)."""
+
+    def interval(route: Route, at: float, occ: tuple[float, float], at_r: float):
+        return tuple(o if not math.isfinite(o) else route.from_line(at + o) - at_r
+                     for o in occ)
+
+    a0, b0 = ego.from_line(geo.ego_at_m), other.from_line(geo.other_at_m)
+    return RouteConflict(geo.kind, a0, b0, interval(ego, geo.ego_at_m, geo.ego_occupancy, a0),
+                         interval(other, geo.other_at_m, geo.other_occupancy, b0))
 
 
 @dataclass(frozen=True)
