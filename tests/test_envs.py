@@ -567,3 +567,48 @@ def test_a_stopped_ego_is_not_admitted_a_step_it_cannot_stop_from(seed):
     result = run_episode(seed, "persuasive", planner_config("persuasive", "worst-case"))
     assert not result.collision
     assert result.shield_interventions > 0
+
+
+# -- highway-env: the envelope the shield assumes -----------------------------------------------
+
+
+def test_speed_bound_covers_every_target_regulated_road_sets(crossing):
+    """RegulatedRoad sets a yielding vehicle's target speed to 0 and later back to its lane's
+    limit: the bound is the lane's limit (10 m/s) whatever the target (taking the target
+    speed, as before, gave 3 m/s here and the vehicle later drove 7 m/s faster); a vehicle
+    spawned above the limit keeps its own speed as bound; and highway-env's IDM, driven from
+    the yielding state with the target restored, never exceeds the bound."""
+    from persuasive.envs.highway import highway_limits, speed_bound
+
+    u, _ = crossing
+    v = _vehicle(u, ("o1", "ir1", 0), 20.0, "o3", speed=3.0)
+    v.target_speed = 0.0  # yielding
+    limit = v.lane.speed_limit
+    assert limit == 10.0 and speed_bound(v) == limit
+    assert highway_limits(v).v_max_mps == limit
+    fast = _vehicle(u, ("o1", "ir1", 0), 20.0, "o3", speed=10.7)
+    assert speed_bound(fast) == 10.7
+    bound = speed_bound(v)
+    v.target_speed = limit  # RegulatedRoad restores the lane's limit
+    top = 0.0
+    for _ in range(150):  # 10 s at 15 Hz, no vehicle ahead
+        v.act()
+        v.step(1.0 / 15.0)
+        top = max(top, v.speed)
+    assert limit - 0.5 < top <= bound + 1e-9
+
+
+@pytest.mark.slow
+def test_every_vehicle_stays_inside_the_bound_the_shield_assumed():
+    """Seed 4 with highway-env's own ego: with the target speed as bound, two vehicle-steps
+    went above it; with the lanes' limits none does, and no IDM accelerates beyond its
+    COMFORT_ACC_MAX. highway-env's IDM does leave the envelope otherwise, and the episode
+    reports it: it drives backwards behind a close leader (speed below 0) and crashed
+    vehicles stop at once."""
+    from persuasive.envs.highway import EnvelopeCheck, run_episode
+
+    r = run_episode(4, "default")
+    kinds = r.envelope_excess_kinds
+    assert set(kinds) == set(EnvelopeCheck.KINDS)
+    assert kinds["over_speed"] == 0 and kinds["over_accel"] == 0
+    assert r.envelope_excesses == sum(kinds.values()) and kinds["reversing"] > 0

@@ -102,5 +102,11 @@ def highway(episodes, planner, seed, shield, as_json, video) -> None:
                f"within {CONTEST_RANGE_M:g} m of it with the ego; min dist: to any vehicle "
                f"(oncoming traffic passes 4 m beside); min conflict dist: to vehicles whose "
                f"lanes enter the ego's path or share its lane")
+    for driver, s in report.summary().items():  # the envelope the shield assumed (docs §12.7)
+        kinds = ", ".join(f"{k} {n}" for k, n in s["envelope_excess_kinds"].items() if n)
+        click.echo(f"envelope ({driver}'s episodes): {s['envelope_excesses']} vehicle-steps of "
+                   f"other vehicles outside the envelope the shield assumes"
+                   + (f" ({kinds}; largest {s['max_envelope_excess_mps']:.2f} m/s)"
+                      if kinds else ""))
     if video:
         click.echo(f"video of seed {first} ({report.planner}) written to {video}")

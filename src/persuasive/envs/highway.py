@@ -34,7 +34,10 @@ whose lanes stay in that band to their end joins the ego's lane (a merge, with i
 where its lane centre comes within :data:`SAME_LANE_M` of the ego's line), one in the ego's lane
 ahead of it is followed. Its limits are highway-env's own: ``IDMVehicle`` accelerates at most at
 its ``COMFORT_ACC_MAX``, brakes at most at its ``ACC_MAX`` and never drives faster than the larger
-of its speed and its target speed. highway-env integrates positions with the speed of the step's
+of its speed and the speed limit of every lane on its way (:func:`speed_bound`: the IDM clips its
+target to the lane's limit, whatever target ``RegulatedRoad`` sets while it makes a vehicle yield
+and after); every episode checks that every vehicle stayed inside that envelope
+(:class:`EnvelopeCheck`, ``envelope_excesses``). highway-env integrates positions with the speed of the step's
 start (Euler): a braking ego rolls further than the planner's exact step says, by ``v dt / 2`` from
 speed ``v`` plus at most ``b dt^2 / 8`` for the last, partial step of deceleration ``b`` (the speed
 is clipped at 0), and an accelerating one lags behind it. The shield therefore takes the ego, for
@@ -67,6 +70,7 @@ headless too, but highway-env's viewer then draws nothing and every frame is bla
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from dataclasses import asdict, dataclass, field
@@ -506,17 +510,91 @@ class Projector:
         return best
 
 
+def speed_bound(vehicle) -> float:
+    """The highest speed a highway-env IDM vehicle can reach from now on [m/s] (module
+    docstring): the larger of its speed and the speed limit of every lane on its way.
+
+    ``IDMVehicle.acceleration`` clips the target speed to ``[0, lane.speed_limit]``, so the
+    IDM never accelerates above its lane's limit, whatever target ``RegulatedRoad`` sets (0
+    while it yields, then the lane's limit again) and whatever its spawn speed (drawn around
+    8 m/s, it can start above a 10 m/s limit: then it slows down). A lane without a limit
+    leaves the target unclipped, and the target speed counts too (and the lane's limit, which
+    ``RegulatedRoad`` restores)."""
+    network = vehicle.road.network if getattr(vehicle, "road", None) is not None else None
+    lanes = [getattr(vehicle, "lane", None)]
+    if network is not None:
+        for index in list(getattr(vehicle, "route", None) or ()):
+            with contextlib.suppress(KeyError, IndexError, ValueError):
+                lanes.append(network.get_lane(index))
+    bound = float(vehicle.speed)
+    unlimited = False
+    for lane in lanes:
+        limit = getattr(lane, "speed_limit", None) if lane is not None else None
+        if limit is None:
+            unlimited = True
+        else:
+            bound = max(bound, float(limit))
+    if unlimited:
+        bound = max(bound, float(getattr(vehicle, "target_speed", vehicle.speed)))
+    return bound
+
+
 def highway_limits(vehicle):
     """A highway-env vehicle's envelope for the shield (module docstring): its IDM accelerates
-    at most at ``COMFORT_ACC_MAX`` and brakes at most at ``ACC_MAX``, and never beyond the
-    larger of its speed and its target speed."""
+    at most at ``COMFORT_ACC_MAX`` and brakes at most at ``ACC_MAX``, and never drives faster
+    than :func:`speed_bound` (the class's ``MAX_SPEED`` of 40 m/s would hold too, and would
+    freeze the ego)."""
     from .external import Limits
 
     u_max = float(getattr(vehicle, "COMFORT_ACC_MAX", 3.0))
     u_min = -float(getattr(vehicle, "ACC_MAX", 6.0))
-    v_max = max(float(vehicle.speed), float(getattr(vehicle, "target_speed", vehicle.speed)))
     return Limits(float(vehicle.LENGTH), float(vehicle.WIDTH), u_min, u_max, 0.0,
-                  max(v_max, 1e-3))
+                  max(speed_bound(vehicle), 1e-3))
+
+
+class EnvelopeCheck:
+    """Whether every vehicle stayed inside the envelope the shield assumed for it: at each
+    observation, its speed against the bound and its speed change against the accelerations
+    of its limits at the previous one (:func:`highway_limits`)."""
+
+    #: tolerance of the comparisons [m/s]
+    TOL_MPS = 1e-9
+
+    #: the kinds of excess: above the speed bound, below ``v_min`` (driving backwards: the
+    #: IDM's braking behind a close leader does not stop at 0), a speed gain beyond ``u_max``,
+    #: a speed loss beyond ``u_min`` (a crash between two other vehicles stops them at once)
+    KINDS = ("over_speed", "reversing", "over_accel", "over_brake")
+
+    def __init__(self, dt_s: float, limits=None):
+        self.dt_s = dt_s
+        self._limits = limits if limits is not None else highway_limits
+        self._last: dict[int, tuple[float, Any]] = {}
+        self.kinds = dict.fromkeys(self.KINDS, 0)  #: vehicle-steps per kind of excess
+        self.max_excess_mps = 0.0  #: the largest excess of speed or speed change [m/s]
+
+    @property
+    def excesses(self) -> int:
+        """Vehicle-steps outside the assumed envelope."""
+        return sum(self.kinds.values())
+
+    def observe(self, vehicles: Iterable, ego) -> None:
+        seen = {}
+        for v in vehicles:
+            if v is ego:
+                continue
+            speed = float(v.speed)
+            before = self._last.get(id(v))
+            if before is not None:
+                v0, lim = before
+                terms = (speed - lim.v_max_mps, lim.v_min_mps - speed,
+                         speed - v0 - lim.u_max_mps2 * self.dt_s,
+                         v0 + lim.u_min_mps2 * self.dt_s - speed)
+                for kind, excess in zip(self.KINDS, terms):
+                    if excess > self.TOL_MPS:
+                        self.kinds[kind] += 1
+                        self.max_excess_mps = max(self.max_excess_mps, excess)
+            seen[id(v)] = (speed, self._limits(v))
+        self._last = seen
 
 
 class PlannerDriver:
@@ -647,6 +725,12 @@ class EpisodeResult:
     min_conflict_distance_m: float
     steps: int
     shield_interventions: int = 0  #: steps where the shield overrode the planner
+    #: vehicle-steps in which another vehicle left the envelope the shield assumed for it
+    #: (speed above its bound, or a speed change beyond its accelerations; 0 expected)
+    envelope_excesses: int = 0
+    max_envelope_excess_mps: float = 0.0  #: the largest such excess [m/s]
+    #: the same per kind (:attr:`EnvelopeCheck.KINDS`)
+    envelope_excess_kinds: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -693,9 +777,11 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             frames.append(env.render())
         contests: dict[int, _Contest] = {}
         state = {"min_d": math.inf, "min_conflict_d": math.inf, "cross": None}
+        envelope = EnvelopeCheck(1.0 / FREQUENCY_HZ)
 
         def observe(k: int) -> list[Projection]:
             ego = u.vehicle
+            envelope.observe(u.road.vehicles, ego)
             projections = []
             for v in u.road.vehicles:
                 if v is ego:
@@ -756,7 +842,10 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             time_to_cross_s=None if state["cross"] is None else round(state["cross"] * dt, 10),
             min_distance_m=float(state["min_d"]),
             min_conflict_distance_m=float(state["min_conflict_d"]), steps=k,
-            shield_interventions=0 if planner is None else planner.interventions)
+            shield_interventions=0 if planner is None else planner.interventions,
+            envelope_excesses=envelope.excesses,
+            max_envelope_excess_mps=envelope.max_excess_mps,
+            envelope_excess_kinds=dict(envelope.kinds))
     finally:
         env.close()
 
@@ -795,6 +884,11 @@ class HighwayReport:
                 "median_min_conflict_distance_m": float(np.median(conflict)) if conflict
                 else None,
                 "shield_interventions": sum(e.shield_interventions for e in eps),
+                "envelope_excesses": sum(e.envelope_excesses for e in eps),
+                "max_envelope_excess_mps": max((e.max_envelope_excess_mps for e in eps),
+                                               default=0.0),
+                "envelope_excess_kinds": {k: sum(e.envelope_excess_kinds.get(k, 0) for e in eps)
+                                          for k in EnvelopeCheck.KINDS},
             }
         return out
 
