@@ -254,3 +254,22 @@ def test_the_adapter_replaces_a_non_finite_proposal():
     with pytest.raises(ValueError, match="non-finite"):
         bare.shield(5.0, math.nan, [c], 0.1)
     assert bare.shield(5.0, 0.5, [c], 0.1) == (0.5, None)
+
+
+def test_every_run_says_whether_the_guarantee_held():
+    from persuasive.record import outcome
+
+    shielded = simulate(Config(mode="corrected"), 3)
+    assert shielded.outcome.uncertified_steps == 0 and shielded.outcome.guarantee_held
+    assert not simulate(Config(mode="paper"), 3).outcome.guarantee_held  # no shield
+    responsive = simulate(Config(mode="corrected").with_overrides(
+        {"av.shield": "responsive"}), 3)
+    assert not responsive.outcome.guarantee_held  # it rests on the human responding
+    noisy = simulate(Config(mode="corrected").with_overrides(
+        {"simulation.accel_noise_mps2": 0.3}), 3)
+    assert not noisy.outcome.guarantee_held  # noise the shield does not know of
+    log = {k: v.copy() for k, v in shielded.log.items()}
+    log["shield_verdict"][[4, 9]] = sh.UNCERTIFIED
+    out = outcome(shielded.scenario, shielded.states, log)
+    assert out.uncertified_steps == 2 and not out.guarantee_held
+    assert out.first_at_line == shielded.outcome.first_at_line  # the rest as before

@@ -268,3 +268,82 @@ def test_every_scenario_draws_a_stoppable_start(kind):
     for seed in range(1, 11):
         x_av, x_hv = scene.initial_states(np.random.RandomState(seed).random_sample)
         assert scene.can_stop("av", *x_av) and scene.can_stop("hv", *x_hv)
+
+
+# -- every initial state in the shield's invariant set (docs/method.md §12.2) -----------------
+
+
+@pytest.mark.parametrize("kind", sorted(SCENARIOS))
+@pytest.mark.parametrize("mode", ["paper", "corrected"])
+def test_at_the_default_geometry_the_zone_rule_implies_the_occupancy_rule(kind, mode):
+    """Every AV state that stops before its conflict zone stands before its occupancy
+    interval at the default geometries, so adding the rule changes no draw: the paper's
+    tables and every default run stay bit-identical."""
+    scene = build_scenario(Config(mode=mode).with_overrides({"scenario.kind": kind}))
+    rng = np.random.default_rng(7)
+    lo = scene.av.zone[0]
+    v_max = scene.av.vehicle.v_max_mps
+    checked = 0
+    for s, v in zip(rng.uniform(lo - 60.0, lo, 4000), rng.uniform(0.0, v_max, 4000)):
+        if scene.can_stop("av", s, v):
+            assert scene.av_stands_before_occupancy(s, v), (s, v)
+            checked += 1
+    # the boundary itself: the furthest position a state can stop before the zone from
+    for v in np.linspace(0.1, v_max, 50):
+        s = np.nextafter(lo - v * v / (2.0 * abs(scene.av.vehicle.u_min_mps2)), -np.inf)
+        if scene.can_stop("av", s, v):
+            assert scene.av_stands_before_occupancy(s, v)
+    assert checked > 1000
+
+
+def _wide_turn(**more):
+    return Config(mode="corrected").with_overrides(
+        {"scenario.kind": "left-turn", "scenario.turn_radius_m": 80.0,
+         "scenario.av_s0_halfwidth_m": 5.0, "scenario.av_v0_halfwidth_mps": 2.0, **more})
+
+
+def test_a_wide_left_turn_draws_only_states_in_the_invariant_set():
+    """At turn radius 80 m the AV's occupancy interval starts at -12.4 m, before the 7.5 m
+    zone: the zone rule alone accepts AV states that cannot stand before it (outside the
+    shield's invariant set); the draw now redraws them, and every state it gives is one
+    from which braking for ever is certified by the shield itself."""
+    from persuasive.record import static_setup
+    from persuasive.safety import shield as sh
+
+    config = _wide_turn()
+    scene = build_scenario(config)
+    assert scene.av.occupancy[0] < scene.av.zone[0] - 4.0
+    _, P_av, P_hv, _ = static_setup(config)
+    C = np.empty(sh.N_CONFLICT)
+    sh.conflict_vector(P_av, P_hv, C)
+    zone_only = drawn = 0
+    for seed in range(300):
+        rng = np.random.default_rng(seed)
+        try:  # the reference's redraws add up: a long walk can give up (InitialStateError)
+            (s, v), _ = scene.initial_states(rng.random)
+        except InitialStateError:
+            continue
+        drawn += 1
+        assert scene.av_stands_before_occupancy(s, v) and sh.yields_before(s, v, C)
+        u_min = scene.av.vehicle.u_min_mps2
+        assert sh.certified(s, v, u_min, 0.1, u_min, -1e3, 0.0, C,
+                            *sh.human_window(-1e3, 0.0, C))
+        # the first draw of the same stream, which the zone rule alone would have taken
+        rng = np.random.default_rng(seed)
+        first = scene.nominal_state() + (-1.0 + 2.0 * rng.random(8)) * np.array(
+            [5.0, 2.0, 0, 0, 0, 0, 0, 0])
+        if scene.can_stop("av", first[0], first[1]) and scene.can_stop("hv", first[6],
+                                                                         first[7]):
+            zone_only += not scene.av_stands_before_occupancy(first[0], first[1])
+    assert zone_only > 0 and drawn > 250  # it redrew states the zone rule accepted
+
+
+def test_a_start_that_cannot_stand_before_the_interval_is_refused():
+    with pytest.raises(ConfigError, match=r"scenario\.av_s0_m = -14 at scenario\.av_v0_mps = 4: "
+                       r"the AV cannot stop before its occupancy interval, which starts at "
+                       r"-12\.38 m in the left-turn scenario .* allowed: below -16\.38 m"):
+        build_scenario(Config(mode="corrected").with_overrides(
+            {"scenario.kind": "left-turn", "scenario.turn_radius_m": 80.0,
+             "scenario.av_s0_m": -14.0}))
+    # the same start where the interval lies inside the zone is taken
+    build_scenario(Config(mode="corrected").with_overrides({"scenario.av_s0_m": -14.0}))

@@ -118,6 +118,13 @@ def sqrt_threshold(c: float) -> float:
     return x
 
 
+def widened(lo: float, hi: float) -> tuple[float, float]:
+    """An interval of positions as the kernels read it: widened by the rounding margin
+    ``ZONE_MARGIN``, never narrower than computed (infinite ends stay)."""
+    return (lo - ZONE_MARGIN * (1.0 + abs(lo)) if math.isfinite(lo) else lo,
+            hi + ZONE_MARGIN * (1.0 + abs(hi)) if math.isfinite(hi) else hi)
+
+
 def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     """The kernel parameter vectors ``(P_av, P_hv)`` of ``config``: each ``(N_SLOTS,)``.
 
@@ -159,14 +166,11 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
         P[LENGTH], P[WIDTH] = veh.length_m, veh.width_m
         P[H_GO] = lib.h_st_m + veh.v_max_mps / lib.kappa
         P[YIELD_S], P[FIRST_S], P[CLEAR_S] = path.yield_s, path.first_s, path.clear_s
-        lo, hi = path.zone
         # the kernels' window may be wider than the zone, never narrower: rounding in xy(s)
-        P[ZONE_LO] = lo - ZONE_MARGIN * (1.0 + abs(lo)) if math.isfinite(lo) else lo
-        P[ZONE_HI] = hi + ZONE_MARGIN * (1.0 + abs(hi)) if math.isfinite(hi) else hi
+        P[ZONE_LO], P[ZONE_HI] = widened(*path.zone)
         P[PATH_B1:PATH_UY2 + 1] = path.geometry_vector()
-        lo, hi = path.occupancy  # widened like the zone: never narrower than computed
-        P[OCC_LO] = lo - ZONE_MARGIN * (1.0 + abs(lo)) if math.isfinite(lo) else lo
-        P[OCC_HI] = hi + ZONE_MARGIN * (1.0 + abs(hi)) if math.isfinite(hi) else hi
+        # widened like the zone: never narrower than computed
+        P[OCC_LO], P[OCC_HI] = widened(*path.occupancy)
         out.append(P)
     return out[0], out[1]
 

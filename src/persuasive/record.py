@@ -82,6 +82,14 @@ class RunOutcome:
     min_ttc_s: float  #: minimum time to collision along the paths [s]
     shield_interventions: int  #: steps where the shield overrode the AV's policy
     av_max_brake_mps2: float  #: the AV's strongest braking [m/s^2] (0: it never braked)
+    #: steps where the shield had no certified choice (verdict "uncertified": the state was
+    #: outside its invariant set; 0 with the shield off)
+    uncertified_steps: int = 0
+    #: the worst-case guarantee covered the whole run (docs/method.md §12.2): the worst-case
+    #: shield was on, every step certified (so the run started in the invariant set) and no
+    #: noise ran outside what the shield knows (acceleration or measurement noise); False with
+    #: the shield off or ``responsive`` (its guarantee rests on the human responding)
+    guarantee_held: bool = False
 
 
 #: Outcome fields that are times or distances (floats), for tables.
@@ -418,6 +426,9 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
     occ_av, occ_hv = scenario.av.occupancy, scenario.hv.occupancy
     verdicts = log.get("shield_verdict")
     accel = log["av_accel_mps2"]
+    from .safety.shield import UNCERTIFIED
+
+    uncertified = int(np.sum(verdicts == UNCERTIFIED)) if verdicts is not None else 0
     return RunOutcome(
         first_at_line=line,
         first_at_conflict_point=conflict,
@@ -439,7 +450,18 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
                                                 + scenario.hv.vehicle.length_m))),
         shield_interventions=int(np.sum(verdicts > 0)) if verdicts is not None else 0,
         av_max_brake_mps2=float(max(0.0, -np.min(accel))) if len(accel) else 0.0,
+        uncertified_steps=uncertified,
+        guarantee_held=bool(config.shield == "worst-case" and uncertified == 0
+                            and verdicts is not None and len(verdicts) > 0
+                            and not _noisy(config)),
     )
+
+
+def _noisy(config) -> bool:
+    """The run has noise the shield does not know of (docs/method.md §12.2)."""
+    sim = config.simulation
+    return sim.accel_noise_mps2 > 0.0 or (sim.measurement_noise != "none"
+                                          and (sim.noise_s_m > 0.0 or sim.noise_v_mps > 0.0))
 
 
 __all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA",

@@ -46,8 +46,8 @@ those from ``x_H``, so "``F`` for ever" is certified from the new state. An over
 first step of a certified fallback, and the same argument holds with ``a = F``. Certification
 covers the step itself (the windows are in continuous time from now), so no overlap happens within
 it either. By induction, from an initial state in ``S`` no AV-caused overlap ever happens. The
-closed loop's initial states let each vehicle stop before its conflict zone, which contains its
-occupancy interval whenever the safety distance exceeds the two half-diagonals (the default sizes),
+closed loop's initial states let each vehicle stop before its conflict zone and the AV stand
+before its occupancy interval (``Scenario.av_stands_before_occupancy``, this module's own test),
 so they are in ``S``. From states outside it the shield still answers (``UNCERTIFIED``: the
 fallback whose possible overlap starts latest, or is shortest), e.g. with measurement noise on, or
 when a vehicle appears out of nowhere in an outside simulator, where the guarantee does not hold.

@@ -82,6 +82,22 @@ class Scenario:
             return False
         return v * v / (2.0 * room) < abs(veh.u_min_mps2)
 
+    def av_stands_before_occupancy(self, s: float, v: float) -> bool:
+        """Whether the AV at ``(s, v)`` can still stand before its occupancy interval by
+        braking at its ``u_min``: the shield's own test (``yields_before``, on the interval
+        the kernels read), which puts the state in the shield's invariant set ``S`` (braking
+        for ever is certified, docs/method.md §12.2). An AV that never conflicts (an empty
+        interval) always does."""
+        from ..packing import widened
+        from ..safety.shield import reach_time
+
+        lo = widened(*self.av.occupancy)[0]
+        if lo == math.inf:
+            return True
+        veh = self.av.vehicle
+        return reach_time(float(s), float(v), veh.u_min_mps2, lo, veh.v_min_mps,
+                          veh.v_max_mps) == math.inf
+
     def initial_states(self, uniform: Callable[[int], np.ndarray]) -> tuple[tuple[float, float],
                                                                              tuple[float, float]]:
         """Draw the initial ``(x_AV, x_HV)``, each ``(s [m], v [m/s])`` (§8).
@@ -89,8 +105,12 @@ class Scenario:
         ``uniform(8)`` returns eight uniforms in [0, 1) (the run's stream: ``random_sample`` of
         the legacy stream, or ``random`` of the initial state's own stream). Eight uniforms per
         draw, for the 8-dim state; ``U(-w, w) = -w + 2 w r``. While a vehicle cannot stop
-        before its conflict zone, eight more are drawn and *added* to the state already drawn
-        (the reference behaviour). Gives up with :class:`InitialStateError` after
+        before its conflict zone, or the AV cannot stand before its occupancy interval
+        (:meth:`av_stands_before_occupancy`: every initial state is in the shield's invariant
+        set, also where the interval starts before the zone, on a wide left turn or with a
+        small ``vehicle.safety_factor``; at the default geometries the first rule implies it,
+        so their draws are unchanged), eight more are drawn and *added* to the state already
+        drawn (the reference behaviour). Gives up with :class:`InitialStateError` after
         ``scenario.max_init_draws`` draws.
         """
         sc = self.config.scenario
@@ -102,15 +122,21 @@ class Scenario:
             state = state + (-width + (2.0 * width) * r)
             x_av = (float(state[0]), float(state[1]))
             x_hv = (float(state[6]), float(state[7]))
-            if self.can_stop("av", *x_av) and self.can_stop("hv", *x_hv):
+            if self.can_stop("av", *x_av) and self.can_stop("hv", *x_hv) and \
+                    self.av_stands_before_occupancy(*x_av):
                 return x_av, x_hv
         raise InitialStateError(
-            f"scenario: no initial state lets both vehicles stop before the conflict zone in "
-            f"{sc.max_init_draws} draws (scenario.max_init_draws); narrow the half-widths"
+            f"scenario: no initial state lets both vehicles stop before the conflict zone (and "
+            f"the AV before its occupancy interval) in {sc.max_init_draws} draws "
+            f"(scenario.max_init_draws); narrow the half-widths"
         )
 
     def check_starts(self) -> None:
-        """A clear error when a vehicle's every nominal start lies inside its conflict zone."""
+        """A clear error when a vehicle's every nominal start lies inside its conflict zone,
+        or when the AV's nominal state can stop before its conflict zone but not before its
+        occupancy interval, which then starts before the zone (a wide left turn, a small
+        ``vehicle.safety_factor``): the draw would rely on its random steps alone to find a
+        state in the shield's invariant set."""
         sc = self.config.scenario
         for who in ("av", "hv"):
             s0, hw = self.nominal_s0(who), getattr(sc, f"{who}_s0_halfwidth_m")
@@ -120,6 +146,18 @@ class Scenario:
                     f"scenario.{who}_s0_m = {s0:g} (half-width {hw:g}) puts every initial "
                     f"position of the {who.upper()} inside its conflict zone, which starts at "
                     f"{lo:.2f} m in the {self.kind} scenario; allowed: below {lo + hw:.2f} m")
+        s0, v0 = self.nominal_s0("av"), sc.av_v0_mps
+        # the geometry's case: a start that stops before the zone but not before the interval
+        if self.can_stop("av", s0, v0) and not self.av_stands_before_occupancy(s0, v0):
+            from ..packing import widened
+
+            lo = widened(*self.av.occupancy)[0]
+            u = abs(self.av.vehicle.u_min_mps2)
+            raise ConfigError(
+                f"scenario.av_s0_m = {s0:g} at scenario.av_v0_mps = {v0:g}: the AV cannot stop "
+                f"before its occupancy interval, which starts at {lo:.2f} m in the {self.kind} "
+                f"scenario (braking at {u:g} m/s^2 takes {v0 * v0 / (2.0 * u):.2f} m); "
+                f"allowed: below {lo - v0 * v0 / (2.0 * u):.2f} m, or a slower start")
 
     # -- the outcome's tests (§7) --------------------------------------------------------------
 
