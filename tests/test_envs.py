@@ -612,3 +612,9 @@ def test_every_vehicle_stays_inside_the_bound_the_shield_assumed():
     assert set(kinds) == set(EnvelopeCheck.KINDS)
     assert kinds["over_speed"] == 0 and kinds["over_accel"] == 0
     assert r.envelope_excesses == sum(kinds.values()) and kinds["reversing"] > 0
+    assert not r.guarantee_held  # highway-env's own driver: no shield
+    # the worst-case shield in seed 1: IDM traffic reverses, and 46 steps have no certified
+    # choice (as before this was counted: the guarantee does not cover this episode)
+    planned = run_episode(1, "persuasive")
+    assert planned.uncertified_steps == 46 and planned.envelope_excesses > 0
+    assert not planned.guarantee_held

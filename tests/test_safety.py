@@ -265,6 +265,10 @@ def test_compare_puts_shields_side_by_side(tmp_path):
                          ("worst-case", "lfg")}
     assert rows[("worst-case", "adversary")]["collisions_caused_by_av"] == 0
     assert rows[("off", "adversary")]["collisions_caused_by_av"] > 0
+    for hv in ("adversary", "lfg"):  # the guarantee, row by row
+        on_row, off_row = rows[("worst-case", hv)], rows[("off", hv)]
+        assert on_row["uncertified_steps"] == 0 and on_row["guarantee_held_runs"] == 4
+        assert off_row["guarantee_held_runs"] == 0
     (diff,) = [p for p in result.summary["paired_shield"] if p["hv"] == "adversary"]
     runs = result.runs
     on = runs[(runs["av.shield"] == "worst-case") & (runs["hv.kind"] == "adversary")]

@@ -415,9 +415,10 @@ def test_sumo_reports_the_unprotected_egos_collision(nets):
     assert hits, "no collision of the unshielded planner in seeds 1..6"
     r = hits[0]
     assert r.junction_collisions >= 1 and r.collisions >= 1
+    assert not r.guarantee_held  # no shield
     base = S.run_episode("intersection", r.seed, S.SUMO_DRIVER, 900.0, 1.0,
                          nets["intersection"]).result
-    assert base.ego_steps == 0
+    assert base.ego_steps == 0 and not base.guarantee_held
 
 
 @pytest.mark.slow
@@ -429,7 +430,7 @@ def test_shielded_ego_stays_certified_where_it_once_collided(nets, seed):
     a car was inserted while the ego stood in that road's conflict (the entry stand-ins)."""
     r = S.run_episode("intersection", seed, "persuasive/worst-case", 900.0, 0.3,
                       nets["intersection"]).result
-    assert not r.collision and r.uncertified == 0 and r.ego_steps > 0
+    assert not r.collision and r.uncertified == 0 and r.ego_steps > 0 and r.guarantee_held
 
 
 @pytest.mark.slow
@@ -439,7 +440,7 @@ def test_merge_stays_certified_on_junction_lanes(nets):
     further than the shield assumed and 13 steps were uncertified with nothing appearing
     from nowhere; in SUMO's own coordinate none is."""
     r = S.run_episode("merge", 214, "yield/worst-case", 300.0, 0.0, nets["merge"]).result
-    assert r.ego_steps > 0 and r.uncertified == 0 and not r.collision
+    assert r.ego_steps > 0 and r.uncertified == 0 and not r.collision and r.guarantee_held
 
 
 @pytest.mark.slow

@@ -104,8 +104,10 @@ def highway(episodes, planner, seed, shield, as_json, video) -> None:
                f"lanes enter the ego's path or share its lane")
     for driver, s in report.summary().items():  # the envelope the shield assumed (docs §12.7)
         kinds = ", ".join(f"{k} {n}" for k, n in s["envelope_excess_kinds"].items() if n)
-        click.echo(f"envelope ({driver}'s episodes): {s['envelope_excesses']} vehicle-steps of "
-                   f"other vehicles outside the envelope the shield assumes"
+        click.echo(f"guarantee ({driver}): held whole in {s['guarantee_held_episodes']} of "
+                   f"{s['episodes']} episodes; {s['uncertified_steps']} uncertified steps; "
+                   f"{s['envelope_excesses']} vehicle-steps of other vehicles outside the "
+                   f"envelope the shield assumes"
                    + (f" ({kinds}; largest {s['max_envelope_excess_mps']:.2f} m/s)"
                       if kinds else ""))
     if video:

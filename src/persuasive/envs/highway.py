@@ -609,6 +609,7 @@ class PlannerDriver:
         self.planner = ExternalPlanner(config, seed)
         self.last_targets = 0  #: vehicles planned against at the last step
         self.interventions = 0  #: steps where the shield overrode the planner
+        self.uncertified = 0  #: of which no fallback was certified
 
     def act(self, env, projector: Projector) -> float:
         av = self.config.vehicle_of("av")
@@ -624,6 +625,7 @@ class PlannerDriver:
         self.last_targets = decision.targets
         if decision.verdict not in (None, "admitted"):
             self.interventions += 1
+        self.uncertified += decision.verdict == "uncertified"
         a = min(max(decision.accel_mps2, av.u_min_mps2, (av.v_min_mps - float(ego.speed)) / dt),
                 av.u_max_mps2, (av.v_max_mps - float(ego.speed)) / dt)
         return float(a)
@@ -731,6 +733,10 @@ class EpisodeResult:
     max_envelope_excess_mps: float = 0.0  #: the largest such excess [m/s]
     #: the same per kind (:attr:`EnvelopeCheck.KINDS`)
     envelope_excess_kinds: dict = field(default_factory=dict)
+    uncertified_steps: int = 0  #: steps where the shield had no certified choice
+    #: the worst-case guarantee covered the episode: a planner ego with the worst-case shield,
+    #: every step certified and every other vehicle inside the envelope the shield assumed
+    guarantee_held: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -845,7 +851,10 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             shield_interventions=0 if planner is None else planner.interventions,
             envelope_excesses=envelope.excesses,
             max_envelope_excess_mps=envelope.max_excess_mps,
-            envelope_excess_kinds=dict(envelope.kinds))
+            envelope_excess_kinds=dict(envelope.kinds),
+            uncertified_steps=0 if planner is None else planner.uncertified,
+            guarantee_held=bool(planner is not None and config.shield == "worst-case"
+                                and planner.uncertified == 0 and envelope.excesses == 0))
     finally:
         env.close()
 
@@ -889,6 +898,8 @@ class HighwayReport:
                                                default=0.0),
                 "envelope_excess_kinds": {k: sum(e.envelope_excess_kinds.get(k, 0) for e in eps)
                                           for k in EnvelopeCheck.KINDS},
+                "uncertified_steps": sum(e.uncertified_steps for e in eps),
+                "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
             }
         return out
 

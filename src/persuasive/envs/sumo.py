@@ -648,6 +648,14 @@ class EpisodeResult:
     uncertified: int  #: of which no fallback was certified
     decide_ms_median: float | None  #: the planner plus shield per step (median) [ms]
     max_in_view: int  #: most vehicles handed to the planner at one step
+    #: the worst-case guarantee covered the episode: a planner ego with the worst-case
+    #: shield, every step certified (False for SUMO's own driver and without the shield)
+    guarantee_held: bool = False
+
+    @property
+    def uncertified_steps(self) -> int:
+        """:attr:`uncertified` under the name every other summary uses."""
+        return self.uncertified
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -873,7 +881,9 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
         sumo_vehicles=n_sumo, ego_steps=ego_steps, shield_overrides=overrides,
         uncertified=uncertified,
         decide_ms_median=float(np.median([m for _, m in timings])) if timings else None,
-        max_in_view=max_view)
+        max_in_view=max_view,
+        guarantee_held=bool(planner is not None and planner.config.shield == "worst-case"
+                            and ego_steps > 0 and uncertified == 0))
     return EpisodeOutput(result, steps, decisions, timings)
 
 
@@ -937,6 +947,7 @@ class SumoReport:
                                                            for e in eps])) if eps else None,
                 "shield_overrides": sum(e.shield_overrides for e in eps),
                 "uncertified": sum(e.uncertified for e in eps),
+                "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
                 "decisions": len(times),
                 "decide_ms_median": float(np.median([m for _, m in times])) if times else None,
                 "decisions_10_in_view": len(ten),

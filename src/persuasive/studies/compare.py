@@ -49,7 +49,8 @@ REFERENCE_AV = "persuasive"
 JSON_KEYS = ("av", "shield", "hv", "runs", "av_first_pct", "hv_first_pct", "neither_pct",
              "collisions", "collisions_caused_by_av", "rear_ends_by_human", "cc_fail_runs",
              "av_delay_s_mean", "hv_delay_s_mean", "min_distance_m_p05",
-             "shield_interventions_mean", "min_gap_m_p05", "min_ttc_s_p05", "pet_s_p05",
+             "shield_interventions_mean", "uncertified_steps", "guarantee_held_runs",
+             "min_gap_m_p05", "min_ttc_s_p05", "pet_s_p05",
              "av_max_brake_mps2_mean", "av_rms_jerk_mps3_mean", "av_decision_ms_median")
 #: The shield setting every other is paired against.
 REFERENCE_SHIELD = "off"
@@ -287,6 +288,12 @@ def pair_row(frame, av: str, hv: str, timing: float | None,
         "hv_rms_jerk_mps3_mean": _mean(_column(frame, "hv_rms_jerk_mps3")),
         "shield_interventions_mean": _mean(_column(frame, "shield_interventions")),
         "shield_intervention_runs": int((frame["shield_interventions"] > 0).sum()),
+        # the guarantee (docs/method.md §12.2): steps without a certified choice, and the runs
+        # it covered whole (worst-case shield, every step certified, no noise)
+        "uncertified_steps": int(frame["uncertified_steps"].sum())
+        if "uncertified_steps" in frame else None,
+        "guarantee_held_runs": int(frame["guarantee_held"].astype(bool).sum())
+        if "guarantee_held" in frame else None,
         "min_gap_m_p05": _p05(_column(frame, "min_gap_m")),
         "min_ttc_s_p05": _p05(_column(frame, "min_ttc_s")),
         "pet_s_p05": _p05(_column(frame, "pet_s")),
