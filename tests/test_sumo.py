@@ -101,9 +101,10 @@ def test_merge_occupancy_and_follow_switch():
     assert c.kind == X.FOLLOW and c.other_s_m - c.ego_s_m == pytest.approx(15.0, abs=1e-9)
 
 
-def _fake_network():
+def _fake_network(junction_scale: float = 1.0):
     """Lanes of a straight road through a junction (internal lane :J_0_0) and a road that
-    crosses it, as libsumo would report them."""
+    crosses it, as libsumo would report them; ``junction_scale``: SUMO's length of a
+    junction lane over its shape's (SUMO's own lengths differ there)."""
     shapes = {"A_0": [(0.0, -50.0), (0.0, -5.0)], ":J_0_0": [(0.0, -5.0), (0.0, 5.0)],
               "B_0": [(0.0, 5.0), (0.0, 50.0)], "W_0": [(-50.0, 1.6), (-5.0, 1.6)],
               ":J_1_0": [(-5.0, 1.6), (5.0, 1.6)], "E_0": [(5.0, 1.6), (50.0, 1.6)]}
@@ -113,7 +114,8 @@ def _fake_network():
              ":J_1_0": [("E_0", True, True, False, "", "M", "s", 0.0)]}
 
     def length(lane):
-        return float(np.sum(np.hypot(*np.diff(np.array(shapes[lane]), axis=0).T)))
+        shape = float(np.sum(np.hypot(*np.diff(np.array(shapes[lane]), axis=0).T)))
+        return shape * junction_scale if lane.startswith(":") else shape
 
     return S.Projector(("A", "B"), EGO, lambda ln: links.get(ln, []), shapes.__getitem__,
                        length)
@@ -148,19 +150,7 @@ def test_route_coordinates_are_sumos_own():
     over from the centre line by the exact map (the crossing at 6.6 m into the junction's
     shape is 6.6 * 1.00064 m into its SUMO length)."""
     scale = 1.00064
-    shapes = {"A_0": [(0.0, -50.0), (0.0, -5.0)], ":J_0_0": [(0.0, -5.0), (0.0, 5.0)],
-              "B_0": [(0.0, 5.0), (0.0, 50.0)], "W_0": [(-50.0, 1.6), (-5.0, 1.6)],
-              ":J_1_0": [(-5.0, 1.6), (5.0, 1.6)], "E_0": [(5.0, 1.6), (50.0, 1.6)]}
-    links = {"A_0": [("B_0", False, True, True, ":J_0_0", "m", "s", 10.0)],
-             ":J_0_0": [("B_0", True, True, False, "", "M", "s", 0.0)],
-             "W_0": [("E_0", True, True, True, ":J_1_0", "M", "s", 10.0)],
-             ":J_1_0": [("E_0", True, True, False, "", "M", "s", 0.0)]}
-
-    def length(lane):
-        shape = float(np.sum(np.hypot(*np.diff(np.array(shapes[lane]), axis=0).T)))
-        return shape * scale if lane.startswith(":") else shape
-
-    pr = S.Projector(("A", "B"), EGO, lambda ln: links.get(ln, []), shapes.__getitem__, length)
+    pr = _fake_network(scale)
     ego = pr.ego
     # moving 3 m from 44 m on A_0 (45 m long) ends 2 m into the junction lane, 3 m further
     assert ego.arc(":J_0_0", 2.0) - ego.arc("A_0", 44.0) == pytest.approx(3.0, abs=1e-12)
