@@ -30,7 +30,9 @@ print(json.dumps({{k: r[k] for k in {figures!r} if k in r}}))
 
 
 def run(src: str, runs: int) -> dict:
-    env = dict(os.environ, PYTHONPATH=os.path.abspath(src))
+    # the tree first; what PYTHONPATH already holds (e.g. installed wheels) after it
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        p for p in (os.path.abspath(src), os.environ.get("PYTHONPATH", "")) if p))
     out = subprocess.run([sys.executable, "-c", SNIPPET.format(runs=runs, figures=FIGURES)],
                          env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
