@@ -40,7 +40,7 @@ from .policies.step import policy_init, policy_role, policy_step
 from .record import (W_AV_A, W_AV_PROPOSED, W_AV_S, W_AV_V, W_HV_A, W_HV_S, W_HV_V, W_SHIELD,
                      WORLD_LOG, make_record, setup)
 from .safety.filter import ShieldFilter
-from .safety.shield import N_CONFLICT, conflict_vector, shield_filter
+from .safety.shield import N_CONFLICT, ONE_BUFFER, conflict_vector, shield_filter_one
 
 
 # -- measuring and advancing (shared by both loops) --------------------------------------------
@@ -115,11 +115,9 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
     policy_init(hv_kind, hv_prm, hv_st, P_hv[slot.PRIOR_L])
     need_game, need_av_lib, av_uses_libs = needs[0], needs[1], needs[2]
     # the shield (one conflict): decide, then filter (persuasive.safety.filter)
-    shield_kind = P_av[slot.SHIELD]
-    conflict = np.empty((1, N_CONFLICT))
-    conflict_vector(P_av, P_hv, conflict[0])
-    sh_s_R, sh_s_H, sh_v_H = np.zeros(1), np.zeros(1), np.zeros(1)
-    sh_lead, sh_window = np.zeros(3), np.empty((1, 3))
+    shield_kind, u_brake = P_av[slot.SHIELD], P_av[slot.U_MIN]
+    shield_buf = np.zeros(ONE_BUFFER)
+    conflict_vector(P_av, P_hv, shield_buf[:N_CONFLICT])
     no_draws = np.zeros(2)
     x = np.empty(4)
     x[:] = x0
@@ -155,9 +153,8 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
                            P_av, P_hv, disc, dt, diag, lib_h1a, lib_h1b, ahead, av_log[k], work)
         row = world_log[k]
         row[W_AV_PROPOSED] = a_av
-        sh_s_R[0], sh_s_H[0], sh_v_H[0] = ms_av, ms_hv, mv_hv
-        a_av, verdict = shield_filter(shield_kind, a_av, mv_av, dt, P_av[slot.U_MIN], sh_s_R,
-                                      sh_s_H, sh_v_H, conflict, sh_lead, sh_window)
+        a_av, verdict = shield_filter_one(shield_kind, a_av, ms_av, mv_av, dt, u_brake, ms_hv,
+                                          mv_hv, shield_buf)
         row[W_SHIELD] = verdict
         if not (math.isfinite(a_av) and math.isfinite(a_hv)):  # never propagated
             raise ValueError("a policy's acceleration is not finite (and no shield replaced it)")

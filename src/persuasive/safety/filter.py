@@ -4,7 +4,7 @@ A step of any world is the same two halves: the AV's policy *decides* (proposes 
 acceleration from what it measured), then the shield *filters* the proposal through its one
 compiled entry point, :func:`persuasive.safety.shield.shield_filter`, which returns the
 acceleration to apply and a verdict. The compiled closed loop (``persuasive.world.run_loop``)
-calls that entry point directly; everything in Python (the Python loop, ``Planner``, the
+calls it directly (through ``shield_filter_one``, its one-conflict buffers in one array); everything in Python (the Python loop, ``Planner``, the
 adapter for outside simulators and through it highway-env and SUMO) calls it through a
 :class:`ShieldFilter`, which holds the shield's kind (its one encoding: the packed
 ``SHIELD_*`` id), the step and the buffers, so that a step allocates nothing and every check
@@ -24,7 +24,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from .. import packing as slot
-from .shield import N_CONFLICT, OFF, conflict_vector, shield_filter, verdict_name
+from .shield import (N_CONFLICT, OFF, conflict_vector, one_buffer, shield_filter,
+                     shield_filter_one, verdict_name)
 
 
 class ShieldFilter:
@@ -33,8 +34,7 @@ class ShieldFilter:
     (its conflict vector from :meth:`closed_loop`); :meth:`among` against any number of
     outside vehicles at once."""
 
-    __slots__ = ("kind", "dt_s", "u_brake", "on", "_C", "_s_R", "_s_H", "_v_H", "_lead",
-                 "_window")
+    __slots__ = ("kind", "dt_s", "u_brake", "on", "_buf", "_lead", "_window")
 
     def __init__(self, kind: float | str, dt_s: float, u_brake: float,
                  conflict: np.ndarray | None = None):
@@ -43,9 +43,8 @@ class ShieldFilter:
         #: the AV's braking fallback [m/s^2] for a non-finite proposal among no vehicle
         self.u_brake = float(u_brake)
         self.on = self.kind != slot.SHIELD_OFF  #: False: every proposal is applied as is
-        self._C = (np.zeros((1, N_CONFLICT)) if conflict is None
-                   else np.asarray(conflict, float).reshape(1, N_CONFLICT))
-        self._s_R, self._s_H, self._v_H = np.zeros(1), np.zeros(1), np.zeros(1)
+        self._buf = one_buffer(np.zeros(N_CONFLICT) if conflict is None
+                               else np.asarray(conflict, float).reshape(N_CONFLICT))
         self._lead = np.zeros(3)
         self._window = np.empty((1, 3))
 
@@ -65,11 +64,8 @@ class ShieldFilter:
         world propagates a non-finite state)."""
         if not self.on:
             return _unfiltered(proposed)
-        self._s_R[0], self._s_H[0], self._v_H[0] = x_R[0], x_H[0], x_H[1]
-        a, code = shield_filter(self.kind, proposed, x_R[1], self.dt_s, self.u_brake,
-                                self._s_R, self._s_H, self._v_H, self._C, self._lead,
-                                self._window)
-        return float(a), int(code)
+        return shield_filter_one(self.kind, proposed, x_R[0], x_R[1], self.dt_s, self.u_brake,
+                                 x_H[0], x_H[1], self._buf)
 
     def among(self, proposed: float, v_R: float, s_R: np.ndarray, s_H: np.ndarray,
               v_H: np.ndarray, C: np.ndarray, lead: Sequence[float] = (0.0, 0.0, 0.0)

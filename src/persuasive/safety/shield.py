@@ -423,16 +423,43 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     return (u_max if _worse(sb, lb, sg, lg) else u_min), UNCERTIFIED
 
 
+#: Size of the one buffer of :func:`shield_filter_one`: the conflict vector, then the three
+#: positions it fills (``s_R, s_H, v_H``), the three leads (zeros) and the window's scratch.
+ONE_BUFFER = N_CONFLICT + 9
+
+
+def one_buffer(C: np.ndarray) -> np.ndarray:
+    """A buffer for :func:`shield_filter_one` around conflict vector ``C``."""
+    buf = np.zeros(ONE_BUFFER)
+    buf[:N_CONFLICT] = C
+    return buf
+
+
+@njit(cache=True)
+def shield_filter_one(kind: float, a: float, s_R: float, v_R: float, dt: float,
+                      u_brake: float, s_H: float, v_H: float, buf: np.ndarray
+                      ) -> tuple[float, int]:
+    """:func:`shield_filter` against the closed loop's one other vehicle, the AV at ``(s_R,
+    v_R)`` and the other at ``(s_H, v_H)``, everything else in one buffer
+    (:func:`one_buffer`): the two-vehicle loops' way in, one array to hand over, so that a
+    check from Python costs about what a scalar one would (no logic of its own)."""
+    n = N_CONFLICT
+    buf[n], buf[n + 1], buf[n + 2] = s_R, s_H, v_H
+    return shield_filter(kind, a, v_R, dt, u_brake, buf[n:n + 1], buf[n + 1:n + 2],
+                         buf[n + 2:n + 3], buf[:n].reshape(1, n), buf[n + 3:n + 6],
+                         buf[n + 6:n + 9].reshape(1, 3))
+
+
 @njit(cache=True)
 def shield_step(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
                 C: np.ndarray) -> tuple[float, int]:
     """:func:`shield_filter` against one other vehicle at ``(s_H, v_H)``, the AV at
     ``(s_R, v_R)``, conflict vector ``C`` (its kind from ``C``): ``(applied acceleration,
     verdict)``. A convenience for one-off questions (it allocates); the loops keep their
-    buffers and call :func:`shield_filter`."""
-    return shield_filter(C[C_KIND], a, v_R, dt, C[C_R_UMIN], np.full(1, s_R),
-                         np.full(1, s_H), np.full(1, v_H), C.reshape(1, C.shape[0]),
-                         np.zeros(3), np.empty((1, 3)))
+    buffers."""
+    buf = np.zeros(ONE_BUFFER)
+    buf[:N_CONFLICT] = C
+    return shield_filter_one(C[C_KIND], a, s_R, v_R, dt, C[C_R_UMIN], s_H, v_H, buf)
 
 
 def verdict_name(code: int) -> str | None:
@@ -442,5 +469,6 @@ def verdict_name(code: int) -> str | None:
 
 __all__ = ["ADMITTED", "BRAKE", "GO", "N_CONFLICT", "OFF", "TIME_MARGIN_S", "UNCERTIFIED",
            "VERDICTS", "admissible", "certified", "conflict_vector", "go_certified",
-           "human_window", "profile_reach", "reach_time", "shield_filter", "shield_step",
+           "human_window", "one_buffer", "profile_reach", "reach_time", "shield_filter",
+           "shield_filter_one", "shield_step",
            "verdict_name", "yields_before"]
