@@ -194,7 +194,7 @@ def test_the_default_is_the_planners_shielded_configuration():
         for seed in range(20):
             *_, (_, _, terminated, _, info) = _episode(e, [1.0] * 61, seed)
             hits[name] += bool(info["collision"])
-    assert hits["default"] == 0 and hits["paper"] > 0, hits
+    assert hits == {"default": 0, "paper": 7}  # the guide quotes these
 
 
 def test_terminates_when_both_have_cleared():
