@@ -86,7 +86,9 @@ class Conflict:
     #: where the other's footprint can touch the ego's path [m] (a merge: its side zone)
     other_occupancy: tuple[float, float] = (-math.inf, math.inf)
     other: Limits | None = None  #: its limits (default: the configuration's human vehicle)
-    extra: dict = field(default_factory=dict, compare=False)  #: the adapter's own data
+    #: the adapter's own data; ``"stand_in": True`` marks a vehicle not in the simulator yet
+    #: (highway-env's spawns), which the shield checks and the planner does not plan against
+    extra: dict = field(default_factory=dict, compare=False)
 
 
 def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
@@ -189,6 +191,8 @@ class ExternalPlanner:
         accels, live = [], set()
         leader = None
         for c in conflicts:
+            if c.extra.get("stand_in"):  # a vehicle not in the simulator yet: the shield's
+                continue
             if c.kind == FOLLOW:
                 gap = c.other_s_m - c.ego_s_m - 0.5 * (ego.length_m + (
                     c.other or human).length_m)

@@ -463,38 +463,43 @@ class Projector:
         return Projection(float(other_s), float(vehicle.speed), float(ego_s),
                           (float(track.point[0]), float(track.point[1])), track)
 
-    def conflicts(self, ego_vehicle, vehicles: Iterable) -> list:
+    def conflicts(self, ego_vehicle, vehicles: Iterable, stand_ins: Iterable = ()) -> list:
         """Every other vehicle that can touch the ego, as the shared adapter's
         :class:`~persuasive.envs.external.Conflict` (module docstring): a crossing or merging
         vehicle relative to its conflict's origin, a vehicle ahead in the ego's lane to follow.
-        Vehicles behind the ego in its lane, or whose lanes never come near it, are left out."""
+        Vehicles behind the ego in its lane, or whose lanes never come near it, are left out.
+        ``stand_ins`` (:func:`spawn_stand_ins`): the same for the vehicles not spawned yet,
+        marked ``extra["stand_in"]`` (the shield checks them, the planner does not plan
+        against them)."""
+        u_ego = self.ego.coordinates(ego_vehicle.position)[0]
+        out = [c for v in vehicles if v is not ego_vehicle
+               for c in [self._conflict(v, u_ego)] if c is not None]
+        for v in stand_ins:
+            c = self._conflict(v, u_ego)
+            if c is not None:
+                c.extra["stand_in"] = True
+                out.append(c)
+        return out
+
+    def _conflict(self, v, u_ego: float):
         from .external import CROSSING, FOLLOW, MERGE, Conflict
 
-        u_ego = self.ego.coordinates(ego_vehicle.position)[0]
-        out = []
-        for v in vehicles:
-            if v is ego_vehicle:
-                continue
-            limits = highway_limits(v)
-            if self.in_ego_lane(v):
-                u = self.ego.coordinates(v.position)[0]
-                if u > u_ego:
-                    out.append(Conflict(id(v), FOLLOW, u_ego, u, float(v.speed), other=limits))
-                continue
-            track = self.track(v)
-            if track.kind is None:
-                continue
-            s_other = self.arc_position(track, v) - track.origin_arc_m
-            s_ego = u_ego - track.origin_u_m
-            if track.kind == "merge" and s_other >= 0.0:  # it has joined the lane
-                if s_other > s_ego:
-                    out.append(Conflict(id(v), FOLLOW, s_ego, s_other, float(v.speed),
-                                        other=limits))
-                continue
-            out.append(Conflict(id(track), CROSSING if track.kind == "crossing" else MERGE,
-                                s_ego, s_other, float(v.speed), track.ego_occupancy,
-                                track.other_occupancy, limits))
-        return out
+        limits = highway_limits(v)
+        if self.in_ego_lane(v):
+            u = self.ego.coordinates(v.position)[0]
+            return Conflict(id(v), FOLLOW, u_ego, u, float(v.speed), other=limits) \
+                if u > u_ego else None
+        track = self.track(v)
+        if track.kind is None:
+            return None
+        s_other = self.arc_position(track, v) - track.origin_arc_m
+        s_ego = u_ego - track.origin_u_m
+        if track.kind == "merge" and s_other >= 0.0:  # it has joined the lane
+            return Conflict(id(v), FOLLOW, s_ego, s_other, float(v.speed), other=limits) \
+                if s_other > s_ego else None
+        return Conflict(id(track), CROSSING if track.kind == "crossing" else MERGE, s_ego,
+                        s_other, float(v.speed), track.ego_occupancy, track.other_occupancy,
+                        limits)
 
     def leader(self, ego_vehicle, vehicles: Iterable) -> tuple[float, float] | None:
         """The nearest vehicle ahead in the ego's lane: ``(bumper gap [m], speed [m/s])``."""
@@ -597,10 +602,46 @@ class EnvelopeCheck:
         self._last = seen
 
 
+#: highway-env spawns vehicles during an episode (``IntersectionEnv._spawn_vehicle``): on an
+#: outer lane ``o{r} -> ir{r}``, ``5 + N(0, 1)`` m along it, at ``8 + N(0, 1)`` m/s, to any other
+#: exit. The stand-ins for the vehicles not spawned yet take that noise up to 5 standard
+#: deviations (exceeded with probability 3e-7 per spawn: the domain the guarantee states): at
+#: 10 m, at 13 m/s.
+SPAWN_FRONT_M, SPAWN_SPEED_MPS = 5.0 + 5.0, 8.0 + 5.0
+
+
+def spawn_stand_ins(env) -> list:
+    """One stand-in per route highway-env may spawn a vehicle on (every entry but the ego's,
+    every other exit), at the furthest spawn position and the highest spawn speed
+    (:data:`SPAWN_FRONT_M`, :data:`SPAWN_SPEED_MPS`); never stepped, so it stays there. A
+    spawned vehicle starts behind its route's stand-in and no faster, so it arrives no
+    earlier: a trajectory certified against the stand-ins is certified against every vehicle
+    spawned later (the entry stand-ins of SUMO, docs/method.md §14.4). Without them the ego
+    could stand inside the occupancy interval of a route that was empty when it entered and
+    have no certified choice once a vehicle spawned there (seed 1: 46 steps)."""
+    from highway_env import utils
+
+    u = env.unwrapped
+    cls = utils.class_from_path(u.config["other_vehicles_type"])
+    ego_entry = u.vehicle.lane_index[0]
+    out = []
+    for r0 in range(4):
+        if f"o{r0}" == ego_entry:  # spawned behind the ego in its lane: a follower
+            continue
+        for r1 in range(4):
+            if r1 != r0:
+                v = cls.make_on_lane(u.road, (f"o{r0}", f"ir{r0}", 0),
+                                     longitudinal=SPAWN_FRONT_M, speed=SPAWN_SPEED_MPS)
+                v.plan_route_to(f"o{r1}")
+                out.append(v)
+    return out
+
+
 class PlannerDriver:
     """The ego driven by the planner through the shared adapter
     (:class:`~persuasive.envs.external.ExternalPlanner`: one planner per conflicting vehicle,
-    the most cautious answer, an IDM gap to a leader, the shield over all)."""
+    the most cautious answer, an IDM gap to a leader, the shield over all, the vehicles not
+    spawned yet included: :func:`spawn_stand_ins`)."""
 
     def __init__(self, config: Config, seed: int):
         from .external import ExternalPlanner
@@ -610,11 +651,14 @@ class PlannerDriver:
         self.last_targets = 0  #: vehicles planned against at the last step
         self.interventions = 0  #: steps where the shield overrode the planner
         self.uncertified = 0  #: of which no fallback was certified
+        self.stand_ins: list | None = None  #: made at the first step
 
     def act(self, env, projector: Projector) -> float:
         av = self.config.vehicle_of("av")
         ego = env.unwrapped.vehicle
-        conflicts = projector.conflicts(ego, env.unwrapped.road.vehicles)
+        if self.stand_ins is None:
+            self.stand_ins = spawn_stand_ins(env)
+        conflicts = projector.conflicts(ego, env.unwrapped.road.vehicles, self.stand_ins)
         dt = 1.0 / FREQUENCY_HZ
         v = float(ego.speed)
 
