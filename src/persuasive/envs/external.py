@@ -135,9 +135,6 @@ class Decision:
     conflicts: int  #: vehicles the shield checked
 
 
-_NO_CONFLICT = (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, sh.N_CONFLICT)))
-
-
 class ExternalPlanner:
     """The ego's planner against many outside vehicles (module docstring).
 
@@ -232,7 +229,7 @@ class ExternalPlanner:
         ``config.shield = "off"``)."""
         a = float(proposed_mps2)
         if not self._shield.on:
-            return self._shield.among(a, 0.0, *_NO_CONFLICT)[0], None  # refuses a NaN
+            return ShieldFilter.unfiltered(a)[0], None  # refuses a NaN
         ego = self.ego
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
         s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)

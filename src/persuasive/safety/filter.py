@@ -63,7 +63,7 @@ class ShieldFilter:
         ValueError for a non-finite proposal without a shield (nothing can replace it, and no
         world propagates a non-finite state)."""
         if not self.on:
-            return _unfiltered(proposed)
+            return self.unfiltered(proposed)
         return shield_filter_one(self.kind, proposed, x_R[0], x_R[1], self.dt_s, self.u_brake,
                                  x_H[0], x_H[1], self._buf)
 
@@ -74,7 +74,7 @@ class ShieldFilter:
         s_H[j], v_H[j], C[j]``: :func:`~persuasive.safety.shield.shield_filter`; ``lead``
         too): ``(applied, verdict code)``; a non-finite proposal as in :meth:`one`."""
         if not self.on:
-            return _unfiltered(proposed)
+            return self.unfiltered(proposed)
         n = s_R.shape[0]
         if self._window.shape[0] < n:
             self._window = np.empty((n, 3))
@@ -88,12 +88,15 @@ class ShieldFilter:
         """A verdict's name ("admitted", "brake", "go", "uncertified"; None: no shield)."""
         return verdict_name(code)
 
-
-def _unfiltered(proposed: float) -> tuple[float, int]:
-    if not math.isfinite(proposed):
-        raise ValueError(f"the AV's policy proposed a non-finite acceleration ({proposed!r}) "
-                         "and no shield replaces it (av.shield = off)")
-    return proposed, OFF
+    @staticmethod
+    def unfiltered(proposed: float) -> tuple[float, int]:
+        """What no shield does to ``proposed``: ``(proposed, OFF)``; a non-finite proposal
+        raises ValueError (nothing can replace it, and no world propagates a non-finite
+        state)."""
+        if not math.isfinite(proposed):
+            raise ValueError(f"the AV's policy proposed a non-finite acceleration "
+                             f"({proposed!r}) and no shield replaces it (av.shield = off)")
+        return proposed, OFF
 
 
 __all__ = ["ShieldFilter"]
