@@ -443,6 +443,8 @@ def shield_filter_one(kind: float, a: float, s_R: float, v_R: float, dt: float,
     v_R)`` and the other at ``(s_H, v_H)``, everything else in one buffer
     (:func:`one_buffer`): the two-vehicle loops' way in, one array to hand over, so that a
     check from Python costs about what a scalar one would (no logic of its own)."""
+    if kind == slot.SHIELD_OFF:  # (shield_filter's own first test, before any copying)
+        return a, OFF
     n = N_CONFLICT
     buf[n], buf[n + 1], buf[n + 2] = s_R, s_H, v_H
     return shield_filter(kind, a, v_R, dt, u_brake, buf[n:n + 1], buf[n + 1:n + 2],
