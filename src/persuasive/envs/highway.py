@@ -37,18 +37,18 @@ its ``COMFORT_ACC_MAX``, brakes at most at its ``ACC_MAX`` and never drives fast
 of its speed and the speed limit of every lane on its way (:func:`speed_bound`: the IDM clips its
 target to the lane's limit, whatever target ``RegulatedRoad`` sets while it makes a vehicle yield
 and after); every episode checks that every vehicle stayed inside that envelope
-(:class:`EnvelopeCheck`, ``envelope_excesses``). highway-env integrates positions with the speed of the step's
-start (Euler): a braking ego rolls further than the planner's exact step says, by ``v dt / 2`` from
-speed ``v`` plus at most ``b dt^2 / 8`` for the last, partial step of deceleration ``b`` (the speed
-is clipped at 0), and an accelerating one lags behind it. The shield therefore takes the ego, for
-each first step it checks, that much further along than the exact kinematics after that step
-(:func:`euler_shift`: the Euler step's own displacement against the exact one, plus
-:func:`euler_lead`, the exact Euler surplus of a stop at ``u_min`` from the new speed; 0 for an ego
-at rest that stays at rest), and the far end of the ego's occupancy is widened by ``v_max dt`` for
-the lag (at ``u_max = 1 m/s^2`` it stays below that for the 10 s it takes the ego to accelerate
-from rest to ``v_max``); the other vehicles' near ends by their ``v_max dt / 2`` (an Euler vehicle
-that stops, stops that much further). The acceleration is finally limited so that the speed stays
-in ``[v_min, v_max]`` within the step.
+(:class:`EnvelopeCheck`, ``envelope_excesses``). highway-env integrates positions with the speed of
+the step's start (Euler): a braking ego rolls further than the planner's exact step says, by
+``v dt / 2`` from speed ``v`` plus at most ``b dt^2 / 8`` for the last, partial step of
+deceleration ``b`` (the speed is clipped at 0), and an accelerating one lags behind it. The shield
+therefore takes the ego, for each first step it checks, that much further along than the exact
+kinematics after that step (:func:`euler_shift`: the Euler step's own displacement against the
+exact one, plus :func:`euler_lead`, the exact Euler surplus of a stop at ``u_min`` from the new
+speed; 0 for an ego at rest that stays at rest), and the far end of the ego's occupancy is widened
+by ``v_max dt`` for the lag (at ``u_max = 1 m/s^2`` it stays below that for the 10 s it takes the
+ego to accelerate from rest to ``v_max``); the other vehicles' near ends by their ``v_max dt / 2``
+(an Euler vehicle that stops, stops that much further). The acceleration is finally limited so that
+the speed stays in ``[v_min, v_max]`` within the step.
 
 The comparison driver (``default``) is highway-env's own: the ego becomes one of the env's
 ``IDMVehicle`` (its parameters as the env sets them for traffic, lane changes off, routed to

@@ -14,17 +14,17 @@
 The persuasive and passive planners hold the belief ``q`` on the human's role and the stored
 one-step prediction of the human per role (§6 step 6).
 
-**Knowing the shield** (docs/method.md §12.3), two settings of the planner, not of the
-shield (a planner whose proposals another loop filters is the same planner): with
-``mpc.shield_aware`` and a shield on (``av.shield``), a candidate whose first acceleration
-the shield would reject is not feasible, so the planner does not persuade itself into a
-corner the shield then brakes it out of. With ``mpc.confidence_filter`` (unset: on exactly
-when a shield is) the persuasive and passive planners track their confidence in the human
-model (``persuasive.safety.confidence``); below ``mpc.confidence_threshold`` they stop trying
-to persuade: only candidates that stand before the conflict at their end (yield smoothly) or
-that the worst-case shield certifies to cross whatever the human does remain (when none does,
-the shield-admitted ones, or all without a shield). With the ``responsive`` shield, which trusts the human to brake in
-time, this is what protects the AV from a human the model does not explain.
+**Knowing the shield** (docs/method.md §12.3), two settings of the planner, not of the shield (a
+planner whose proposals another loop filters is the same planner): with ``mpc.shield_aware`` and a
+shield on (``av.shield``), a candidate whose first acceleration the shield would reject is not
+feasible, so the planner does not persuade itself into a corner the shield then brakes it out of.
+With ``mpc.confidence_filter`` (unset: on exactly when a shield is) the persuasive and passive
+planners track their confidence in the human model (``persuasive.safety.confidence``); below
+``mpc.confidence_threshold`` they stop trying to persuade: only candidates that stand before the
+conflict at their end (yield smoothly) or that the worst-case shield certifies to cross whatever
+the human does remain (when none does, the shield-admitted ones, or all without a shield). With the
+``responsive`` shield, which trusts the human to brake in time, this is what protects the AV from a
+human the model does not explain.
 """
 
 from __future__ import annotations

@@ -1,14 +1,14 @@
 """The shield as every loop and adapter applies it: decide, then filter (docs/method.md §12.2).
 
-A step of any world is the same two halves: the AV's policy *decides* (proposes an
-acceleration from what it measured), then the shield *filters* the proposal through its one
-compiled entry point, :func:`persuasive.safety.shield.shield_filter`, which returns the
-acceleration to apply and a verdict. The compiled closed loop (``persuasive.world.run_loop``)
-calls it directly (through ``shield_filter_one``, its one-conflict buffers in one array); everything in Python (the Python loop, ``Planner``, the
-adapter for outside simulators and through it highway-env and SUMO) calls it through a
-:class:`ShieldFilter`, which holds the shield's kind (its one encoding: the packed
-``SHIELD_*`` id), the step and the buffers, so that a step allocates nothing and every check
-the shield makes is written once.
+A step of any world is the same two halves: the AV's policy *decides* (proposes an acceleration
+from what it measured), then the shield *filters* the proposal through its one compiled entry
+point, :func:`persuasive.safety.shield.shield_filter`, which returns the acceleration to apply and
+a verdict. The compiled closed loop (``persuasive.world.run_loop``) calls it directly (through
+``shield_filter_one``, its one-conflict buffers in one array); everything in Python (the Python
+loop, ``Planner``, the adapter for outside simulators and through it highway-env and SUMO) calls it
+through a :class:`ShieldFilter`, which holds the shield's kind (its one encoding: the packed
+``SHIELD_*`` id), the step and the buffers, so that a step allocates nothing and every check the
+shield makes is written once.
 
 The planner's own features that anticipate the shield are settings of the planner, not of the
 shield (``mpc.shield_aware``, ``mpc.confidence_filter``): an outside simulator's per-vehicle

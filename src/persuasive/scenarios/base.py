@@ -84,14 +84,13 @@ class Scenario:
 
     def av_stands_before_occupancy(self, s: float, v: float) -> bool:
         """Whether the AV at ``(s, v)`` can still stand before its occupancy interval by
-        braking at its ``u_min``: the shield's own test (``yields_before``, on the interval
-        the kernels read), which puts the state in the shield's invariant set ``S`` (braking
-        for ever is certified, docs/method.md §12.2). An AV that never conflicts (an empty
-        interval) always does."""
-        from ..packing import widened
+        braking at its ``u_min``: the test of the shield's ``yields_before`` (the same reach
+        time, on the widened interval the kernels read), which puts the state in the shield's
+        invariant set ``S`` (braking for ever is certified, docs/method.md §12.2). An AV that
+        never conflicts (an empty interval) always does."""
         from ..safety.shield import reach_time
 
-        lo = widened(*self.av.occupancy)[0]
+        lo = slot.widened(*self.av.occupancy)[0]
         if lo == math.inf:
             return True
         veh = self.av.vehicle
@@ -149,9 +148,7 @@ class Scenario:
         s0, v0 = self.nominal_s0("av"), sc.av_v0_mps
         # the geometry's case: a start that stops before the zone but not before the interval
         if self.can_stop("av", s0, v0) and not self.av_stands_before_occupancy(s0, v0):
-            from ..packing import widened
-
-            lo = widened(*self.av.occupancy)[0]
+            lo = slot.widened(*self.av.occupancy)[0]
             u = abs(self.av.vehicle.u_min_mps2)
             raise ConfigError(
                 f"scenario.av_s0_m = {s0:g} at scenario.av_v0_mps = {v0:g}: the AV cannot stop "
