@@ -403,6 +403,10 @@ class AVParams:
     shield: ShieldKind | None = None
     #: responsive shield: the human may do anything for this long, then brakes [s]
     shield_response_s: float = 1.0
+    #: the shield's yield line: the AV yields standing this far before the start of its
+    #: occupancy interval [m] (docs/method.md §12.8); past the point where it can no longer
+    #: stand there it commits and prefers driving through; unset: 0, at the interval
+    yield_line_m: float | None = None
     vehicle: VehicleOverrides = field(default_factory=VehicleOverrides)
 
     def __post_init__(self) -> None:
@@ -414,6 +418,8 @@ class AVParams:
         if self.shield is not None:
             _choice("av.shield", self.shield, SHIELD_KINDS)
         _in_range("av.shield_response_s", self.shield_response_s, 0.0, 60.0)
+        if self.yield_line_m is not None:
+            _in_range("av.yield_line_m", self.yield_line_m, 0.0, 100.0)
 
 
 @dataclass(frozen=True)

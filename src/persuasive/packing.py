@@ -64,6 +64,9 @@ ZONE_LO, ZONE_HI = _slots("ZONE_LO", "ZONE_HI")
 # cannot touch the other's (``persuasive.geometry.occupancy_interval``); in a merge, the side
 # zone up to the merge point (the shield and the surrogate safety measures, §12)
 OCC_LO, OCC_HI = _slots("OCC_LO", "OCC_HI")
+# The yield line of the shield [m]: where the vehicle stands when the shield makes it yield,
+# at or before ``OCC_LO`` (``av.yield_line_m`` before it; the human's is its ``OCC_LO``)
+SHIELD_LINE = _slots("SHIELD_LINE")[0]
 # The path: ``xy(s)`` in three pieces (``persuasive.geometry``): straight before ``B1``
 # (direction ``U0``, through ``(X1, Y1)`` at ``B1``), an arc from ``B1`` to ``B2`` (centre,
 # radius, polar angle at ``B1``, +1 left / -1 right; none when ``R == 0``), straight after ``B2``
@@ -171,7 +174,11 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
         P[PATH_B1:PATH_UY2 + 1] = path.geometry_vector()
         # widened like the zone: never narrower than computed
         P[OCC_LO], P[OCC_HI] = widened(*path.occupancy)
+        P[SHIELD_LINE] = P[OCC_LO]
         out.append(P)
+    line = config.av.yield_line_m
+    if line:  # at or before the interval: a line only ever adds caution
+        out[0][SHIELD_LINE] = out[0][OCC_LO] - line
     return out[0], out[1]
 
 

@@ -90,6 +90,16 @@ class RunOutcome:
     #: noise ran outside what the shield knows (acceleration or measurement noise); False with
     #: the shield off or ``responsive`` (its guarantee rests on the human responding)
     guarantee_held: bool = False
+    # liveness (docs/method.md §12.6): both vehicles cleared the conflict within the run; the AV
+    # passed the conflict point first and both cleared (persuasion that counts); a standoff
+    # (neither advances 0.5 m in 3 s, neither cleared) and when its first window starts [s];
+    # how long each vehicle stood (below 0.1 m/s) before it cleared [s]
+    both_cleared: bool = False
+    av_first_through: bool = False
+    deadlock: bool = False
+    deadlock_at_s: float = math.nan
+    av_wait_s: float = 0.0
+    hv_wait_s: float = 0.0
 
 
 #: Outcome fields that are times or distances (floats), for tables.
@@ -429,6 +439,10 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
     from .safety.shield import UNCERTIFIED
 
     uncertified = int(np.sum(verdicts == UNCERTIFIED)) if verdicts is not None else 0
+    cleared_av = scenario.cleared("av", states[:, 0])
+    cleared_hv = scenario.cleared("hv", states[:, 2])
+    both = bool(cleared_av[-1] and cleared_hv[-1])
+    stood = measures.standoff(states[:, 0], states[:, 2], cleared_av, cleared_hv, dt)
     return RunOutcome(
         first_at_line=line,
         first_at_conflict_point=conflict,
@@ -454,6 +468,12 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
         guarantee_held=bool(config.shield == "worst-case" and uncertified == 0
                             and verdicts is not None and len(verdicts) > 0
                             and not _noisy(config)),
+        both_cleared=both,
+        av_first_through=bool(both and conflict == 1),
+        deadlock=not math.isnan(stood),
+        deadlock_at_s=stood,
+        av_wait_s=measures.waiting_time(states[:, 1], cleared_av, dt),
+        hv_wait_s=measures.waiting_time(states[:, 3], cleared_hv, dt),
     )
 
 

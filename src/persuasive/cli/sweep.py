@@ -128,8 +128,10 @@ def _parse_where(values: tuple[str, ...]) -> dict[str, Any]:
               help="Axis along y: a heatmap instead of a line plot.")
 @click.option("--metric", required=True, metavar="NAME",
               help="av_first_pct, hv_first_pct, same_step_pct, neither_pct, collision_pct, "
-                   "infeasible_pct (percent of runs, Wilson 95 % interval), min_distance_m, "
-                   "min_distance_to_line_m, hv_role_changes (means, normal 95 % interval).")
+                   "infeasible_pct, both_cleared_pct, av_first_through_pct, deadlock_pct "
+                   "(percent of runs, Wilson 95 % interval), min_distance_m, "
+                   "min_distance_to_line_m, hv_role_changes, wait_s (means, normal 95 % "
+                   "interval).")
 @click.option("--where", "where", multiple=True, metavar="AXIS=VALUE",
               help="Keep only runs with this value of another axis (repeatable); other "
                    "axes are pooled.")

@@ -89,6 +89,11 @@ class Conflict:
     #: the adapter's own data; ``"stand_in": True`` marks a vehicle not in the simulator yet
     #: (highway-env's spawns), which the shield checks and the planner does not plan against
     extra: dict = field(default_factory=dict, compare=False)
+    #: the ego's yield line relative to the conflict point [m]: where the shield makes it
+    #: stand when it yields (docs/method.md §12.8; e.g. before a junction's polygon); None:
+    #: ``ego_occupancy[0]`` less the configuration's ``av.yield_line_m``; never after
+    #: ``ego_occupancy[0]``
+    ego_line_m: float | None = None
 
 
 def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
@@ -102,6 +107,7 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
     base[sh.C_RHO] = config.av.shield_response_s
     base[sh.C_R_UMIN], base[sh.C_R_UMAX] = ego.u_min_mps2, ego.u_max_mps2
     base[sh.C_R_VMIN], base[sh.C_R_VMAX] = ego.v_min_mps, ego.v_max_mps
+    before = config.av.yield_line_m or 0.0
     s_R, s_H, v_H, rows = [], [], [], []
     for c in conflicts:
         o = c.other if c.other is not None else human
@@ -115,6 +121,9 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
         else:
             row[sh.C_R_LO], row[sh.C_R_HI] = c.ego_occupancy
             row[sh.C_H_LO], row[sh.C_H_HI] = c.other_occupancy
+        lo = row[sh.C_R_LO]
+        line = lo - before if c.ego_line_m is None else float(c.ego_line_m)
+        row[sh.C_R_LINE] = min(line, lo) if math.isfinite(lo) else lo
         row[sh.C_SHARED] = 0.0 if c.kind == CROSSING else 1.0
         row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m)
         row[sh.C_H_UMIN], row[sh.C_H_UMAX] = o.u_min_mps2, o.u_max_mps2
@@ -302,6 +311,9 @@ class RouteConflict:
     other_at_m: float
     ego_occupancy: tuple[float, float]
     other_occupancy: tuple[float, float]
+    #: the ego's yield line relative to its conflict point (:attr:`Conflict.ego_line_m`;
+    #: None: the configuration's)
+    ego_line_m: float | None = None
 
     def conflict(self, key: Hashable, ego_arc_m: float, other_arc_m: float, other_v_mps: float,
                  other: Limits | None = None, extra: dict | None = None,
@@ -318,7 +330,8 @@ class RouteConflict:
             kind, occupancy = FOLLOW, self.ego_occupancy
         return Conflict(key, kind, float(s_R), float(s_H), float(other_v_mps),
                         occupancy, self.other_occupancy, other,
-                        extra if extra is not None else {})
+                        extra if extra is not None else {},
+                        ego_line_m=None if kind == FOLLOW else self.ego_line_m)
 
 
 def route_conflict(ego: Polyline, other: Polyline, ego_size: tuple[float, float],

@@ -193,12 +193,15 @@ def make_highway_env(config: Config, render_mode: str | None = None):
 @dataclass(frozen=True)
 class EgoPath:
     """The ego's straight path: ``origin`` (2,) [m], unit ``direction`` (2,), ``length_m``;
-    ``exit_u_m``: where it leaves the intersection (the start of its last lane) [m]."""
+    ``exit_u_m``: where it leaves the intersection (the start of its last lane) [m];
+    ``entry_u_m``: where it enters it (the end of its first lane; None for a route of fewer
+    than three lanes), the ego's yield line (docs/method.md §12.8)."""
 
     origin: np.ndarray
     direction: np.ndarray
     length_m: float
     exit_u_m: float
+    entry_u_m: float | None = None
 
     @classmethod
     def from_lanes(cls, network, lanes: list[tuple]) -> EgoPath:
@@ -217,7 +220,8 @@ class EgoPath:
                 raise ConfigError("the ego's route is not one straight line")
         length = float(sum(lane.length for lane in objs))
         exit_u = float(sum(lane.length for lane in objs[:-1]))
-        return cls(origin, direction, length, exit_u)
+        entry_u = float(objs[0].length) if len(objs) >= 3 else None
+        return cls(origin, direction, length, exit_u, entry_u)
 
     def coordinates(self, point) -> tuple[float, float]:
         """``(u, lateral)`` [m] of ``point``: along the path from its origin, and to its left."""
@@ -497,9 +501,11 @@ class Projector:
         if track.kind == "merge" and s_other >= 0.0:  # it has joined the lane
             return Conflict(id(v), FOLLOW, s_ego, s_other, float(v.speed), other=limits) \
                 if s_other > s_ego else None
+        entry = self.ego.entry_u_m  # it yields with its front before the intersection
+        line = None if entry is None else entry - 0.5 * self.ego_size[0] - track.origin_u_m
         return Conflict(id(track), CROSSING if track.kind == "crossing" else MERGE, s_ego,
                         s_other, float(v.speed), track.ego_occupancy, track.other_occupancy,
-                        limits)
+                        limits, ego_line_m=line)
 
     def leader(self, ego_vehicle, vehicles: Iterable) -> tuple[float, float] | None:
         """The nearest vehicle ahead in the ego's lane: ``(bumper gap [m], speed [m/s])``."""

@@ -80,6 +80,7 @@ import numpy as np
 
 from .._processes import scratch_dir
 from ..config import AV_KIND_ALIASES, AV_KINDS, SHIELD_KINDS, Config, ConfigError
+from ..safety.measures import WAIT_SPEED_MPS
 from .external import (CROSSING, FOLLOW, MERGE, ExternalPlanner, Limits, Polyline,
                        RouteConflict, route_conflict)
 
@@ -473,6 +474,10 @@ class Projector:
             geo = route_conflict(ego.line, other.line, self.ego_size, other_size,
                                  LATERAL_MARGIN_M, LONG_MARGIN_M)
         geo = None if geo is None else in_route_coordinates(geo, ego, other)
+        if geo is not None and geo.kind != FOLLOW:
+            entry = junction_entry(ego, geo.ego_at_m)
+            if entry is not None:  # the ego yields with its front before the junction
+                geo = replace(geo, ego_line_m=entry - 0.5 * self.ego_size[0] - geo.ego_at_m)
         self._conflicts[key] = geo
         return geo
 
@@ -494,6 +499,20 @@ class Projector:
             entry = (self.route(edges), geo, widened)
         self._seen[key] = entry
         return entry
+
+
+def junction_entry(route: Route, at_m: float) -> float | None:
+    """Where ``route`` enters the junction of its conflict point ``at_m`` (route coordinate):
+    the start of the last run of internal lanes (SUMO's ``:``-lanes, inside the junction's
+    polygon) that starts at or before it; None if none does."""
+    entry, inside = None, False
+    for lane in route.lanes:
+        internal = lane.startswith(":")
+        start = route.offsets[lane][0]
+        if internal and not inside and start <= at_m:
+            entry = start
+        inside = internal
+    return entry
 
 
 def in_route_coordinates(geo: RouteConflict, ego: Route, other: Route) -> RouteConflict:
@@ -651,6 +670,9 @@ class EpisodeResult:
     #: the worst-case guarantee covered the episode: a planner ego with the worst-case
     #: shield, every step certified (False for SUMO's own driver and without the shield)
     guarantee_held: bool = False
+    #: time the ego stood (below 0.1 m/s, SUMO's waiting threshold) inside a junction, on one
+    #: of its internal lanes [s]: where it blocks others (every driver, SUMO's own too)
+    junction_stood_s: float = 0.0
 
     @property
     def uncertified_steps(self) -> int:
@@ -792,6 +814,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
     timings: list[tuple[int, float]] = []
     pairs: dict[tuple[str, str], str] = {}
     overrides = uncertified = ego_steps = max_view = 0
+    stood_steps = 0
     crossed_at = depart_at = None
     types: dict[str, Limits] = {}
     known: dict[str, tuple] = {}
@@ -833,6 +856,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                     continue
                 if depart_at is None:
                     depart_at = t
+                stood_steps += ego.lane.startswith(":") and ego.speed_mps < WAIT_SPEED_MPS
                 arc = projector.ego.arc(ego.lane, ego.lane_pos_m)
                 if crossed_at is None and arc is not None and \
                         arc - 0.5 * ego.length_m >= cross_arc:
@@ -883,7 +907,8 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
         decide_ms_median=float(np.median([m for _, m in timings])) if timings else None,
         max_in_view=max_view,
         guarantee_held=bool(planner is not None and planner.config.shield == "worst-case"
-                            and ego_steps > 0 and uncertified == 0))
+                            and ego_steps > 0 and uncertified == 0),
+        junction_stood_s=round(stood_steps * DT_S, 6))
     return EpisodeOutput(result, steps, decisions, timings)
 
 
@@ -948,6 +973,8 @@ class SumoReport:
                 "shield_overrides": sum(e.shield_overrides for e in eps),
                 "uncertified": sum(e.uncertified for e in eps),
                 "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
+                "junction_stood_s": float(sum(e.junction_stood_s for e in eps)),
+                "junction_stood_episodes": sum(e.junction_stood_s > 0 for e in eps),
                 "decisions": len(times),
                 "decide_ms_median": float(np.median([m for _, m in times])) if times else None,
                 "decisions_10_in_view": len(ten),

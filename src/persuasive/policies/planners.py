@@ -29,6 +29,8 @@ human the model does not explain.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -40,8 +42,9 @@ from ..mpc import (D_BELIEF_L, D_EXPECTED, D_MAX_SAFE, D_MIN_SAFE, D_P_LL, D_PLA
 from ..online import online_init, online_step
 from ..roles import FOLLOWER, LEADER, bayes_update
 from ..safety.confidence import confidence_update, plausible_of, role_prediction
-from ..safety.shield import (C_KIND, N_CONFLICT, admissible, conflict_vector, go_certified,
-                             human_window, yields_before)
+from ..safety.shield import (C_KIND, C_R_LINE, C_R_UMAX, C_R_UMIN, N_CONFLICT, admissible,
+                             conflict_vector, go_certified, human_window, line_binds,
+                             line_brake, yields_before)
 
 #: Slots of the MPC's state: belief q = (P(HV = L), P(HV = F)), the stored prediction of the
 #: HV's next state per HV role, whether it has been initialised; then the confidence filter
@@ -93,7 +96,8 @@ def shield_allowed(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib,
     explain the human): only those that stand before the conflict at their end or that the
     worst-case shield certifies to cross now, whatever the shield's own kind, on or off (if
     none, as if not robust). Otherwise, with a shield on and ``mpc.shield_aware``, those whose
-    first acceleration the shield admits; without, all of them."""
+    first acceleration the shield admits (the AV held to its yield line while the line binds,
+    §12.8); without, all of them."""
     n_traj = allowed.shape[0]
     aware = P_av[slot.SHIELD] != slot.SHIELD_OFF and P_av[slot.SHIELD_AWARE] != 0.0
     if not aware and not robust:
@@ -124,6 +128,21 @@ def shield_allowed(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib,
         allowed[c] = admissible(s_R, v_R, lib_r.A[0, c], dt, s_H, v_H, C, t_in, t_out, past)
         count += allowed[c]
     return count
+
+
+@njit(cache=True)
+def yield_at_line(s_R: float, v_R: float, P_av: np.ndarray, P_hv: np.ndarray) -> float:
+    """With a shield on and its yield line still binding (docs/method.md §12.8): the gentlest
+    acceleration that stands the AV before its line (``persuasive.safety.shield.line_brake``),
+    for a shield-aware planner none of whose candidates the shield allows (its library may
+    hold none that stops exactly there); NaN otherwise (the planner's own choice stands)."""
+    if P_av[slot.SHIELD] == slot.SHIELD_OFF or P_av[slot.SHIELD_AWARE] == 0.0:
+        return np.nan
+    C = np.empty(N_CONFLICT)
+    conflict_vector(P_av, P_hv, C)
+    if not line_binds(s_R, v_R, C):
+        return np.nan
+    return line_brake(s_R, v_R, P_av[slot.SAMPLE_DT], C[C_R_LINE], C[C_R_UMIN], C[C_R_UMAX])
 
 
 @njit(cache=True)
@@ -223,6 +242,10 @@ def mpc_step(st: np.ndarray, prm: np.ndarray, persuade: bool, s_R: float, v_R: f
     log[COL_CONFIDENCE] = st[CONFIDENCE] if tracking else np.nan
     log[COL_N_ALLOWED] = n_allowed
     log[COL_P_A_HAT] = p_hat if persuade else np.nan
+    if n_allowed == 0:
+        a_line = yield_at_line(s_R, v_R, P_av, P_hv)
+        if not math.isnan(a_line):
+            return a_line
     return lib_r.A[0, c]
 
 

@@ -15,6 +15,12 @@ point, after which the lane is shared).
   two were never on a collision course.
 - **minimum footprint gap** [m]: the smallest distance between the two oriented rectangles
   over the run (0 when they overlap): physical, in every scenario.
+- **standoff** (deadlock): a window of ``STANDOFF_WINDOW_S`` (3 s) in which neither vehicle
+  advances more than ``STANDOFF_PROGRESS_M`` (0.5 m) and neither has cleared the conflict by
+  its end; a run has one when any window of its states does (runs shorter than the window
+  have none). Reported with the time its first window starts.
+- **waiting time** [s]: how long a vehicle stood (speed below ``WAIT_SPEED_MPS``, 0.1 m/s, as
+  SUMO's ``waitingTime``) before it cleared the conflict (the whole run if it never did).
 - **collisions by fault**: a collision (a run of overlapping states) is a *rear-end by the
   human* when it starts with the lane shared, the AV past the merge point and ahead of the
   human; every other collision is *caused by the AV* (the shield's target is none of those).
@@ -26,6 +32,41 @@ import math
 
 import numpy as np
 from numba import njit
+
+
+#: A standoff: neither vehicle advances more than this [m] ...
+STANDOFF_PROGRESS_M = 0.5
+#: ... within this window [s], neither having cleared.
+STANDOFF_WINDOW_S = 3.0
+#: Below this speed a vehicle is waiting [m/s] (SUMO's ``waitingTime`` threshold).
+WAIT_SPEED_MPS = 0.1
+
+
+def standoff(s_av: np.ndarray, s_hv: np.ndarray, cleared_av: np.ndarray,
+             cleared_hv: np.ndarray, dt: float) -> float:
+    """When the run's first standoff window starts [s] (module docstring); NaN if none.
+
+    ``s_*``: positions at states ``0..N`` (``k dt``); ``cleared_*``: per state, the vehicle is
+    past its conflict."""
+    w = int(round(STANDOFF_WINDOW_S / dt))
+    s_av, s_hv = np.asarray(s_av, float), np.asarray(s_hv, float)
+    if s_av.shape[0] <= w:
+        return math.nan
+    still = ((s_av[w:] - s_av[:-w] <= STANDOFF_PROGRESS_M)
+             & (s_hv[w:] - s_hv[:-w] <= STANDOFF_PROGRESS_M)
+             & ~np.asarray(cleared_av, bool)[w:] & ~np.asarray(cleared_hv, bool)[w:])
+    k = np.flatnonzero(still)
+    return float(k[0] * dt) if k.size else math.nan
+
+
+def waiting_time(v: np.ndarray, cleared: np.ndarray, dt: float) -> float:
+    """Time [s] a vehicle stood (speed below ``WAIT_SPEED_MPS``) before it cleared: the steps
+    ``k`` (from state ``k`` to ``k + 1``) that start below the speed, before the first cleared
+    state. ``v``, ``cleared``: per state ``0..N``."""
+    v, cleared = np.asarray(v, float), np.asarray(cleared, bool)
+    done = np.flatnonzero(cleared)
+    end = int(done[0]) if done.size else v.shape[0] - 1
+    return float(np.count_nonzero(v[:end] < WAIT_SPEED_MPS) * dt)
 
 
 def crossing_times(s: np.ndarray, target: float, dt: float) -> float:
@@ -199,4 +240,6 @@ def rear_end_mask(scenario, s_av: np.ndarray, s_hv: np.ndarray) -> np.ndarray:
     return (np.asarray(s_av) >= scenario.av.occupancy[1]) & (np.asarray(s_av) > np.asarray(s_hv))
 
 
-__all__ = ["caused_by_av", "footprint_gaps", "min_gap", "min_ttc", "pet", "rear_end_mask"]
+__all__ = ["STANDOFF_PROGRESS_M", "STANDOFF_WINDOW_S", "WAIT_SPEED_MPS", "caused_by_av",
+           "footprint_gaps", "min_gap", "min_ttc", "pet", "rear_end_mask", "standoff",
+           "waiting_time"]

@@ -52,6 +52,15 @@ so they are in ``S``. From states outside it the shield still answers (``UNCERTI
 fallback whose possible overlap starts latest, or is shortest), e.g. with measurement noise on, or
 when a vehicle appears out of nowhere in an outside simulator, where the guarantee does not hold.
 
+**The yield line** (docs/method.md §12.8). Each conflict carries the AV's yield line
+``C_R_LINE <= R_lo``: where it stands when it yields. While the line *binds* (the AV is before
+it and can still stand before it, :func:`line_binds`), "``a``, then ``BRAKE``" is certified with
+the AV's interval taken to start at the line (:func:`brake_certified`), and an override first
+tries the gentlest stop at the line (:func:`line_brake`); once committed, an override prefers
+``GO`` to ``BRAKE``. Moving ``R_lo`` back only enlarges the AV's claimed occupancy, so every
+answer is still certified from the current state and ``S`` is unchanged: the line chooses among
+certified answers, never adds one. A line at ``R_lo`` (the default) never binds.
+
 **Conservative, never optimistic.** Every time compared carries a margin of
 :data:`TIME_MARGIN_S` against the AV and every interval is widened by rounding margins when it
 is built (``persuasive.packing``), so floating-point rounding cannot turn an unsafe verdict into
@@ -80,10 +89,11 @@ from ..kinematics import saturated_step
 # Conflict vector slots: the AV's and the human's occupancy intervals [m]; 1.0 for a shared
 # lane (``R_HI`` is then the merge point, ``H_LO..H_HI`` the human's side zone); the mean
 # length of the pair [m] (the gap of a follower); the shield kind and the responsive
-# human's response time [s]; the AV's and the human's limits.
+# human's response time [s]; the AV's and the human's limits; the AV's yield line (where it
+# stands when it yields, at or before ``R_LO``; ``R_LO`` itself: none before the interval).
 (C_R_LO, C_R_HI, C_H_LO, C_H_HI, C_SHARED, C_GAP, C_KIND, C_RHO, C_R_UMIN, C_R_UMAX, C_R_VMIN,
- C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX) = range(16)
-N_CONFLICT = 16
+ C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX, C_R_LINE) = range(17)
+N_CONFLICT = 17
 
 #: Verdicts of :func:`shield_filter` (the world logs them per step); ``OFF``: no shield.
 ADMITTED, BRAKE, GO, UNCERTIFIED, OFF = 0, 1, 2, 3, -1
@@ -94,6 +104,9 @@ VERDICTS = ("admitted", "brake", "go", "uncertified")
 TIME_MARGIN_S = 1e-6
 #: Margin on a follower's gap, against the AV [m] (same reason).
 GAP_MARGIN_M = 1e-6
+#: How far before its yield line the AV aims to stand when it yields there [m]: standing on
+#: the line itself would count as past it (committed).
+LINE_MARGIN_M = 0.01
 
 _INF = math.inf
 
@@ -110,6 +123,7 @@ def conflict_vector(P_av: np.ndarray, P_hv: np.ndarray, out: np.ndarray) -> None
     out[C_R_VMIN], out[C_R_VMAX] = P_av[slot.V_MIN], P_av[slot.V_MAX]
     out[C_H_UMIN], out[C_H_UMAX] = P_hv[slot.U_MIN], P_hv[slot.U_MAX]
     out[C_H_VMIN], out[C_H_VMAX] = P_hv[slot.V_MIN], P_hv[slot.V_MAX]
+    out[C_R_LINE] = min(P_av[slot.SHIELD_LINE], P_av[slot.OCC_LO])
 
 
 # -- one vehicle under constant acceleration -----------------------------------------------
@@ -337,13 +351,77 @@ def _worse(start_a: float, len_a: float, start_b: float, len_b: float) -> bool:
 # -- the filter ---------------------------------------------------------------------------------
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def line_binds(s: float, v: float, C: np.ndarray) -> bool:
+    """The AV at ``(s, v)`` has a yield line before its occupancy interval and can still
+    stand before it by braking now: it has not committed (docs/method.md §12.8)."""
+    line = C[C_R_LINE]
+    return line < C[C_R_LO] and s < line and reach_time(s, v, C[C_R_UMIN], line, C[C_R_VMIN],
+                                           C[C_R_VMAX]) == _INF
+
+
+@njit(cache=True, _nrt=False)
+def brake_certified(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
+                    C: np.ndarray, t_in_H: float, t_out_H: float, past: bool,
+                    binds: bool) -> bool:
+    """"``a``, then ``BRAKE``" is certified; ``binds`` (:func:`line_binds` at the step's
+    start): certified with the AV's interval starting at its stop target,
+    :data:`LINE_MARGIN_M` before its yield line, so that it yields there, not at the interval
+    (more conservative: the interval only grows). An AV already past its target (within the
+    margin before the line: a stop at the target that rolled on by rounding or a simulator's
+    integration) may not creep on: it moves forward only when ``GO`` is certified, and
+    standing there is certified against the line itself."""
+    u_min = C[C_R_UMIN]
+    if not binds:
+        return certified(s_R, v_R, a, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past)
+    line = C[C_R_LINE]
+    target = line - LINE_MARGIN_M
+    if s_R >= target:
+        if a > 0.0:
+            return False
+        target = line
+    lo = C[C_R_LO]
+    C[C_R_LO] = target
+    ok = certified(s_R, v_R, a, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past)
+    C[C_R_LO] = lo
+    return ok
+
+
 @njit(cache=True, _nrt=False)
 def admissible(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
                C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
-    """The shield admits ``a`` for one step: "``a``, then ``BRAKE``" or "``a``, then ``GO``"
-    is certified."""
-    return (certified(s_R, v_R, a, dt, C[C_R_UMIN], s_H, v_H, C, t_in_H, t_out_H, past)
-            or certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past))
+    """The shield admits ``a`` for one step: "``a``, then ``GO``" is certified, or "``a``,
+    then ``BRAKE``" (with the yield line while it binds, :func:`brake_certified`)."""
+    return (certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past)
+            or brake_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in_H, t_out_H, past,
+                               line_binds(s_R, v_R, C)))
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def line_brake(s: float, v: float, dt: float, line: float, u_min: float, u_max: float
+               ) -> float:
+    """The gentlest acceleration that, held for ``dt`` and followed by ``u_min``, stands the
+    AV at ``(s, v)`` :data:`LINE_MARGIN_M` before ``line`` (within ``[u_min, 0]``: a yield
+    never speeds up; ``u_min`` when none does): the yield that stops at the line instead of
+    as early as full braking would, and leaves the AV standing where the line still binds.
+    ``u_max`` is unused (kept for the callers' symmetry). Closed form
+    of ``(v + w) dt / 2 + w^2 / (2 |u_min|) = line - s`` for the speed ``w`` after the step,
+    less a relative margin; the caller certifies the result."""
+    d = line - LINE_MARGIN_M - s
+    if not (d > 0.0) or u_min >= 0.0:
+        return u_min
+    b = -u_min
+    half = 0.5 * dt
+    c = v * half - d
+    disc = half * half - 2.0 * c / b
+    if not disc >= 0.0:  # not even a stop within the step reaches only the line
+        return u_min
+    w = b * (-half + math.sqrt(disc))
+    if w <= 0.0:
+        return u_min
+    a = (w - v) / dt
+    a -= 1e-9 * (1.0 + abs(a))
+    return min(max(a, u_min), 0.0)
 
 
 @njit(cache=True, _nrt=False)
@@ -375,10 +453,12 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     admitted): ``s_R[j]`` the AV's position in its coordinates, ``s_H[j], v_H[j]`` the
     other vehicle's state, ``C[j]`` its conflict vector (:func:`conflict_vector`). A
     trajectory is certified only with one fallback against all of them: ``a`` is admitted if
-    "``a``, then ``F``" is certified against every vehicle for ``F = BRAKE`` or for
-    ``F = GO``; otherwise ``BRAKE`` or ``GO`` if certified against all; otherwise
-    (``UNCERTIFIED``) the fallback whose first possible overlap, over all the vehicles,
-    starts latest, or whose overlaps are shortest in all (ties: brake).
+    "``a``, then ``F``" is certified against every vehicle for ``F = BRAKE`` (held to the
+    yield line of every conflict whose line binds) or for ``F = GO``; otherwise, while some
+    line binds, the gentlest stop before every binding line (verdict ``BRAKE``), then
+    ``BRAKE``, then ``GO``; once none binds, ``GO`` before ``BRAKE`` (each if certified
+    against all); otherwise (``UNCERTIFIED``) the fallback whose first possible overlap, over
+    all the vehicles, starts latest, or whose overlaps are shortest in all (ties: brake).
 
     ``lead`` ``(3,)`` [m]: how much further along its path the AV is taken when its first
     step is ``a``, ``u_min`` or ``u_max`` (zeros: the exact kinematics). A simulator that
@@ -399,21 +479,47 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
         t_in, t_out, past = human_window(s_H[j], v_H[j], C[j])
         window[j, 0], window[j, 1], window[j, 2] = t_in, t_out, 1.0 if past else 0.0
     u_min, u_max = C[0, C_R_UMIN], C[0, C_R_UMAX]
-    for i in range(0 if proposal_ok else 2, 4):
-        first = a if i < 2 else (u_min if i == 2 else u_max)
-        fb = u_min if i == 0 or i == 2 else u_max
-        shift = lead[0] if i < 2 else lead[i - 1]
+    # the yield lines that still bind (the AV can stand before them: docs/method.md §12.8),
+    # and the gentlest braking that stands before every one of them
+    yielding, a_line = False, u_max
+    for j in range(n):
+        binds = line_binds(s_R[j] + lead[1], v_R, C[j])
+        window[j, 2] += 2.0 if binds else 0.0
+        if binds:
+            yielding = True
+            a_line = min(a_line, line_brake(s_R[j] + lead[1], v_R, dt, C[j, C_R_LINE],
+                                            u_min, u_max))
+    # candidates: the proposal with either fallback; then, while a line binds, the yield at
+    # the line, BRAKE, GO; once committed (no line binds), GO before BRAKE: drive through
+    # rather than stand where it blocks others
+    for i in range(0 if proposal_ok else 2, 5):
+        if i < 2:
+            first, fb, shift, verdict = a, (u_min if i == 0 else u_max), lead[0], ADMITTED
+        elif i == 2:
+            if not yielding:
+                continue
+            first, fb, shift, verdict = a_line, u_min, lead[1], BRAKE
+        elif (i == 3) == yielding:
+            first, fb, shift, verdict = u_min, u_min, lead[1], BRAKE
+        else:
+            first, fb, shift, verdict = u_max, u_max, lead[2], GO
         ok = True
         for j in range(n):
-            if not certified(s_R[j] + shift, v_R, first, dt, fb, s_H[j], v_H[j], C[j],
-                             window[j, 0], window[j, 1], window[j, 2] != 0.0):
+            past = window[j, 2] % 2.0 != 0.0
+            if fb == u_min:
+                good = brake_certified(s_R[j] + shift, v_R, first, dt, s_H[j], v_H[j], C[j],
+                                       window[j, 0], window[j, 1], past, window[j, 2] >= 2.0)
+            else:
+                good = certified(s_R[j] + shift, v_R, first, dt, fb, s_H[j], v_H[j], C[j],
+                                 window[j, 0], window[j, 1], past)
+            if not good:
                 ok = False
                 break
         if ok:
-            return first, (ADMITTED if i < 2 else (BRAKE if i == 2 else GO))
+            return first, verdict
     sb, lb, sg, lg = _INF, 0.0, _INF, 0.0
     for j in range(n):
-        past = window[j, 2] != 0.0
+        past = window[j, 2] % 2.0 != 0.0
         s, length = threat(s_R[j] + lead[1], v_R, u_min, dt, u_min, s_H[j], v_H[j], C[j],
                            window[j, 0], window[j, 1], past)
         sb, lb = min(sb, s), lb + length
@@ -469,8 +575,9 @@ def verdict_name(code: int) -> str | None:
     return None if code == OFF else VERDICTS[code]
 
 
-__all__ = ["ADMITTED", "BRAKE", "GO", "N_CONFLICT", "OFF", "TIME_MARGIN_S", "UNCERTIFIED",
-           "VERDICTS", "admissible", "certified", "conflict_vector", "go_certified",
-           "human_window", "one_buffer", "profile_reach", "reach_time", "shield_filter",
+__all__ = ["ADMITTED", "BRAKE", "GO", "LINE_MARGIN_M", "N_CONFLICT", "OFF", "TIME_MARGIN_S",
+           "UNCERTIFIED", "VERDICTS", "admissible", "brake_certified", "certified",
+           "conflict_vector", "go_certified", "human_window", "line_binds", "line_brake",
+           "one_buffer", "profile_reach", "reach_time", "shield_filter",
            "shield_filter_one", "shield_step",
            "verdict_name", "yields_before"]

@@ -50,6 +50,8 @@ JSON_KEYS = ("av", "shield", "hv", "runs", "av_first_pct", "hv_first_pct", "neit
              "collisions", "collisions_caused_by_av", "rear_ends_by_human", "cc_fail_runs",
              "av_delay_s_mean", "hv_delay_s_mean", "min_distance_m_p05",
              "shield_interventions_mean", "uncertified_steps", "guarantee_held_runs",
+             "both_cleared_pct", "av_first_through_pct", "deadlocks", "wait_s_p95",
+             "wait_s_max", "av_clear_s_rmean",
              "min_gap_m_p05", "min_ttc_s_p05", "pet_s_p05",
              "av_max_brake_mps2_mean", "av_rms_jerk_mps3_mean", "av_decision_ms_median")
 #: The shield setting every other is paired against.
@@ -248,9 +250,42 @@ def _column(frame, name: str) -> np.ndarray:
     return frame[name].to_numpy(dtype=float, na_value=np.nan)
 
 
+def _liveness(frame, horizon_s: float | None) -> dict[str, Any]:
+    """Liveness of a row's runs (docs/method.md §12.6): both cleared, the AV first through the
+    conflict point with both cleared (with its interval), standoffs, the waiting time (the
+    longer of the two vehicles' per run: p95 and max) and each vehicle's time to clear as a
+    restricted mean of ``min(t, horizon)`` over all runs (a run that never cleared counts the
+    horizon, so failing the hard runs is not rewarded). Rows from runs recorded before these
+    measures existed give None."""
+    if "both_cleared" not in frame:
+        return {k: None for k in ("both_cleared_pct", "av_first_through_pct",
+                                  "av_first_through_pct_ci", "deadlocks", "wait_s_p95",
+                                  "wait_s_max", "av_clear_s_rmean", "hv_clear_s_rmean")}
+    through = frame["av_first_through"].to_numpy(float)
+    wait = np.maximum(_column(frame, "av_wait_s"), _column(frame, "hv_wait_s"))
+
+    def rmean(name: str) -> float | None:
+        if horizon_s is None:
+            return None
+        t = _column(frame, name)
+        return float(np.mean(np.where(np.isfinite(t), np.minimum(t, horizon_s), horizon_s)))
+
+    return {
+        "both_cleared_pct": _pct(frame["both_cleared"].to_numpy(float)),
+        "av_first_through_pct": _pct(through),
+        "av_first_through_pct_ci": [100 * v for v in _bootstrap_ci(through)],
+        "deadlocks": int(frame["deadlock"].astype(bool).sum()),
+        "wait_s_p95": float(np.percentile(wait, 95)) if wait.size else None,
+        "wait_s_max": float(np.max(wait)) if wait.size else None,
+        "av_clear_s_rmean": rmean("av_time_to_clear_s"),
+        "hv_clear_s_rmean": rmean("hv_time_to_clear_s"),
+    }
+
+
 def pair_row(frame, av: str, hv: str, timing: float | None,
-             shield: str = "off") -> dict[str, Any]:
-    """The summary of one (AV, shield, human) combination's runs."""
+             shield: str = "off", horizon_s: float | None = None) -> dict[str, Any]:
+    """The summary of one (AV, shield, human) combination's runs; ``horizon_s``: the runs'
+    length (``n_steps dt``), for the restricted mean times to clear."""
     first = frame["first_at_line"].to_numpy()
     av_first, hv_first = (first == 1).astype(float), (first == 2).astype(float)
     neither = (first == 0).astype(float)
@@ -294,6 +329,7 @@ def pair_row(frame, av: str, hv: str, timing: float | None,
         if "uncertified_steps" in frame else None,
         "guarantee_held_runs": int(frame["guarantee_held"].astype(bool).sum())
         if "guarantee_held" in frame else None,
+        **_liveness(frame, horizon_s),
         "min_gap_m_p05": _p05(_column(frame, "min_gap_m")),
         "min_ttc_s_p05": _p05(_column(frame, "min_ttc_s")),
         "pet_s_p05": _p05(_column(frame, "pet_s")),
@@ -406,7 +442,8 @@ def summarize(runs, base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[st
                 mine = _select(runs, av, shield, hv, axis)
                 if len(mine):
                     rows.append(pair_row(mine, av, hv, (timing or {}).get((av, shield, hv)),
-                                         shield))
+                                         shield, base.simulation.n_steps
+                                         * base.simulation.dt_s))
     return {
         "study": "compare",
         "mode": base.mode,
@@ -502,6 +539,22 @@ def to_markdown(summary: dict[str, Any]) -> str:
             f"{_fmt(r['av_max_brake_mps2_mean'], 2)} ({_fmt(r['av_max_brake_mps2_max'], 2)})",
             _fmt(r["av_rms_jerk_mps3_mean"], 2),
         ]) + " |")
+    if summary["rows"] and summary["rows"][0].get("both_cleared_pct") is not None:
+        head = name + ["both cleared %", "AV first through % [95 % CI]", "standoffs",
+                       "wait p95 / max s", "time to clear AV / HV s (restricted mean)"]
+        lines += ["", "Liveness (docs/method.md §12.6): both vehicles cleared the conflict; the AV "
+                  "passed the conflict point first and both cleared; standoffs (neither "
+                  "advanced 0.5 m in 3 s, neither cleared); the longer wait of the two "
+                  "(standing below 0.1 m/s before clearing); times to clear as means of "
+                  "min(t, run length) over all runs:", "",
+                  "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for r in summary["rows"]:
+            lines.append("| " + " | ".join(key(r) + [
+                _fmt(r["both_cleared_pct"]),
+                _fmt(r["av_first_through_pct"]) + _ci(r["av_first_through_pct_ci"]),
+                str(r["deadlocks"]), f"{_fmt(r['wait_s_p95'])} / {_fmt(r['wait_s_max'])}",
+                f"{_fmt(r['av_clear_s_rmean'], 2)} / {_fmt(r['hv_clear_s_rmean'], 2)}",
+            ]) + " |")
     repeated = [r for r in summary["rows"] if r.get("interactions")]
     if repeated:
         k = repeated[0]["interactions"]

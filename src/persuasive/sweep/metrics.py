@@ -58,6 +58,16 @@ METRICS: dict[str, Metric] = {
                                      lambda f: f["min_distance_to_line_m"]),
     "hv_role_changes": Metric("HV role changes per run, mean", "mean", ("hv_role_changes",),
                               lambda f: f["hv_role_changes"]),
+    # liveness (docs/method.md §12.8)
+    "both_cleared_pct": Metric("both vehicles through [% of runs]", "proportion",
+                               ("both_cleared",), lambda f: f["both_cleared"].astype(bool)),
+    "av_first_through_pct": Metric("AV first through the conflict point [% of runs]",
+                                   "proportion", ("av_first_through",),
+                                   lambda f: f["av_first_through"].astype(bool)),
+    "deadlock_pct": Metric("standoffs [% of runs]", "proportion", ("deadlock",),
+                           lambda f: f["deadlock"].astype(bool)),
+    "wait_s": Metric("longer wait of the two, mean [s]", "mean", ("av_wait_s", "hv_wait_s"),
+                     lambda f: np.maximum(f["av_wait_s"], f["hv_wait_s"])),
 }
 
 
