@@ -1,14 +1,17 @@
 """The yield line's frontier in our simulator: persuasion against standoffs (docs/method.md §12.8).
 
-    python benchmarks/yield_frontier.py [--lines 0,3.75,5] [--seeds 200] [--steps 200]
-                                        [--scenario intersection] [--hv lfg,idm,...]
+    python benchmarks/yield_frontier.py [--lines 0,3.75,5] [--margins 0] [--seeds 200]
+                                        [--steps 200] [--scenario intersection]
+                                        [--hv lfg,idm,...]
 
-For each ``av.yield_line_m`` in ``--lines`` runs ``persuasive compare`` (corrected mode, the
+For each ``av.yield_line_m`` in ``--lines`` and each clearance ``av.shield_margin_m`` in
+``--margins`` runs ``persuasive compare`` (corrected mode, the
 worst-case shield, the persuasive planner) against each human of ``--hv`` on seeds 1..N with
 ``simulation.n_steps = --steps``, and prints one row per (line, human): both vehicles through,
 the AV first through the conflict point with both through (with its 95 % interval), standoffs
 (neither advanced 0.5 m in 3 s, neither cleared), the longer wait of the two (p95, max), the AV's
-time to clear as a restricted mean over all runs, AV-caused collisions and uncertified steps. The
+time to clear as a restricted mean over all runs, AV-caused collisions, uncertified steps and
+the closest the footprints came (runs with a rear-end by the human left out). The
 line at 0 is the shield without a line; at the paper's intersection 3.75 m puts it on the 7.5 m
 circle around the conflict point. Runs in this process's worker pool (``--workers``).
 """
@@ -27,6 +30,7 @@ HUMANS = ("lfg", "noisy", "idm", "stubborn", "aggressive")
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lines", default="0,3.75,5")
+    parser.add_argument("--margins", default="0")
     parser.add_argument("--seeds", type=int, default=200)
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--scenario", default="intersection")
@@ -37,25 +41,26 @@ def main() -> None:
     lines = [float(x) for x in args.lines.split(",")]
     print(f"{args.scenario}, corrected mode, worst-case shield, persuasive AV, seeds "
           f"1..{args.seeds}, {args.steps} steps")
-    print("| yield line m | human | both through % | AV first through % [95 % CI] | "
+    margins = [float(x) for x in args.margins.split(",")]
+    print("| yield line m | margin m | human | both through % | AV first through % [95 % CI] | "
           "standoffs | wait p95 / max s | AV clear s (restricted mean) | AV-caused | "
-          "uncertified |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for line in lines:
+          "uncertified | min gap m |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for line, margin in ((x, m) for x in lines for m in margins):
         base = Config(mode="corrected").with_overrides({
             "scenario.kind": args.scenario, "simulation.n_steps": args.steps,
-            "av.yield_line_m": line})
+            "av.yield_line_m": line, "av.shield_margin_m": margin})
         with tempfile.TemporaryDirectory() as tmp:
             summary = run_comparison(base, ("persuasive",), humans, args.seeds,
                                      out=f"{tmp}/compare", workers=args.workers,
                                      timing_seeds=1).summary
         for r in summary["rows"]:
             lo, hi = r["av_first_through_pct_ci"]
-            print(f"| {line:g} | {r['hv']} | {r['both_cleared_pct']:.1f} | "
+            print(f"| {line:g} | {margin:g} | {r['hv']} | {r['both_cleared_pct']:.1f} | "
                   f"{r['av_first_through_pct']:.1f} [{lo:.1f}, {hi:.1f}] | {r['deadlocks']} | "
                   f"{r['wait_s_p95']:.1f} / {r['wait_s_max']:.1f} | "
                   f"{r['av_clear_s_rmean']:.2f} | {r['collisions_caused_by_av']} | "
-                  f"{r['uncertified_steps']} |", flush=True)
+                  f"{r['uncertified_steps']} | {r['min_gap_m_min']:.3f} |", flush=True)
 
 
 if __name__ == "__main__":

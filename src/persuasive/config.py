@@ -407,6 +407,10 @@ class AVParams:
     #: occupancy interval [m] (docs/method.md §12.8); past the point where it can no longer
     #: stand there it commits and prefers driving through; unset: 0, at the interval
     yield_line_m: float | None = None
+    #: the shield's clearance between the two footprints [m]: kept in its occupancy test and
+    #: the follower's gap, so that a position error up to it does not turn a certified state
+    #: into contact (docs/method.md §12.2); unset: 0
+    shield_margin_m: float | None = None
     vehicle: VehicleOverrides = field(default_factory=VehicleOverrides)
 
     def __post_init__(self) -> None:
@@ -418,6 +422,8 @@ class AVParams:
         if self.shield is not None:
             _choice("av.shield", self.shield, SHIELD_KINDS)
         _in_range("av.shield_response_s", self.shield_response_s, 0.0, 60.0)
+        if self.shield_margin_m is not None:
+            _in_range("av.shield_margin_m", self.shield_margin_m, 0.0, 5.0)
         if self.yield_line_m is not None:
             _in_range("av.yield_line_m", self.yield_line_m, 0.0, 100.0)
 

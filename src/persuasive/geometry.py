@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -119,10 +119,30 @@ class Path:
     #: conservative interval of positions where the footprint may touch the other vehicle's
     #: (:func:`occupancy_interval`; the safety shield and the surrogate measures use it) [m]
     occupancy: tuple[float, float] = (-math.inf, math.inf)
+    #: the shield's occupancy interval: the same with both footprints enlarged by half the
+    #: clearance ``av.shield_margin_m`` on every side (docs/method.md §12.2); None: no
+    #: clearance, :attr:`occupancy` itself (:attr:`shield_interval`)
+    shield_occupancy: tuple[float, float] | None = None
     _G: np.ndarray = field(default=None, repr=False, compare=False)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_G", np.array(self.geometry_vector_tuple(), dtype=np.float64))
+
+    @property
+    def shield_interval(self) -> tuple[float, float]:
+        """The occupancy interval the shield certifies with (:attr:`shield_occupancy`)."""
+        return self.occupancy if self.shield_occupancy is None else self.shield_occupancy
+
+    def inflated(self, margin_m: float) -> Path:
+        """The same path with the footprint enlarged by ``margin_m`` on every side (length
+        and width ``+ 2 margin_m``): two inflated footprints overlap whenever the true ones
+        come within ``2 margin_m`` of each other (each contains its footprint's points within
+        ``margin_m``; at the corners also a little farther), so an occupancy interval computed
+        on them keeps that clearance."""
+        veh = self.vehicle
+        return replace(self, vehicle=replace(veh, length_m=veh.length_m + 2.0 * margin_m,
+                                             width_m=veh.width_m + 2.0 * margin_m),
+                       occupancy=(-math.inf, math.inf), shield_occupancy=None)
 
     # -- construction ------------------------------------------------------------------------
 

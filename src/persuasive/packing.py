@@ -67,6 +67,10 @@ OCC_LO, OCC_HI = _slots("OCC_LO", "OCC_HI")
 # The yield line of the shield [m]: where the vehicle stands when the shield makes it yield,
 # at or before ``OCC_LO`` (``av.yield_line_m`` before it; the human's is its ``OCC_LO``)
 SHIELD_LINE = _slots("SHIELD_LINE")[0]
+# The shield's occupancy interval [m]: ``OCC_LO..OCC_HI`` on footprints enlarged by the
+# clearance ``av.shield_margin_m`` (the same without one), and that clearance [m]
+SHIELD_OCC_LO, SHIELD_OCC_HI, SHIELD_MARGIN = _slots("SHIELD_OCC_LO", "SHIELD_OCC_HI",
+                                                     "SHIELD_MARGIN")
 # The path: ``xy(s)`` in three pieces (``persuasive.geometry``): straight before ``B1``
 # (direction ``U0``, through ``(X1, Y1)`` at ``B1``), an arc from ``B1`` to ``B2`` (centre,
 # radius, polar angle at ``B1``, +1 left / -1 right; none when ``R == 0``), straight after ``B2``
@@ -174,11 +178,13 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
         P[PATH_B1:PATH_UY2 + 1] = path.geometry_vector()
         # widened like the zone: never narrower than computed
         P[OCC_LO], P[OCC_HI] = widened(*path.occupancy)
-        P[SHIELD_LINE] = P[OCC_LO]
+        P[SHIELD_OCC_LO], P[SHIELD_OCC_HI] = widened(*path.shield_interval)
+        P[SHIELD_LINE] = P[SHIELD_OCC_LO]
+        P[SHIELD_MARGIN] = config.av.shield_margin_m or 0.0
         out.append(P)
     line = config.av.yield_line_m
     if line:  # at or before the interval: a line only ever adds caution
-        out[0][SHIELD_LINE] = out[0][OCC_LO] - line
+        out[0][SHIELD_LINE] = out[0][SHIELD_OCC_LO] - line
     return out[0], out[1]
 
 

@@ -108,6 +108,10 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
     base[sh.C_R_UMIN], base[sh.C_R_UMAX] = ego.u_min_mps2, ego.u_max_mps2
     base[sh.C_R_VMIN], base[sh.C_R_VMAX] = ego.v_min_mps, ego.v_max_mps
     before = config.av.yield_line_m or 0.0
+    # the clearance: in the follower's gap; the occupancy intervals are the simulator's own
+    # projection's, which keeps its own margins (SUMO: 0.5 m laterally, 1.6 m along the
+    # path; highway-env: 0.25 m laterally and the Euler step's), not counted twice
+    margin = config.av.shield_margin_m or 0.0
     s_R, s_H, v_H, rows = [], [], [], []
     for c in conflicts:
         o = c.other if c.other is not None else human
@@ -125,7 +129,7 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
         line = lo - before if c.ego_line_m is None else float(c.ego_line_m)
         row[sh.C_R_LINE] = min(line, lo) if math.isfinite(lo) else lo
         row[sh.C_SHARED] = 0.0 if c.kind == CROSSING else 1.0
-        row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m)
+        row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m) + margin
         row[sh.C_H_UMIN], row[sh.C_H_UMAX] = o.u_min_mps2, o.u_max_mps2
         row[sh.C_H_VMIN], row[sh.C_H_VMAX] = o.v_min_mps, o.v_max_mps
         rows.append(row)

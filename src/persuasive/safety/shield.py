@@ -114,16 +114,16 @@ _INF = math.inf
 @njit(cache=True, _nrt=False)
 def conflict_vector(P_av: np.ndarray, P_hv: np.ndarray, out: np.ndarray) -> None:
     """The closed loop's conflict vector (``N_CONFLICT``,) from the two parameter vectors."""
-    out[C_R_LO], out[C_R_HI] = P_av[slot.OCC_LO], P_av[slot.OCC_HI]
-    out[C_H_LO], out[C_H_HI] = P_hv[slot.OCC_LO], P_hv[slot.OCC_HI]
+    out[C_R_LO], out[C_R_HI] = P_av[slot.SHIELD_OCC_LO], P_av[slot.SHIELD_OCC_HI]
+    out[C_H_LO], out[C_H_HI] = P_hv[slot.SHIELD_OCC_LO], P_hv[slot.SHIELD_OCC_HI]
     out[C_SHARED] = P_av[slot.LANE_SHARED]
-    out[C_GAP] = 0.5 * (P_av[slot.LENGTH] + P_hv[slot.LENGTH])
+    out[C_GAP] = 0.5 * (P_av[slot.LENGTH] + P_hv[slot.LENGTH]) + P_av[slot.SHIELD_MARGIN]
     out[C_KIND], out[C_RHO] = P_av[slot.SHIELD], P_av[slot.SHIELD_RESPONSE]
     out[C_R_UMIN], out[C_R_UMAX] = P_av[slot.U_MIN], P_av[slot.U_MAX]
     out[C_R_VMIN], out[C_R_VMAX] = P_av[slot.V_MIN], P_av[slot.V_MAX]
     out[C_H_UMIN], out[C_H_UMAX] = P_hv[slot.U_MIN], P_hv[slot.U_MAX]
     out[C_H_VMIN], out[C_H_VMAX] = P_hv[slot.V_MIN], P_hv[slot.V_MAX]
-    out[C_R_LINE] = min(P_av[slot.SHIELD_LINE], P_av[slot.OCC_LO])
+    out[C_R_LINE] = min(P_av[slot.SHIELD_LINE], P_av[slot.SHIELD_OCC_LO])
 
 
 # -- one vehicle under constant acceleration -----------------------------------------------

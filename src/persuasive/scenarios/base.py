@@ -90,7 +90,7 @@ class Scenario:
         never conflicts (an empty interval) always does."""
         from ..safety.shield import reach_time
 
-        lo = slot.widened(*self.av.occupancy)[0]
+        lo = slot.widened(*self.av.shield_interval)[0]
         if lo == math.inf:
             return True
         veh = self.av.vehicle
@@ -148,7 +148,7 @@ class Scenario:
         s0, v0 = self.nominal_s0("av"), sc.av_v0_mps
         # the geometry's case: a start that stops before the zone but not before the interval
         if self.can_stop("av", s0, v0) and not self.av_stands_before_occupancy(s0, v0):
-            lo = slot.widened(*self.av.occupancy)[0]
+            lo = slot.widened(*self.av.shield_interval)[0]
             u = abs(self.av.vehicle.u_min_mps2)
             raise ConfigError(
                 f"scenario.av_s0_m = {s0:g} at scenario.av_v0_mps = {v0:g}: the AV cannot stop "
@@ -213,6 +213,32 @@ def shape(config: Config, who: str):
     v = config.vehicle_of(who)
     return VehicleShape(v.length_m, v.width_m, v.v_min_mps, v.v_max_mps, v.u_min_mps2,
                         v.u_max_mps2)
+
+
+def crossing_occupancies(paths: dict) -> dict:
+    """Each path's occupancy interval against the other's whole path (two paths that cross:
+    the intersection, the crossing, the left turn)."""
+    from ..geometry import occupancy_interval
+
+    return {"av": occupancy_interval(paths["av"], paths["hv"]),
+            "hv": occupancy_interval(paths["hv"], paths["av"])}
+
+
+def with_occupancies(paths: dict, occupancies: Callable[[dict], dict], config: Config
+                     ) -> dict:
+    """``paths`` (``{"av": Path, "hv": Path}``) with their occupancy intervals
+    ``occupancies(paths)`` and the shield's, the same on both paths' footprints enlarged by
+    half the clearance ``av.shield_margin_m`` (unset or 0: none, the same intervals;
+    docs/method.md §12.2)."""
+    from dataclasses import replace
+
+    occ = occupancies(paths)
+    margin = config.av.shield_margin_m or 0.0
+    shield = None
+    if margin > 0.0:
+        shield = occupancies({k: p.inflated(0.5 * margin) for k, p in paths.items()})
+    return {k: replace(p, occupancy=occ[k], shield_occupancy=None if shield is None
+                       else shield[k]) for k, p in paths.items()}
 
 
 def pair_min_dist(config: Config) -> float:

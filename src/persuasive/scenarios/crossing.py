@@ -15,9 +15,10 @@ from dataclasses import replace
 
 from .. import packing as slot
 from ..config import Config
-from ..geometry import Path, occupancy_interval, unit
+from ..geometry import Path, unit
 from . import intersection
-from .base import Scenario, pair_min_dist, shape
+from .base import (Scenario, crossing_occupancies, pair_min_dist, shape,
+                   with_occupancies)
 
 DEFAULT_ANGLE_DEG = 90.0
 
@@ -41,9 +42,7 @@ def build(config: Config, perpendicular_at_90: bool = True) -> Scenario:
         line = -(config.vehicle.lane_width_m / sin + veh.length_m / 2)
         paths[who] = replace(Path.straight(veh, (0.0, 0.0), direction), yield_s=line,
                              first_s=line, clear_s=reach, zone=(-reach, reach))
-    paths["av"], paths["hv"] = (
-        replace(paths[who], occupancy=occupancy_interval(paths[who], paths[other]))
-        for who, other in (("av", "hv"), ("hv", "av")))
+    paths = with_occupancies(paths, crossing_occupancies, config)
     scenario = Scenario("crossing", config, paths["av"], paths["hv"], slot.CONFLICT_EUCLIDEAN,
                         min_dist, config.vehicle.lane_width_m)
     scenario.check_starts()

@@ -13,8 +13,9 @@ from dataclasses import replace
 
 from .. import packing as slot
 from ..config import Config
-from ..geometry import Path, occupancy_interval
-from .base import Scenario, pair_min_dist, shape
+from ..geometry import Path
+from .base import (Scenario, crossing_occupancies, pair_min_dist, shape,
+                   with_occupancies)
 
 
 def build(config: Config) -> Scenario:
@@ -26,9 +27,7 @@ def build(config: Config) -> Scenario:
         line = -(config.vehicle.lane_width_m + veh.length_m / 2)
         paths[who] = replace(Path.straight(veh, (0.0, 0.0), direction), yield_s=line,
                              first_s=line, clear_s=min_dist, zone=(-min_dist, min_dist))
-    paths["av"], paths["hv"] = (
-        replace(paths[who], occupancy=occupancy_interval(paths[who], paths[other]))
-        for who, other in (("av", "hv"), ("hv", "av")))
+    paths = with_occupancies(paths, crossing_occupancies, config)
     scenario = Scenario("intersection", config, paths["av"], paths["hv"],
                         slot.CONFLICT_ALONG_PATHS, min_dist, config.vehicle.lane_width_m)
     scenario.check_starts()

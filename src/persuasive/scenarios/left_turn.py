@@ -23,8 +23,9 @@ from dataclasses import replace
 
 from .. import packing as slot
 from ..config import Config
-from ..geometry import Path, occupancy_interval
-from .base import Scenario, pair_min_dist, shape
+from ..geometry import Path
+from .base import (Scenario, crossing_occupancies, pair_min_dist, shape,
+                   with_occupancies)
 
 
 def build(config: Config) -> Scenario:
@@ -57,9 +58,7 @@ def build(config: Config) -> Scenario:
     for who, path, first in (("av", av, av_first), ("hv", hv, hv_first)):
         paths[who] = replace(path, yield_s=first, first_s=first, clear_s=min_dist,
                              zone=(-min_dist, min_dist))
-    paths["av"], paths["hv"] = (
-        replace(paths[who], occupancy=occupancy_interval(paths[who], paths[other]))
-        for who, other in (("av", "hv"), ("hv", "av")))
+    paths = with_occupancies(paths, crossing_occupancies, config)
     scenario = Scenario("left-turn", config, paths["av"], paths["hv"],
                         slot.CONFLICT_ALONG_PATHS, min_dist, w)
     scenario.check_starts()

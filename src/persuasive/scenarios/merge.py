@@ -20,9 +20,17 @@ from dataclasses import replace
 from .. import packing as slot
 from ..config import Config
 from ..geometry import Path, occupancy_interval, unit, zone_interval
-from .base import Scenario, pair_min_dist, shape
+from .base import Scenario, pair_min_dist, shape, with_occupancies
 
 DEFAULT_ANGLE_DEG = 30.0
+
+
+def merge_occupancies(paths: dict) -> dict:
+    """The AV's side zone up to the merge point and the HV's: where its footprint can touch
+    the AV's anywhere on that side zone."""
+    av_lo = occupancy_interval(paths["av"], paths["hv"])[0]
+    return {"av": (av_lo, 0.0),
+            "hv": occupancy_interval(paths["hv"], paths["av"], other_range=(av_lo, 0.0))}
 
 
 def build(config: Config) -> Scenario:
@@ -43,10 +51,7 @@ def build(config: Config) -> Scenario:
     # from ``av_lo`` on; up to the merge point that is the side zone, past it both share the
     # lane (a car-following conflict). The HV's side zone: where its footprint can touch the
     # AV's anywhere on the side zone.
-    av_lo = occupancy_interval(paths["av"], paths["hv"])[0]
-    hv_side = occupancy_interval(paths["hv"], paths["av"], other_range=(av_lo, 0.0))
-    paths["av"] = replace(paths["av"], occupancy=(av_lo, 0.0))
-    paths["hv"] = replace(paths["hv"], occupancy=hv_side)
+    paths = with_occupancies(paths, merge_occupancies, config)
     scenario = Scenario("merge", config, paths["av"], paths["hv"], slot.CONFLICT_EUCLIDEAN,
                         min_dist, config.vehicle.lane_width_m, lane_shared=True)
     scenario.check_starts()

@@ -240,6 +240,12 @@ def _mean(x: np.ndarray) -> float | None:
     return float(np.mean(x)) if x.size else None
 
 
+def _min(x: np.ndarray) -> float | None:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    return float(np.min(x)) if x.size else None
+
+
 def _p05(x: np.ndarray) -> float | None:
     x = np.asarray(x, dtype=float)
     x = x[np.isfinite(x)]
@@ -331,6 +337,10 @@ def pair_row(frame, av: str, hv: str, timing: float | None,
         if "guarantee_held" in frame else None,
         **_liveness(frame, horizon_s),
         "min_gap_m_p05": _p05(_column(frame, "min_gap_m")),
+        # the closest the footprints came in a run with no rear-end by the human (every
+        # approach the AV answers for), against the shield's clearance av.shield_margin_m
+        "min_gap_m_min": _min(_column(frame, "min_gap_m")[
+            ~frame["rear_end_by_human"].to_numpy(bool)]),
         "min_ttc_s_p05": _p05(_column(frame, "min_ttc_s")),
         "pet_s_p05": _p05(_column(frame, "pet_s")),
         "av_max_brake_mps2_mean": _mean(brake),
