@@ -464,7 +464,8 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     step is ``a``, ``u_min`` or ``u_max`` (zeros: the exact kinematics). A simulator that
     integrates differently from the exact step (highway-env's Euler step,
     :func:`persuasive.envs.highway.euler_shift`) hands in how much further its vehicle rolls
-    to a stop after that first step than the exact kinematics say. ``window``: scratch for the
+    to a stop after that first step than the exact kinematics say (the stop at a yield line,
+    a braking step, takes ``u_min``'s). ``window``: scratch for the
     humans' windows, ``(n, 3)`` or larger (the caller keeps it, so that a step allocates
     nothing; a smaller one is replaced by a new one)."""
     if kind == slot.SHIELD_OFF:
