@@ -267,8 +267,11 @@ def test_every_run_says_whether_the_guarantee_held():
         {"av.shield": "responsive"}), 3)
     assert not responsive.outcome.guarantee_held  # it rests on the human responding
     noisy = simulate(Config(mode="corrected").with_overrides(
-        {"simulation.accel_noise_mps2": 0.3}), 3)
+        {"simulation.measurement_noise": "uniform", "simulation.noise_s_m": 0.2}), 3)
     assert not noisy.outcome.guarantee_held  # noise the shield does not know of
+    known = simulate(Config(mode="corrected").with_overrides(
+        {"simulation.accel_noise_mps2": 0.3}), 3)
+    assert known.outcome.guarantee_held  # the acceleration noise it certifies against
     log = {k: v.copy() for k, v in shielded.log.items()}
     log["shield_verdict"][[4, 9]] = sh.UNCERTIFIED
     out = outcome(shielded.scenario, shielded.states, log)

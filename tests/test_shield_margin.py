@@ -1,4 +1,5 @@
-"""The shield's clearance ``av.shield_margin_m`` (docs/method.md §12.2).
+"""The shield's clearance ``av.shield_margin_m`` and the acceleration noise it certifies
+against (docs/method.md §12.2).
 
 The shield certifies with occupancy intervals computed on both footprints enlarged by half the
 clearance, and keeps it in a follower's gap: a run it certifies whole keeps the footprints at
@@ -10,9 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from persuasive import Config
 from persuasive.config import ConfigError
+from persuasive.kinematics import saturated_step
 from persuasive.record import static_setup
 from persuasive.safety import measures
 from persuasive.safety import shield as sh
@@ -94,3 +98,59 @@ def test_a_certified_run_keeps_the_clearance(over, hv):
         bare = simulate(config(None, **over, **{"hv.kind": hv, "simulation.n_steps": 150}),
                         33 if hv == "adversary" else 24).outcome
         assert bare.guarantee_held and bare.min_gap_m < 0.01
+
+
+# -- acceleration noise (simulation.accel_noise_mps2) ------------------------------------------
+
+
+def conflict(over: dict) -> np.ndarray:
+    _, P, H, _ = static_setup(Config(mode="corrected").with_overrides(over))
+    C = np.empty(sh.N_CONFLICT)
+    sh.conflict_vector(P, H, C)
+    return C
+
+
+def test_noise_widens_the_human_and_weakens_the_avs_fallbacks_by_hand():
+    """Noise of 0.3 m/s^2: the human's limits widen to [-2.3, 1.3]; the AV's braking may be
+    as weak as -1.7. From -13 m at 6 m/s braking at -2 stands at -4 m, before the interval
+    (-3.75 m); at -1.7 at -2.41 m, inside it: the noise-free shield lets the AV stand there
+    before a human waiting at -4.5 m, the noisy one has no certified answer."""
+    C0, C = conflict({}), conflict({"simulation.accel_noise_mps2": 0.3})
+    assert (C[sh.C_H_UMIN], C[sh.C_H_UMAX]) == pytest.approx((-2.3, 1.3))
+    assert C[sh.C_R_NOISE] == 0.3 and C0[sh.C_R_NOISE] == 0.0
+    assert sh.yields_before(-13.0, 6.0, C0) and not sh.yields_before(-13.0, 6.0, C)
+    # a human waiting just before its interval: only standing before the path is safe
+    assert sh.shield_step(-13.0, 6.0, -2.0, 0.1, -4.5, 0.0, C0) == (-2.0, sh.ADMITTED)
+    a, verdict = sh.shield_step(-13.0, 6.0, -2.0, 0.1, -4.5, 0.0, C)
+    assert verdict == sh.UNCERTIFIED  # no noisy braking stands before it from there
+    assert sh.shield_step(-20.0, 6.0, 1.0, 0.1, -4.5, 0.0, C)[1] != sh.UNCERTIFIED
+
+
+def test_noise_the_shield_cannot_brake_through_is_refused():
+    with pytest.raises(ConfigError, match=r"simulation.accel_noise_mps2 .*\[0, 1\) with a "
+                                          "shield on"):
+        Config(mode="corrected").with_overrides({"simulation.accel_noise_mps2": 1.0})
+    Config(mode="paper").with_overrides({"simulation.accel_noise_mps2": 1.0})  # no shield
+
+
+@given(st.floats(-40.0, -4.0), st.floats(0.0, 10.0), st.floats(-40.0, -3.8),
+       st.floats(0.0, 10.0), st.floats(-2.0, 1.0), st.floats(-1.0, 1.0),
+       st.floats(-2.3, 1.3))
+def test_the_invariant_holds_under_noise(s_R, v_R, s_H, v_H, a, n, u_H):
+    """From a state in S (BRAKE or GO for ever certified with the noise), one filtered step
+    with any noise on the AV's acceleration and any human acceleration in the widened limits
+    lands in S again."""
+    w = 0.3
+    C = conflict({"simulation.accel_noise_mps2": w})
+    t_in, t_out, past = sh.human_window(s_H, v_H, C)
+    in_S = (sh.certified(s_R, v_R, -2.0, 0.0, -2.0, s_H, v_H, C, t_in, t_out, past)
+            or sh.certified(s_R, v_R, 1.0, 0.0, 1.0, s_H, v_H, C, t_in, t_out, past))
+    if not in_S:
+        return
+    a_out, verdict = sh.shield_step(s_R, v_R, a, 0.1, s_H, v_H, C)
+    assert verdict != sh.UNCERTIFIED
+    s1, v1 = saturated_step(s_R, v_R, a_out + n * w, 0.1, 0.0, 10.0)
+    h1, w1 = saturated_step(s_H, v_H, u_H, 0.1, 0.0, 10.0)
+    t_in, t_out, past = sh.human_window(h1, w1, C)
+    assert (sh.certified(s1, v1, -2.0, 0.0, -2.0, h1, w1, C, t_in, t_out, past)
+            or sh.certified(s1, v1, 1.0, 0.0, 1.0, h1, w1, C, t_in, t_out, past))

@@ -634,6 +634,14 @@ class Config:
                     f"[{v.v_min_mps:g}, {v.v_max_mps:g}] with its half-width {hw:g} "
                     f"(the {who.upper()}'s speed limits)",
                 )
+        w = self.simulation.accel_noise_mps2
+        if w > 0.0 and self.shield != "off":  # the shield's fallbacks must still brake and go
+            av = self.vehicle_of("av")
+            most = min(-av.u_min_mps2, av.u_max_mps2)
+            if not w < most:
+                _fail("simulation.accel_noise_mps2", w,
+                      f"[0, {most:g}) with a shield on (below the AV's braking and throttle, "
+                      "so that its fallbacks still brake and go)")
 
     # -- derived -----------------------------------------------------------------------------
 

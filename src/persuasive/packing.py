@@ -48,6 +48,9 @@ LANE_SHARED = _slots("LANE_SHARED")[0]
 # acceleration width [m/s^2], switching probability per step)
 SHIELD, SHIELD_RESPONSE, SHIELD_AWARE, CONF_THRESHOLD, CONF_STD, CONF_SWITCH = _slots(
     "SHIELD", "SHIELD_RESPONSE", "SHIELD_AWARE", "CONF_THRESHOLD", "CONF_STD", "CONF_SWITCH")
+# The half-width of the uniform acceleration noise on both vehicles [m/s^2]
+# (``simulation.accel_noise_mps2``), which the shield certifies against
+ACCEL_NOISE = _slots("ACCEL_NOISE")[0]
 
 # -- per vehicle -------------------------------------------------------------------------------
 # Limits and size (§1); ``H_GO = h_st + v_max / kappa`` of the OVM law (§2)
@@ -164,6 +167,7 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     shared[CONF_THRESHOLD] = mpc.confidence_threshold if config.confidence_filter else 0.0
     shared[CONF_STD] = mpc.confidence_accel_std_mps2
     shared[CONF_SWITCH] = mpc.confidence_switch
+    shared[ACCEL_NOISE] = config.simulation.accel_noise_mps2
     out = []
     for path in (scenario.av, scenario.hv):
         P = shared.copy()

@@ -87,7 +87,8 @@ class RunOutcome:
     uncertified_steps: int = 0
     #: the worst-case guarantee covered the whole run (docs/method.md §12.2): the worst-case
     #: shield was on, every step certified (so the run started in the invariant set) and no
-    #: noise ran outside what the shield knows (acceleration or measurement noise); False with
+    #: noise ran outside what the shield knows (measurement noise; it certifies against the
+    #: acceleration noise); False with
     #: the shield off or ``responsive`` (its guarantee rests on the human responding)
     guarantee_held: bool = False
     # liveness (docs/method.md §12.6): both vehicles cleared the conflict within the run; the AV
@@ -478,10 +479,10 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
 
 
 def _noisy(config) -> bool:
-    """The run has noise the shield does not know of (docs/method.md §12.2)."""
+    """The run has noise the shield does not know of (docs/method.md §12.2): measurement
+    noise (the acceleration noise it certifies against)."""
     sim = config.simulation
-    return sim.accel_noise_mps2 > 0.0 or (sim.measurement_noise != "none"
-                                          and (sim.noise_s_m > 0.0 or sim.noise_v_mps > 0.0))
+    return sim.measurement_noise != "none" and (sim.noise_s_m > 0.0 or sim.noise_v_mps > 0.0)
 
 
 __all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA",

@@ -42,8 +42,8 @@ from ..mpc import (D_BELIEF_L, D_EXPECTED, D_MAX_SAFE, D_MIN_SAFE, D_P_LL, D_PLA
 from ..online import online_init, online_step
 from ..roles import FOLLOWER, LEADER, bayes_update
 from ..safety.confidence import confidence_update, plausible_of, role_prediction
-from ..safety.shield import (C_KIND, C_R_LINE, C_R_UMAX, C_R_UMIN, N_CONFLICT, admissible,
-                             conflict_vector, go_certified, human_window, line_binds,
+from ..safety.shield import (C_KIND, C_R_LINE, C_R_NOISE, C_R_UMAX, C_R_UMIN, N_CONFLICT,
+                             admissible, conflict_vector, go_certified, human_window, line_binds,
                              line_brake, yields_before)
 
 #: Slots of the MPC's state: belief q = (P(HV = L), P(HV = F)), the stored prediction of the
@@ -142,7 +142,9 @@ def yield_at_line(s_R: float, v_R: float, P_av: np.ndarray, P_hv: np.ndarray) ->
     conflict_vector(P_av, P_hv, C)
     if not line_binds(s_R, v_R, C):
         return np.nan
-    return line_brake(s_R, v_R, P_av[slot.SAMPLE_DT], C[C_R_LINE], C[C_R_UMIN], C[C_R_UMAX])
+    w = C[C_R_NOISE]  # the stop fits the fastest of the noisy realisations
+    return line_brake(s_R, v_R, P_av[slot.SAMPLE_DT], C[C_R_LINE], C[C_R_UMIN] + w,
+                      C[C_R_UMAX]) - w
 
 
 @njit(cache=True)

@@ -52,6 +52,10 @@ so they are in ``S``. From states outside it the shield still answers (``UNCERTI
 fallback whose possible overlap starts latest, or is shortest), e.g. with measurement noise on, or
 when a vehicle appears out of nowhere in an outside simulator, where the guarantee does not hold.
 
+**Acceleration noise** (``simulation.accel_noise_mps2 = w``, uniform, on both vehicles) is
+certified against: the human's limits widen by ``w`` (:func:`conflict_vector`) and the AV's
+trajectory is any between the slowest and the fastest realisation (:func:`certified`).
+
 **The yield line** (docs/method.md §12.8). Each conflict carries the AV's yield line
 ``C_R_LINE <= R_lo``: where it stands when it yields. While the line *binds* (the AV is before
 it and can still stand before it, :func:`line_binds`), "``a``, then ``BRAKE``" is certified with
@@ -91,9 +95,11 @@ from ..kinematics import saturated_step
 # length of the pair [m] (the gap of a follower); the shield kind and the responsive
 # human's response time [s]; the AV's and the human's limits; the AV's yield line (where it
 # stands when it yields, at or before ``R_LO``; ``R_LO`` itself: none before the interval).
+# Last, the half-width of the uniform error on the AV's applied acceleration [m/s^2]
+# (``simulation.accel_noise_mps2``; the human's limits are widened by it already).
 (C_R_LO, C_R_HI, C_H_LO, C_H_HI, C_SHARED, C_GAP, C_KIND, C_RHO, C_R_UMIN, C_R_UMAX, C_R_VMIN,
- C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX, C_R_LINE) = range(17)
-N_CONFLICT = 17
+ C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX, C_R_LINE, C_R_NOISE) = range(18)
+N_CONFLICT = 18
 
 #: Verdicts of :func:`shield_filter` (the world logs them per step); ``OFF``: no shield.
 ADMITTED, BRAKE, GO, UNCERTIFIED, OFF = 0, 1, 2, 3, -1
@@ -121,7 +127,12 @@ def conflict_vector(P_av: np.ndarray, P_hv: np.ndarray, out: np.ndarray) -> None
     out[C_KIND], out[C_RHO] = P_av[slot.SHIELD], P_av[slot.SHIELD_RESPONSE]
     out[C_R_UMIN], out[C_R_UMAX] = P_av[slot.U_MIN], P_av[slot.U_MAX]
     out[C_R_VMIN], out[C_R_VMAX] = P_av[slot.V_MIN], P_av[slot.V_MAX]
-    out[C_H_UMIN], out[C_H_UMAX] = P_hv[slot.U_MIN], P_hv[slot.U_MAX]
+    # the acceleration noise both vehicles' accelerations carry (uniform, half-width w): the
+    # human's limits widen by it, the AV's trajectories become the set between its slowest and
+    # fastest (docs/method.md §12.2)
+    w = P_av[slot.ACCEL_NOISE]
+    out[C_H_UMIN], out[C_H_UMAX] = P_hv[slot.U_MIN] - w, P_hv[slot.U_MAX] + w
+    out[C_R_NOISE] = w
     out[C_H_VMIN], out[C_H_VMAX] = P_hv[slot.V_MIN], P_hv[slot.V_MAX]
     out[C_R_LINE] = min(P_av[slot.SHIELD_LINE], P_av[slot.SHIELD_OCC_LO])
 
@@ -296,31 +307,37 @@ def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: floa
               v_H: float, C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
     """Whether the AV trajectory "``a1`` for ``d1`` seconds, then ``a2`` for ever" is
     certified against every human of the model (module docstring); ``t_in_H, t_out_H,
-    past``: the human's :func:`human_window`."""
+    past``: the human's :func:`human_window`. With acceleration noise of half-width
+    ``w = C[C_R_NOISE]`` the AV's actual trajectory lies between the slowest ("``a1 - w``,
+    then ``a2 - w``") and the fastest (``+ w``), position being monotone in every step's
+    acceleration: it enters no earlier than the fastest, leaves no later than the slowest,
+    stands before a line if the fastest does, and follows no closer than the fastest."""
     m = TIME_MARGIN_S
     rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
     r_lo, r_hi = C[C_R_LO], C[C_R_HI]
+    w = C[C_R_NOISE]
+    f1, f2, l1, l2 = a1 + w, a2 + w, a1 - w, a2 - w  # fastest, slowest (w = 0: a1, a2)
     if C[C_SHARED] == 0.0:  # a crossing
         if s_R > r_hi:
             return True
-        t_in_R = profile_reach(s_R, v_R, a1, d1, a2, r_lo, rv_min, rv_max)
+        t_in_R = profile_reach(s_R, v_R, f1, d1, f2, r_lo, rv_min, rv_max)
         if t_in_R == _INF or t_in_H == _INF:
             return True  # it stands before the human's path, or no human gets to its own
-        t_out_R = profile_reach(s_R, v_R, a1, d1, a2, r_hi, rv_min, rv_max)
+        t_out_R = profile_reach(s_R, v_R, l1, d1, l2, r_hi, rv_min, rv_max)
         return t_out_R + m < t_in_H - m or t_out_H + m < t_in_R - m
     # a shared lane past r_hi (the merge point)
     if s_R >= r_hi:
         if s_H < s_R:
             return True  # the human is behind: driving into the AV is its rear-end
-        return _gap_holds(s_R, v_R, a1, d1, a2, s_H, v_H, C)
-    t_in_R = profile_reach(s_R, v_R, a1, d1, a2, r_lo, rv_min, rv_max)
+        return _gap_holds(s_R, v_R, f1, d1, f2, s_H, v_H, C)
+    t_in_R = profile_reach(s_R, v_R, f1, d1, f2, r_lo, rv_min, rv_max)
     if t_in_R == _INF:
         return True  # it stands before the side zone
-    t_0 = profile_reach(s_R, v_R, a1, d1, a2, r_hi, rv_min, rv_max)
+    t_0 = profile_reach(s_R, v_R, l1, d1, l2, r_hi, rv_min, rv_max)
     if not past and (t_in_H == _INF or t_0 + m < t_in_H - m):
         return True  # in the lane (or standing in its side zone) before any human gets near
     if past or t_out_H + m < t_in_R - m:  # the human is surely ahead: follow it
-        return _gap_holds(s_R, v_R, a1, d1, a2, s_H, v_H, C)
+        return _gap_holds(s_R, v_R, f1, d1, f2, s_H, v_H, C)
     return False
 
 
@@ -336,8 +353,9 @@ def threat(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float, 
     if C[C_SHARED] != 0.0 and (s_R >= C[C_R_HI] or past):
         return 0.0, _INF
     rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
-    t_in_R = profile_reach(s_R, v_R, a1, d1, a2, C[C_R_LO], rv_min, rv_max)
-    t_out_R = profile_reach(s_R, v_R, a1, d1, a2, C[C_R_HI], rv_min, rv_max)
+    w = C[C_R_NOISE]
+    t_in_R = profile_reach(s_R, v_R, a1 + w, d1, a2 + w, C[C_R_LO], rv_min, rv_max)
+    t_out_R = profile_reach(s_R, v_R, a1 - w, d1, a2 - w, C[C_R_HI], rv_min, rv_max)
     start = max(t_in_R, t_in_H)
     return start, max(min(t_out_R, t_out_H) - start, 0.0)
 
@@ -356,8 +374,8 @@ def line_binds(s: float, v: float, C: np.ndarray) -> bool:
     """The AV at ``(s, v)`` has a yield line before its occupancy interval and can still
     stand before it by braking now: it has not committed (docs/method.md §12.8)."""
     line = C[C_R_LINE]
-    return line < C[C_R_LO] and s < line and reach_time(s, v, C[C_R_UMIN], line, C[C_R_VMIN],
-                                           C[C_R_VMAX]) == _INF
+    return line < C[C_R_LO] and s < line and reach_time(
+        s, v, C[C_R_UMIN] + C[C_R_NOISE], line, C[C_R_VMIN], C[C_R_VMAX]) == _INF
 
 
 @njit(cache=True, _nrt=False)
@@ -433,8 +451,10 @@ def go_certified(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: f
 
 @njit(cache=True, _nrt=False)
 def yields_before(s: float, v: float, C: np.ndarray) -> bool:
-    """The AV at ``(s, v)`` can still stand before its occupancy interval by braking now."""
-    return reach_time(s, v, C[C_R_UMIN], C[C_R_LO], C[C_R_VMIN], C[C_R_VMAX]) == _INF
+    """The AV at ``(s, v)`` can still stand before its occupancy interval by braking now
+    (with its weakest braking under acceleration noise)."""
+    return reach_time(s, v, C[C_R_UMIN] + C[C_R_NOISE], C[C_R_LO], C[C_R_VMIN],
+                      C[C_R_VMAX]) == _INF
 
 
 @njit(cache=True)
@@ -489,7 +509,7 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
         if binds:
             yielding = True
             a_line = min(a_line, line_brake(s_R[j] + lead[1], v_R, dt, C[j, C_R_LINE],
-                                            u_min, u_max))
+                                            u_min + C[j, C_R_NOISE], u_max) - C[j, C_R_NOISE])
     # candidates: the proposal with either fallback; then, while a line binds, the yield at
     # the line, BRAKE, GO; once committed (no line binds), GO before BRAKE: drive through
     # rather than stand where it blocks others

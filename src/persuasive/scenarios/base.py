@@ -94,8 +94,9 @@ class Scenario:
         if lo == math.inf:
             return True
         veh = self.av.vehicle
-        return reach_time(float(s), float(v), veh.u_min_mps2, lo, veh.v_min_mps,
-                          veh.v_max_mps) == math.inf
+        # its weakest braking under acceleration noise (the shield's own test)
+        u = veh.u_min_mps2 + self.config.simulation.accel_noise_mps2
+        return reach_time(float(s), float(v), u, lo, veh.v_min_mps, veh.v_max_mps) == math.inf
 
     def initial_states(self, uniform: Callable[[int], np.ndarray]) -> tuple[tuple[float, float],
                                                                              tuple[float, float]]:
