@@ -19,11 +19,8 @@ from hypothesis import strategies as st
 from persuasive import Config
 from persuasive import packing as slot
 from persuasive.kinematics import saturated_step
-from persuasive.policies import kinds as kd
-from persuasive.policies import policy_params
 from persuasive.safety import shield as sh
-from persuasive.record import setup, static_setup
-from persuasive.world import WORLD_LOG, run_loop
+from persuasive.record import static_setup
 
 SCENARIOS = {
     "intersection": {},
@@ -258,22 +255,10 @@ def test_the_verdict_is_tight_at_the_intersection():
 
 def run_with_human(config: Config, accels: np.ndarray, seed: int = 1):
     """The compiled closed loop with the configured AV against a human replaying
-    ``accels`` (one per step, within its limits)."""
-    s = setup(config, seed, None, 0)
-    n = config.simulation.n_steps
-    av = kd.KINDS[config.av.kind]
-    states = np.empty((n + 1, 4))
-    world_log = np.full((n, len(WORLD_LOG)), np.nan)
-    av_log, hv_log = np.full((n, kd.LOG_SIZE), np.nan), np.full((n, kd.LOG_SIZE), np.nan)
-    needs = np.array([av.needs_game, av.needs_av_library, av.needs_game or av.needs_av_library])
-    st_ = s.streams
-    hv_prm = np.concatenate([[float(accels.size)], accels])
-    run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind,
-             policy_params(config, kd.AV), kd.REPLAY, hv_prm, st_.draws_av, np.zeros((n, 0)),
-             needs, False, st_.meas_noise, st_.accel_noise, False, states, world_log, av_log,
-             hv_log, np.zeros(n, np.int64), np.zeros(slot.N_WORK, np.int64),
-             np.zeros(kd.STATE_SIZE))
-    return s.scenario, states, world_log
+    ``accels`` (one per step, within its limits): the falsifier's runner."""
+    from persuasive.safety.falsifier import run_against
+
+    return run_against(config, accels, seed)
 
 
 def av_caused_overlaps(scenario, states) -> int:

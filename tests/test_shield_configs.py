@@ -1,0 +1,109 @@
+"""The shield over random *configurations*, not only states (issue 24's acceptance; docs/method.md
+§12.2).
+
+hypothesis draws a scenario (its crossing or merge angle, or the left turn's radius), both
+vehicles' size and the safety factor, both starts and their spread, the AV kind, a human that
+tests the shield, the yield line, the clearance and the acceleration noise. Either the
+configuration is refused with a one-line ``ConfigError`` (or no initial state can be drawn), or
+its run has no AV-caused collision, no uncertified step, and keeps the footprints at least the
+clearance apart; and a falsifier, a cross-entropy search over bounded piecewise-constant human
+accelerations with a fixed budget, finds no way in. One exception, stated: in a merge, a human that drives into the AV from behind
+(a rear-end by the human, the open fault rule of the shared lane, issue 24 item 2) leaves the
+model, and the steps after it are not held to the shield's invariant.
+"""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from persuasive import Config
+from persuasive.config import ConfigError
+from persuasive.safety.falsifier import falsify
+from persuasive.scenarios import InitialStateError
+from persuasive.simulation import simulate
+
+AV_KINDS = ("persuasive", "passive", "cv", "lfg", "yield")
+HUMANS = ("adversary", "random", "aggressive", "deceptive", "idm", "lfg")
+
+
+@st.composite
+def configurations(draw) -> dict:
+    kind = draw(st.sampled_from(["intersection", "crossing", "left-turn", "merge"]))
+    over = {
+        "scenario.kind": kind, "av.shield": "worst-case",
+        "av.kind": draw(st.sampled_from(AV_KINDS)), "hv.kind": draw(st.sampled_from(HUMANS)),
+        "vehicle.safety_factor": draw(st.floats(0.5, 2.5)),
+        "vehicle.length_m": draw(st.floats(3.5, 6.0)),
+        "vehicle.width_m": draw(st.floats(1.5, 2.2)),
+        "scenario.av_s0_m": draw(st.floats(-35.0, -8.0)),
+        "scenario.av_v0_mps": draw(st.floats(0.0, 8.0)),
+        "scenario.av_s0_halfwidth_m": draw(st.floats(0.0, 6.0)),
+        "scenario.av_v0_halfwidth_mps": draw(st.floats(0.0, 2.0)),
+        "scenario.hv_s0_m": draw(st.floats(-35.0, -8.0)),
+        "scenario.hv_v0_mps": draw(st.floats(0.0, 8.0)),
+        "simulation.n_steps": 100,
+    }
+    if kind == "crossing":
+        over["scenario.angle_deg"] = draw(st.floats(15.0, 165.0))
+    elif kind == "merge":
+        over["scenario.angle_deg"] = draw(st.floats(15.0, 90.0))
+    elif kind == "left-turn":
+        over["scenario.turn_radius_m"] = draw(st.floats(4.0, 90.0))
+    if draw(st.booleans()):
+        over["av.yield_line_m"] = draw(st.floats(0.0, 6.0))
+    if draw(st.booleans()):
+        over["av.shield_margin_m"] = draw(st.floats(0.0, 0.5))
+    if draw(st.booleans()):
+        over["simulation.accel_noise_mps2"] = draw(st.floats(0.0, 0.5))
+    return over
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(configurations(), st.integers(1, 10_000))
+def test_any_configuration_is_refused_or_certified(over, seed):
+    try:
+        config = Config(mode="corrected").with_overrides(over)
+        record = simulate(config, seed)
+    except (ConfigError, InitialStateError) as err:
+        assert "\n" not in str(err)  # a clear one-line refusal
+        return
+    o = record.outcome
+    assert not o.collision_caused_by_av, over
+    if not (o.rear_end_by_human and over["scenario.kind"] == "merge"):
+        assert o.uncertified_steps == 0 and o.guarantee_held, over
+        margin = over.get("av.shield_margin_m") or 0.0
+        assert o.min_gap_m >= margin - 1e-6, over
+
+
+@pytest.mark.parametrize("over", [
+    {"scenario.kind": "left-turn", "scenario.turn_radius_m": 80.0, "hv.kind": "aggressive"},
+    {"vehicle.safety_factor": 0.6, "hv.kind": "lfg"},
+])
+def test_the_reviews_reproductions_stay_certified(over):
+    """Issue 24 item 1's reproductions: a wide left turn and a small safety factor, whose
+    draws used to start outside the invariant set, are certified from the first step (or
+    refused)."""
+    for seed in range(1, 6):
+        try:
+            o = simulate(Config(mode="corrected").with_overrides(
+                {**over, "simulation.n_steps": 100}), seed).outcome
+        except (ConfigError, InitialStateError):
+            continue
+        assert o.uncertified_steps == 0 and not o.collision_caused_by_av
+
+
+# -- a falsifier: a cross-entropy search for the human that comes closest ---------------------
+
+
+@pytest.mark.parametrize("over", [{}, {"scenario.kind": "crossing", "scenario.angle_deg": 50.0},
+                                  {"scenario.kind": "left-turn"}])
+def test_the_falsifier_finds_no_way_in(over):
+    """150 runs of a cross-entropy search for the bounded human that comes closest to the
+    shielded persuasive AV find none that touches it (with a 0.2 m clearance, none closer than
+    that); against the unshielded AV the same search finds a collision, so it has teeth."""
+    base = Config(mode="corrected").with_overrides({**over, "simulation.n_steps": 61})
+    assert falsify(base.with_overrides({"av.shield": "off"})) == 0.0
+    assert falsify(base) > 0.0
+    assert falsify(base.with_overrides({"av.shield_margin_m": 0.2})) >= 0.2 - 1e-6
