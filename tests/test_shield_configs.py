@@ -60,7 +60,7 @@ def configurations(draw) -> dict:
     return over
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(configurations(), st.integers(1, 10_000))
 def test_any_configuration_is_refused_or_certified(over, seed):
     try:
@@ -100,10 +100,12 @@ def test_the_reviews_reproductions_stay_certified(over):
 @pytest.mark.parametrize("over", [{}, {"scenario.kind": "crossing", "scenario.angle_deg": 50.0},
                                   {"scenario.kind": "left-turn"}])
 def test_the_falsifier_finds_no_way_in(over):
-    """150 runs of a cross-entropy search for the bounded human that comes closest to the
-    shielded persuasive AV find none that touches it (with a 0.2 m clearance, none closer than
-    that); against the unshielded AV the same search finds a collision, so it has teeth."""
+    """60 runs of a cross-entropy search (20 humans, 3 rounds; benchmarks/falsify.py runs
+    150) for the bounded human that comes closest to the shielded persuasive AV find none that
+    touches it (with a 0.2 m clearance, none closer than that); against the unshielded AV the
+    same search finds a collision, so it has teeth."""
     base = Config(mode="corrected").with_overrides({**over, "simulation.n_steps": 61})
-    assert falsify(base.with_overrides({"av.shield": "off"})) == 0.0
-    assert falsify(base) > 0.0
-    assert falsify(base.with_overrides({"av.shield_margin_m": 0.2})) >= 0.2 - 1e-6
+    budget = {"samples": 20, "rounds": 3}
+    assert falsify(base.with_overrides({"av.shield": "off"}), **budget) == 0.0
+    assert falsify(base, **budget) > 0.0
+    assert falsify(base.with_overrides({"av.shield_margin_m": 0.2}), **budget) >= 0.2 - 1e-6
