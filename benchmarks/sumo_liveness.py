@@ -8,7 +8,9 @@ persuasive planner behind the worst-case shield and with SUMO's own driver as th
 after the run without an ego, the time-loss reference), and prints one row per configuration:
 episodes crossed or merged within 60 s by each, the paired difference (planner minus SUMO, in
 points, with a 95 % bootstrap interval over seeds), the time loss each caused per episode
-(mean), the time the ego stood inside the junction, collisions and uncertified steps.
+(mean), the time the ego stood inside the junction, SUMO's vehicles it forced to brake (harder
+than 1.5 m/s^2, counted against the same seed without the ego; mean per episode), collisions
+and uncertified steps.
 """
 
 from __future__ import annotations
@@ -40,8 +42,8 @@ def main() -> None:
           "driver as the ego")
     print("| scenario | flow veh/h | reckless | crossed: planner / SUMO | difference points "
           "[95 % CI] | time loss caused s: planner / SUMO | stood in junction s: planner / "
-          "SUMO | collisions | uncertified |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "SUMO | forced to brake: planner / SUMO | collisions | uncertified |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for scenario in args.scenarios.split(","):
         for flow in (float(x) for x in args.flows.split(",")):
             for foes in (float(x) for x in args.ignore_foes.split(",")):
@@ -60,11 +62,15 @@ def main() -> None:
                 def loss(es):
                     return np.mean([e.caused_time_loss_s or 0.0 for e in es])
 
+                def forced(es):
+                    return np.mean([e.forced_to_brake or 0 for e in es])
+
                 print(f"| {scenario} | {flow:g} | {foes:g} | {sum(e.crossed for e in mine)} / "
                       f"{sum(e.crossed for e in ref)} | {diff.mean():+.1f} [{lo:+.1f}, {hi:+.1f}]"
                       f" | {loss(mine):.2f} / {loss(ref):.2f} | "
                       f"{sum(e.junction_stood_s for e in mine):.1f} / "
                       f"{sum(e.junction_stood_s for e in ref):.1f} | "
+                      f"{forced(mine):.2f} / {forced(ref):.2f} | "
                       f"{sum(e.collisions for e in mine)} / {sum(e.collisions for e in ref)} | "
                       f"{sum(e.uncertified for e in mine)} |", flush=True)
 

@@ -449,12 +449,16 @@ def test_the_ego_never_waits_inside_the_junction(nets, seed):
     yield to it and the queue waited (on 2834a8e, seeds 2 and 9: 47 s and 51 s stood inside,
     683 s of time lost by the others in each, not crossed within 60 s). Now it waits before
     the junction and crosses."""
+    ref = S.run_episode("intersection", seed, S.NO_EGO, 900.0, 0.3,
+                        nets["intersection"]).result
     r = S.run_episode("intersection", seed, "persuasive/worst-case", 900.0, 0.3,
-                      nets["intersection"], reference_time_loss_s=S.run_episode(
-                          "intersection", seed, S.NO_EGO, 900.0, 0.3,
-                          nets["intersection"]).result.traffic_time_loss_s).result
+                      nets["intersection"], reference_time_loss_s=ref.traffic_time_loss_s,
+                      reference_hard_braking=ref.hard_braking_vehicles).result
     assert r.junction_stood_s == 0.0 and r.crossed and r.uncertified == 0
     assert not r.collision and abs(r.caused_time_loss_s) < 5.0
+    # the vehicles forced to brake are counted against the same seed without the ego
+    assert ref.forced_to_brake is None
+    assert r.forced_to_brake == r.hard_braking_vehicles - ref.hard_braking_vehicles
 
 
 @pytest.mark.slow

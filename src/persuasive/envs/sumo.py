@@ -51,7 +51,9 @@ SUMO's SSM device on the ego (minimum TTC, minimum PET, maximum DRAC over its co
 SUMO records a conflict only past its default thresholds, TTC < 3 s, DRAC > 3 m/s^2, PET <
 2 s), the ego's time to cross (from its insertion until its centre is half a length past the
 end of the junction), and the time loss of SUMO's vehicles (tripinfo ``timeLoss``, unfinished
-trips included, at the episode's end) against the same episode without the ego.
+trips included, at the episode's end) against the same episode without the ego, the time the
+ego stood inside the junction, and SUMO's vehicles forced to brake: those that braked harder
+than 1.5 m/s^2 at least once, less as many in the same episode without the ego.
 
 Determinism: SUMO's ``--seed`` is the episode's seed, the traffic comes from the seed, the
 planner's per-vehicle seeds from it too; each episode runs in a worker process (libsumo runs
@@ -87,6 +89,9 @@ from .external import (CROSSING, FOLLOW, MERGE, ExternalPlanner, Limits, Polylin
 SCENARIOS = ("intersection", "merge")
 #: The SUMO-driven baseline ego, and the run without an ego.
 SUMO_DRIVER, NO_EGO = "sumo", "none"
+#: A deceleration above this counts as braking hard [m/s^2]: above Krauss's own dawdling
+#: (at most ``sigma * accel`` = 0.5 x 2.6 = 1.3 m/s^2 for SUMO's default car).
+HARD_BRAKE_MPS2 = 1.5
 #: SUMO's step and the planner's [s].
 DT_S = 0.1
 #: The ego's insertion time [s] (the traffic has filled the roads by then) and the episode's
@@ -673,6 +678,11 @@ class EpisodeResult:
     #: time the ego stood (below 0.1 m/s, SUMO's waiting threshold) inside a junction, on one
     #: of its internal lanes [s]: where it blocks others (every driver, SUMO's own too)
     junction_stood_s: float = 0.0
+    #: SUMO's vehicles that braked harder than :data:`HARD_BRAKE_MPS2` at least once (above
+    #: what Krauss's own dawdling can do), and of those how many more than in the same episode
+    #: without the ego: the vehicles the ego forced to brake (None without the reference)
+    hard_braking_vehicles: int = 0
+    forced_to_brake: int | None = None
 
     @property
     def uncertified_steps(self) -> int:
@@ -783,7 +793,8 @@ def _time_loss(path: Path) -> tuple[float, int]:
 
 def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore_foes: float,
                 net_file: str | Path, logs: bool = False,
-                reference_time_loss_s: float | None = None) -> EpisodeOutput:
+                reference_time_loss_s: float | None = None,
+                reference_hard_braking: int | None = None) -> EpisodeOutput:
     """One episode in this process's SUMO (libsumo): ``driver`` is ``"kind/shield"`` (the
     planner), :data:`SUMO_DRIVER` or :data:`NO_EGO` (module docstring)."""
     ls = _libsumo()
@@ -815,6 +826,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
     pairs: dict[tuple[str, str], str] = {}
     overrides = uncertified = ego_steps = max_view = 0
     stood_steps = 0
+    hard: set[str] = set()
     crossed_at = depart_at = None
     types: dict[str, Limits] = {}
     known: dict[str, tuple] = {}
@@ -836,6 +848,10 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                     if "ego" in (c.collider, c.victim):
                         pairs.setdefault((c.collider, c.victim), c.type)
                 ids = ls.vehicle.getIDList()
+                for vid in ids:  # who brakes hard (SUMO's vehicles; judged for every driver)
+                    if vid != "ego" and vid not in hard and \
+                            ls.vehicle.getAcceleration(vid) < -HARD_BRAKE_MPS2:
+                        hard.add(vid)
                 if not logs:  # only what the judges and the planner read
                     ids = (() if "ego" not in ids else ids if planner is not None
                            else ("ego",))
@@ -908,16 +924,19 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
         max_in_view=max_view,
         guarantee_held=bool(planner is not None and planner.config.shield == "worst-case"
                             and ego_steps > 0 and uncertified == 0),
-        junction_stood_s=round(stood_steps * DT_S, 6))
+        junction_stood_s=round(stood_steps * DT_S, 6),
+        hard_braking_vehicles=len(hard),
+        forced_to_brake=None if reference_hard_braking is None or not with_ego
+        else len(hard) - reference_hard_braking)
     return EpisodeOutput(result, steps, decisions, timings)
 
 
 def run_seed(scenario: str, seed: int, drivers: Sequence[str], flow_veh_h: float,
              ignore_foes: float, net_file: str, logs: bool) -> list[EpisodeOutput]:
     """Every driver on one seed, after the run without the ego (the time-loss reference)."""
-    ref = run_episode(scenario, seed, NO_EGO, flow_veh_h, ignore_foes, net_file)
-    loss = ref.result.traffic_time_loss_s
-    return [run_episode(scenario, seed, d, flow_veh_h, ignore_foes, net_file, logs, loss)
+    ref = run_episode(scenario, seed, NO_EGO, flow_veh_h, ignore_foes, net_file).result
+    return [run_episode(scenario, seed, d, flow_veh_h, ignore_foes, net_file, logs,
+                        ref.traffic_time_loss_s, ref.hard_braking_vehicles)
             for d in drivers]
 
 
@@ -974,6 +993,8 @@ class SumoReport:
                 "uncertified": sum(e.uncertified for e in eps),
                 "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
                 "junction_stood_s": float(sum(e.junction_stood_s for e in eps)),
+                "forced_to_brake": sum(e.forced_to_brake for e in eps
+                                       if e.forced_to_brake is not None),
                 "junction_stood_episodes": sum(e.junction_stood_s > 0 for e in eps),
                 "decisions": len(times),
                 "decide_ms_median": float(np.median([m for _, m in times])) if times else None,
