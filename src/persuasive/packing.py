@@ -49,8 +49,9 @@ LANE_SHARED = _slots("LANE_SHARED")[0]
 SHIELD, SHIELD_RESPONSE, SHIELD_AWARE, CONF_THRESHOLD, CONF_STD, CONF_SWITCH = _slots(
     "SHIELD", "SHIELD_RESPONSE", "SHIELD_AWARE", "CONF_THRESHOLD", "CONF_STD", "CONF_SWITCH")
 # The half-width of the uniform acceleration noise on both vehicles [m/s^2]
-# (``simulation.accel_noise_mps2``), which the shield certifies against
-ACCEL_NOISE = _slots("ACCEL_NOISE")[0]
+# (``simulation.accel_noise_mps2``), which the shield certifies against, and the shield's
+# clearance between the footprints [m] (``av.shield_margin_m``)
+ACCEL_NOISE, SHIELD_MARGIN = _slots("ACCEL_NOISE", "SHIELD_MARGIN")
 
 # -- per vehicle -------------------------------------------------------------------------------
 # Limits and size (§1); ``H_GO = h_st + v_max / kappa`` of the OVM law (§2)
@@ -67,13 +68,12 @@ ZONE_LO, ZONE_HI = _slots("ZONE_LO", "ZONE_HI")
 # cannot touch the other's (``persuasive.geometry.occupancy_interval``); in a merge, the side
 # zone up to the merge point (the shield and the surrogate safety measures, §12)
 OCC_LO, OCC_HI = _slots("OCC_LO", "OCC_HI")
-# The yield line of the shield [m]: where the vehicle stands when the shield makes it yield,
-# at or before ``OCC_LO`` (``av.yield_line_m`` before it; the human's is its ``OCC_LO``)
-SHIELD_LINE = _slots("SHIELD_LINE")[0]
 # The shield's occupancy interval [m]: ``OCC_LO..OCC_HI`` on footprints enlarged by the
-# clearance ``av.shield_margin_m`` (the same without one), and that clearance [m]
-SHIELD_OCC_LO, SHIELD_OCC_HI, SHIELD_MARGIN = _slots("SHIELD_OCC_LO", "SHIELD_OCC_HI",
-                                                     "SHIELD_MARGIN")
+# clearance ``SHIELD_MARGIN`` (the same without one); its yield line [m], where the vehicle
+# stands when the shield makes it yield, at or before ``SHIELD_OCC_LO`` (``av.yield_line_m``
+# before it; the human's is its ``SHIELD_OCC_LO``)
+SHIELD_OCC_LO, SHIELD_OCC_HI, SHIELD_LINE = _slots("SHIELD_OCC_LO", "SHIELD_OCC_HI",
+                                                   "SHIELD_LINE")
 # The path: ``xy(s)`` in three pieces (``persuasive.geometry``): straight before ``B1``
 # (direction ``U0``, through ``(X1, Y1)`` at ``B1``), an arc from ``B1`` to ``B2`` (centre,
 # radius, polar angle at ``B1``, +1 left / -1 right; none when ``R == 0``), straight after ``B2``
@@ -168,6 +168,7 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     shared[CONF_STD] = mpc.confidence_accel_std_mps2
     shared[CONF_SWITCH] = mpc.confidence_switch
     shared[ACCEL_NOISE] = config.simulation.accel_noise_mps2
+    shared[SHIELD_MARGIN] = config.av.shield_margin_m or 0.0
     out = []
     for path in (scenario.av, scenario.hv):
         P = shared.copy()
@@ -184,7 +185,6 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
         P[OCC_LO], P[OCC_HI] = widened(*path.occupancy)
         P[SHIELD_OCC_LO], P[SHIELD_OCC_HI] = widened(*path.shield_interval)
         P[SHIELD_LINE] = P[SHIELD_OCC_LO]
-        P[SHIELD_MARGIN] = config.av.shield_margin_m or 0.0
         out.append(P)
     line = config.av.yield_line_m
     if line:  # at or before the interval: a line only ever adds caution
