@@ -7,9 +7,10 @@ tests the shield, the yield line, the clearance and the acceleration noise. Eith
 configuration is refused with a one-line ``ConfigError`` (or no initial state can be drawn), or
 its run has no AV-caused collision, no uncertified step, and keeps the footprints at least the
 clearance apart; and a falsifier, a cross-entropy search over bounded piecewise-constant human
-accelerations with a fixed budget, finds no way in. One exception, stated: in a merge, a human that drives into the AV from behind
-(a rear-end by the human, the open fault rule of the shared lane, issue 24 item 2) leaves the
-model, and the steps after it are not held to the shield's invariant.
+accelerations with a fixed budget, finds no way in. One exception, stated: in a merge, a human
+that drives into the AV from behind after the AV's fair cut-in (a rear-end the human is at fault
+for by the cut-in rule, docs/method.md §12.10) leaves the model, and the steps after it are not
+held to the shield's invariant.
 """
 
 from __future__ import annotations

@@ -548,6 +548,54 @@ _MODE_QUIRKS: dict[str, dict[str, Any]] = {
 
 
 @dataclass(frozen=True)
+class ResponsibilityParams:
+    """What a driver in a shared lane is assumed to do when another enters ahead of it: the
+    responsibility rule of the shield's cut-in (docs/method.md §12.10), after RSS's safe
+    longitudinal distance (Shalev-Shwartz, Shammah, Shashua 2017, "On a Formal Model of Safe
+    and Scalable Self-driving Cars", Definition 1).
+
+    The AV enters a lane ahead of a vehicle only with a gap from which that vehicle, holding at
+    most ``follower_accel_mps2`` for ``reaction_s`` and then braking at
+    ``follower_brake_mps2``, keeps the gap even if the AV brakes at ``front_brake_mps2`` from
+    the moment it enters; in the lane it then brakes no harder than that. These are assumptions
+    about the *human* (a rule of the road, not a physical limit), so they live here, not under
+    ``[av]``. Every field unset gives the default named beside it.
+    """
+
+    #: the follower's reaction time ``rho`` [s]; unset: 1.0
+    reaction_s: float | None = None
+    #: the follower's acceleration during ``rho`` [m/s^2]; unset: its own ``u_max``
+    follower_accel_mps2: float | None = None
+    #: the follower's braking after ``rho`` [m/s^2], positive; unset: 4.5 (SUMO's ``decel``
+    #: of a passenger car); never taken harder than the follower's own ``|u_min|``
+    follower_brake_mps2: float | None = None
+    #: the AV's hardest braking in the lane ahead of a follower [m/s^2], positive (its in-lane
+    #: fallback); unset: the follower's braking as taken; never harder than the AV's own
+    front_brake_mps2: float | None = None
+
+    def __post_init__(self) -> None:
+        p = "responsibility."
+        if self.reaction_s is not None:
+            _in_range(p + "reaction_s", self.reaction_s, 0.0, 10.0)
+        if self.follower_accel_mps2 is not None:
+            _in_range(p + "follower_accel_mps2", self.follower_accel_mps2, 0.0, 20.0)
+        for name in ("follower_brake_mps2", "front_brake_mps2"):
+            if getattr(self, name) is not None:
+                _in_range(p + name, getattr(self, name), 0.0, 20.0, lo_open=True)
+
+    def resolved(self, follower: VehicleParams, front: VehicleParams
+                 ) -> tuple[float, float, float, float]:
+        """``(rho [s], follower's acceleration during rho, follower's braking, front's
+        braking)`` [m/s^2, both brakings positive] for these two vehicles."""
+        rho = 1.0 if self.reaction_s is None else self.reaction_s
+        acc = follower.u_max_mps2 if self.follower_accel_mps2 is None else self.follower_accel_mps2
+        brake = min(4.5 if self.follower_brake_mps2 is None else self.follower_brake_mps2,
+                    -follower.u_min_mps2)
+        front_brake = brake if self.front_brake_mps2 is None else self.front_brake_mps2
+        return rho, acc, brake, min(front_brake, -front.u_min_mps2)
+
+
+@dataclass(frozen=True)
 class Quirks:
     """Reference-implementation quirks Q1..Q7 (docs/method.md §9); ``None`` follows the mode."""
 
@@ -609,6 +657,7 @@ class Config:
     av: AVParams = field(default_factory=AVParams)
     hv: HVParams = field(default_factory=HVParams)
     quirks: Quirks = field(default_factory=Quirks)
+    responsibility: ResponsibilityParams = field(default_factory=ResponsibilityParams)
 
     def __post_init__(self) -> None:
         _choice("mode", self.mode, MODES)
@@ -642,8 +691,21 @@ class Config:
                 _fail("simulation.accel_noise_mps2", w,
                       f"[0, {most:g}) with a shield on (below the AV's braking and throttle, "
                       "so that its fallbacks still brake and go)")
+            if self.scenario.kind == "merge":
+                brake = self.responsibility_rule[3]
+                if not w < brake:
+                    _fail("simulation.accel_noise_mps2", w,
+                          f"[0, {brake:g}) with a shield on in a merge (below the AV's braking "
+                          "in the lane, responsibility.front_brake_mps2, so that it still "
+                          "brakes)")
 
     # -- derived -----------------------------------------------------------------------------
+
+    @property
+    def responsibility_rule(self) -> tuple[float, float, float, float]:
+        """The cut-in rule in force with the HV following the AV (:class:`ResponsibilityParams`
+        resolved): ``(rho, follower's acceleration, follower's braking, AV's braking)``."""
+        return self.responsibility.resolved(self.vehicle_of("hv"), self.vehicle_of("av"))
 
     @functools.cached_property
     def effective_quirks(self) -> Quirks:
@@ -711,9 +773,12 @@ class Config:
     # -- building ----------------------------------------------------------------------------
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict (TOML/JSON friendly); unset optional values are left out."""
-        return {"mode": self.mode, **{name: _section_dict(getattr(self, name))
-                                      for name in _SECTIONS}}
+        """Plain nested dict (TOML/JSON friendly); unset optional values are left out, and
+        so is a section whose every value is unset (``[responsibility]`` by default: the
+        configurations written before it existed keep their text and digests)."""
+        sections = {name: _section_dict(getattr(self, name)) for name in _SECTIONS}
+        return {"mode": self.mode, **{k: v for k, v in sections.items()
+                                      if v or k != "responsibility"}}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Config:
@@ -850,6 +915,7 @@ _SECTIONS: dict[str, type] = {
     "av": AVParams,
     "hv": HVParams,
     "quirks": Quirks,
+    "responsibility": ResponsibilityParams,
 }
 
 #: Fields that moved, for a helpful message when an old configuration names them.

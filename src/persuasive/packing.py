@@ -52,6 +52,11 @@ SHIELD, SHIELD_RESPONSE, SHIELD_AWARE, CONF_THRESHOLD, CONF_STD, CONF_SWITCH = _
 # (``simulation.accel_noise_mps2``), which the shield certifies against, and the shield's
 # clearance between the footprints [m] (``av.shield_margin_m``)
 ACCEL_NOISE, SHIELD_MARGIN = _slots("ACCEL_NOISE", "SHIELD_MARGIN")
+# The shield's cut-in rule in a shared lane (``[responsibility]``, docs/method.md §12.10): the
+# follower's reaction time [s], its acceleration during it and its braking after it [m/s^2,
+# braking positive], and the AV's hardest braking in the lane ahead of it [m/s^2, positive]
+RESP_RHO, RESP_ACCEL, RESP_BRAKE, RESP_FRONT_BRAKE = _slots(
+    "RESP_RHO", "RESP_ACCEL", "RESP_BRAKE", "RESP_FRONT_BRAKE")
 
 # -- per vehicle -------------------------------------------------------------------------------
 # Limits and size (§1); ``H_GO = h_st + v_max / kappa`` of the OVM law (§2)
@@ -169,6 +174,8 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     shared[CONF_SWITCH] = mpc.confidence_switch
     shared[ACCEL_NOISE] = config.simulation.accel_noise_mps2
     shared[SHIELD_MARGIN] = config.av.shield_margin_m or 0.0
+    shared[RESP_RHO], shared[RESP_ACCEL], shared[RESP_BRAKE], shared[RESP_FRONT_BRAKE] = (
+        config.responsibility_rule)
     out = []
     for path in (scenario.av, scenario.hv):
         P = shared.copy()

@@ -75,8 +75,11 @@ class RunOutcome:
     av_rms_jerk_mps3: float  #: RMS of the acceleration differences over dt [m/s^3]
     hv_rms_jerk_mps3: float
     # safety outside the model (docs/method.md §12.6)
-    collision_caused_by_av: bool  #: an overlap that is not a rear-end by the human
-    rear_end_by_human: bool  #: the human drove into the AV from behind in a shared lane
+    #: an overlap the AV is at fault for: every one but a rear-end by the human
+    collision_caused_by_av: bool
+    #: the human drove into the AV from behind in a shared lane after the AV's fair cut-in,
+    #: the AV braking no harder than the rule allows since (docs/method.md §12.10)
+    rear_end_by_human: bool
     min_gap_m: float  #: smallest distance between the two footprints [m] (0: they touched)
     pet_s: float  #: post-encroachment time at the conflict [s]
     min_ttc_s: float  #: minimum time to collision along the paths [s]
@@ -432,8 +435,8 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
         times[f"{who}_rms_accel_mps2"] = _rms(accel)
         times[f"{who}_rms_jerk_mps3"] = _rms(np.diff(accel) / dt)
     overlap = scenario.collides(after[:, 0], after[:, 2])
-    caused = measures.caused_by_av(overlap, measures.rear_end_mask(scenario, after[:, 0],
-                                                                   after[:, 2]))
+    caused = measures.caused_by_av(overlap, measures.human_at_fault(
+        scenario, states, log["av_accel_mps2"], dt))
     occ_av, occ_hv = scenario.av.occupancy, scenario.hv.occupancy
     verdicts = log.get("shield_verdict")
     accel = log["av_accel_mps2"]

@@ -132,6 +132,12 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
         row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m) + margin
         row[sh.C_H_UMIN], row[sh.C_H_UMAX] = o.u_min_mps2, o.u_max_mps2
         row[sh.C_H_VMIN], row[sh.C_H_VMAX] = o.v_min_mps, o.v_max_mps
+        # the cut-in rule with this vehicle as the follower (docs/method.md §12.10): in a merge
+        # the ego's braking command is held to the rule's in-lane limit
+        rule = config.responsibility.resolved(o, ego)
+        row[sh.C_RESP_RHO], row[sh.C_RESP_ACCEL], row[sh.C_RESP_BRAKE], row[sh.C_RESP_FRONT] = rule
+        if c.kind == MERGE:
+            row[sh.C_R_UMIN] = sh.lane_braking(ego.u_min_mps2, rule[3], 0.0)
         rows.append(row)
     C = np.array(rows, float).reshape(len(rows), sh.N_CONFLICT)
     return (np.array(s_R, float), np.array(s_H, float), np.array(v_H, float), C)

@@ -7,8 +7,8 @@ with a fixed budget (``samples * rounds`` closed-loop runs): each round draws ac
 a Gaussian per piece (clipped to the limits), runs the compiled closed loop against a human that
 replays them (:func:`run_against`), keeps the ``elite`` that came closest
 (:func:`closest_approach`) and refits the Gaussian to them. It returns the smallest footprint
-gap it found: 0 means a human touched the AV (a collision the AV caused, since rear-ends by the
-human in a shared lane are left out).
+gap it found: 0 means a human touched the AV (a collision the AV caused, since rear-ends the
+human is at fault for, after a fair cut-in in a shared lane, are left out: docs/method.md §12.10).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from .. import packing as slot
 from ..config import Config
 from ..policies import kinds as kd
 from ..policies import policy_params
-from ..record import WORLD_LOG, setup
+from ..record import W_AV_A, WORLD_LOG, setup
 from . import measures
 
 
@@ -49,10 +49,11 @@ def run_against(config: Config, accels: np.ndarray, seed: int = 1):
 def closest_approach(config: Config, accels: np.ndarray, seed: int = 1) -> float:
     """The smallest footprint gap [m] of :func:`run_against` (0: they touched), up to the
     first rear-end by the human if there is one (the human's fault, not the AV's)."""
-    scenario, states, _ = run_against(config, accels, seed)
+    scenario, states, world_log = run_against(config, accels, seed)
     gaps = measures.min_gap(scenario, states[:, 0], states[:, 2])
     after = states[1:]
-    rear = np.r_[False, measures.rear_end_mask(scenario, after[:, 0], after[:, 2])
+    rear = np.r_[False, measures.human_at_fault(scenario, states, world_log[:, W_AV_A],
+                                                config.simulation.dt_s)
                  & scenario.collides(after[:, 0], after[:, 2])]
     if rear.any():
         gaps = gaps[:int(np.argmax(rear))]

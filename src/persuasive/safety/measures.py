@@ -240,6 +240,50 @@ def rear_end_mask(scenario, s_av: np.ndarray, s_hv: np.ndarray) -> np.ndarray:
     return (np.asarray(s_av) >= scenario.av.occupancy[1]) & (np.asarray(s_av) > np.asarray(s_hv))
 
 
+def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float
+                   ) -> np.ndarray:
+    """Per state after each step (``states[1:]``): an overlap there is a rear-end for which the
+    human is at fault under the cut-in rule (docs/method.md §12.10). That needs all of: a
+    rear-end by geometry (:func:`rear_end_mask`); the AV entered the lane (passed the shield's
+    merge point) on a fair cut-in, judged as the shield judges it
+    (``persuasive.safety.shield.cut_in_fair``) from the state before its entry step, with its
+    realised acceleration over that step, against every human the model allows (an AV that
+    starts in the lane is judged at its first state); and it has braked no harder than the
+    rule's in-lane limit since (its realised accelerations, to 1e-9 m/s^2). Anything else is
+    the AV's.
+
+    ``states`` ``(n + 1, 4)``: the true states ``s_av, v_av, s_hv, v_hv``; ``accel_av``
+    ``(n,)`` [m/s^2]: the AV's realised acceleration of each step (noise included)."""
+    after = states[1:]
+    rear = rear_end_mask(scenario, after[:, 0], after[:, 2])
+    if not rear.any():
+        return rear
+    from ..packing import pack
+    from . import shield as sh
+
+    P_av, P_hv = pack(scenario.config, scenario)
+    C = np.empty(sh.N_CONFLICT)
+    sh.conflict_vector(P_av, P_hv, C)
+    C[sh.C_R_NOISE] = 0.0  # the realised accelerations are known
+    r_hi = C[sh.C_R_HI]
+    inside = np.flatnonzero(states[:, 0] >= r_hi)
+    if inside.size == 0:
+        return np.zeros_like(rear)
+    e = int(inside[0])
+    k = max(e - 1, 0)  # the entry step (or the first one, for an AV that starts in the lane)
+    s_R, v_R, s_H, v_H = (float(x) for x in states[k])
+    a = float(accel_av[k]) if e > 0 else 0.0
+    t_0 = 0.0 if e == 0 else sh.profile_reach(s_R, v_R, a, dt, a, r_hi, C[sh.C_R_VMIN],
+                                              C[sh.C_R_VMAX])
+    fair = math.isfinite(t_0) and sh.cut_in_fair(s_R, v_R, a, dt, a, t_0, s_H, v_H, C)
+    out = np.zeros_like(rear)
+    if fair:
+        gentle = np.asarray(accel_av, float)[k:] >= -C[sh.C_RESP_FRONT] - 1e-9
+        out[k:] = np.logical_and.accumulate(gentle)
+    return rear & out
+
+
 __all__ = ["STANDOFF_PROGRESS_M", "STANDOFF_WINDOW_S", "WAIT_SPEED_MPS", "caused_by_av",
-           "footprint_gaps", "min_gap", "min_ttc", "pet", "rear_end_mask", "standoff",
+           "footprint_gaps", "human_at_fault", "min_gap", "min_ttc", "pet", "rear_end_mask",
+           "standoff",
            "waiting_time"]

@@ -95,11 +95,16 @@ from ..kinematics import saturated_step
 # length of the pair [m] (the gap of a follower); the shield kind and the responsive
 # human's response time [s]; the AV's and the human's limits; the AV's yield line (where it
 # stands when it yields, at or before ``R_LO``; ``R_LO`` itself: none before the interval).
-# Last, the half-width of the uniform error on the AV's applied acceleration [m/s^2]
-# (``simulation.accel_noise_mps2``; the human's limits are widened by it already).
+# Then the half-width of the uniform error on the AV's applied acceleration [m/s^2]
+# (``simulation.accel_noise_mps2``; the human's limits are widened by it already). Last, the
+# cut-in rule of a shared lane (``[responsibility]``, docs/method.md §12.10): the follower's
+# reaction time [s], its acceleration during it, its braking after it and the AV's hardest
+# braking in the lane ahead of it [m/s^2, brakings positive]. In a shared lane ``C_R_UMIN`` is
+# the AV's braking command held to that in-lane limit (its BRAKE fallback there).
 (C_R_LO, C_R_HI, C_H_LO, C_H_HI, C_SHARED, C_GAP, C_KIND, C_RHO, C_R_UMIN, C_R_UMAX, C_R_VMIN,
- C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX, C_R_LINE, C_R_NOISE) = range(18)
-N_CONFLICT = 18
+ C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX, C_R_LINE, C_R_NOISE, C_RESP_RHO,
+ C_RESP_ACCEL, C_RESP_BRAKE, C_RESP_FRONT) = range(22)
+N_CONFLICT = 22
 
 #: Verdicts of :func:`shield_filter` (the world logs them per step); ``OFF``: no shield.
 ADMITTED, BRAKE, GO, UNCERTIFIED, OFF = 0, 1, 2, 3, -1
@@ -115,6 +120,14 @@ GAP_MARGIN_M = 1e-6
 LINE_MARGIN_M = 0.01
 
 _INF = math.inf
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def lane_braking(u_min: float, front_brake: float, w: float) -> float:
+    """The AV's braking command in a shared lane [m/s^2]: its own ``u_min``, held to the
+    cut-in rule's in-lane limit ``front_brake`` (positive) less the acceleration noise ``w``,
+    so that no realisation brakes harder than the rule allows (docs/method.md §12.10)."""
+    return max(u_min, -front_brake + w)
 
 
 @njit(cache=True, _nrt=False)
@@ -135,6 +148,11 @@ def conflict_vector(P_av: np.ndarray, P_hv: np.ndarray, out: np.ndarray) -> None
     out[C_R_NOISE] = w
     out[C_H_VMIN], out[C_H_VMAX] = P_hv[slot.V_MIN], P_hv[slot.V_MAX]
     out[C_R_LINE] = min(P_av[slot.SHIELD_LINE], P_av[slot.SHIELD_OCC_LO])
+    out[C_RESP_RHO], out[C_RESP_ACCEL] = P_av[slot.RESP_RHO], P_av[slot.RESP_ACCEL]
+    out[C_RESP_BRAKE], out[C_RESP_FRONT] = P_av[slot.RESP_BRAKE], P_av[slot.RESP_FRONT_BRAKE]
+    if out[C_SHARED] != 0.0:
+        out[C_R_UMIN] = lane_braking(P_av[slot.U_MIN], P_av[slot.RESP_FRONT_BRAKE], w)
+
 
 
 # -- one vehicle under constant acceleration -----------------------------------------------
@@ -258,48 +276,80 @@ def _next_after(t: float, b0: float, b1: float, b2: float, b3: float) -> float:
 
 
 @njit(cache=True, _nrt=False)
-def _gap_holds(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float,
-               v_H: float, C: np.ndarray) -> bool:
-    """A follower (the AV: ``a1`` for ``d1``, then ``a2``) never closes to within ``L`` of a
-    leader braking at its ``u_min`` from now: ``s_H(t) - s_R(t) > L`` for all ``t >= 0``.
+def _gap_ok(s_L: float, v_L: float, la1: float, ld1: float, la2: float, lv_min: float,
+            lv_max: float, s_F: float, v_F: float, fa1: float, fd1: float, fa2: float,
+            fv_min: float, fv_max: float, L: float) -> bool:
+    """A follower ("``fa1`` for ``fd1`` seconds, then ``fa2``", speeds in ``fv_min..fv_max``)
+    stays more than ``L`` behind a leader ("``la1`` for ``ld1``, then ``la2``"):
+    ``s_L(t) - s_F(t) > L`` for all ``t >= 0``, exactly.
 
     Both positions are piecewise quadratic in ``t``; the gap's minimum lies at a breakpoint
     (a change of acceleration or a saturation) or where the speeds are equal inside a piece,
     and after the last breakpoint both speeds are constant."""
-    L = C[C_GAP] + GAP_MARGIN_M
-    rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
-    hu, hv_min, hv_max = C[C_H_UMIN], C[C_H_VMIN], C[C_H_VMAX]
-    # breakpoints: a saturation in the first piece, the switch, a saturation after it, the
-    # human's stop
-    b0 = _saturation_time(v_R, a1, rv_min, rv_max)
-    b0 = b0 if b0 < d1 else _INF
-    _, v1 = saturated_step(s_R, v_R, a1, d1, rv_min, rv_max)
-    b2 = d1 + _saturation_time(v1, a2, rv_min, rv_max)
-    b3 = _saturation_time(v_H, hu, hv_min, hv_max)
+    # breakpoints: each vehicle's saturation in its first piece, its switch, its saturation
+    # after the switch
+    b0 = _saturation_time(v_F, fa1, fv_min, fv_max)
+    b0 = b0 if b0 < fd1 else _INF
+    _, v1 = saturated_step(s_F, v_F, fa1, fd1, fv_min, fv_max)
+    b2 = fd1 + _saturation_time(v1, fa2, fv_min, fv_max)
+    c0 = _saturation_time(v_L, la1, lv_min, lv_max)
+    c0 = c0 if c0 < ld1 else _INF
+    _, w1 = saturated_step(s_L, v_L, la1, ld1, lv_min, lv_max)
+    c2 = ld1 + _saturation_time(w1, la2, lv_min, lv_max)
     t = 0.0
     while True:
-        sr, vr = _profile_state(s_R, v_R, a1, d1, a2, t, rv_min, rv_max)
-        sh, vh = saturated_step(s_H, v_H, hu, t, hv_min, hv_max)
+        sr, vr = _profile_state(s_F, v_F, fa1, fd1, fa2, t, fv_min, fv_max)
+        sh, vh = _profile_state(s_L, v_L, la1, ld1, la2, t, lv_min, lv_max)
         if not sh - sr > L:
             return False
-        t_next = _next_after(t, b0, d1, b2, b3)
+        t_next = min(_next_after(t, b0, fd1, b2, _INF), _next_after(t, c0, ld1, c2, _INF))
         # constant accelerations until t_next (0 once a speed limit is reached)
-        ar = _held(a1 if t < d1 else a2, vr, rv_min, rv_max)
-        ah = _held(hu, vh, hv_min, hv_max)
+        ar = _held(fa1 if t < fd1 else fa2, vr, fv_min, fv_max)
+        ah = _held(la1 if t < ld1 else la2, vh, lv_min, lv_max)
         if ah != ar:  # the gap's stationary point inside the piece
             t_star = t + (vr - vh) / (ah - ar)
             if t < t_star < t_next:
-                srs, _ = _profile_state(s_R, v_R, a1, d1, a2, t_star, rv_min, rv_max)
-                shs, _ = saturated_step(s_H, v_H, hu, t_star, hv_min, hv_max)
+                srs, _ = _profile_state(s_F, v_F, fa1, fd1, fa2, t_star, fv_min, fv_max)
+                shs, _ = _profile_state(s_L, v_L, la1, ld1, la2, t_star, lv_min, lv_max)
                 if not shs - srs > L:
                     return False
         if t_next == _INF:
             # the speeds the two keep for ever: a speed a rounding error short of its limit
             # may leave no breakpoint of its own, so the limit is read off the acceleration
-            vr_end = rv_max if ar > 0.0 else (rv_min if ar < 0.0 else vr)
-            vh_end = hv_max if ah > 0.0 else (hv_min if ah < 0.0 else vh)
+            vr_end = fv_max if ar > 0.0 else (fv_min if ar < 0.0 else vr)
+            vh_end = lv_max if ah > 0.0 else (lv_min if ah < 0.0 else vh)
             return not vh_end < vr_end
         t = t_next
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _gap_holds(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float,
+               v_H: float, C: np.ndarray) -> bool:
+    """The AV following (``a1`` for ``d1``, then ``a2``) never closes to within ``L`` of a
+    human leader braking at its ``u_min`` from now (:func:`_gap_ok`)."""
+    hu = C[C_H_UMIN]
+    return _gap_ok(s_H, v_H, hu, 0.0, hu, C[C_H_VMIN], C[C_H_VMAX], s_R, v_R, a1, d1, a2,
+                   C[C_R_VMIN], C[C_R_VMAX], C[C_GAP] + GAP_MARGIN_M)
+
+
+@njit(cache=True, _nrt=False)
+def cut_in_fair(s_R: float, v_R: float, a1: float, d1: float, a2: float, t_0: float,
+                s_H: float, v_H: float, C: np.ndarray) -> bool:
+    """The cut-in rule (docs/method.md §12.10) for the AV trajectory "``a1`` for ``d1``, then
+    ``a2``" (its slowest realisation under acceleration noise) that reaches the merge point at
+    ``t_0``: against the furthest and fastest human at ``t_0`` (full throttle from now: every
+    human is behind it and slower), a follower that holds ``C_RESP_ACCEL`` for ``C_RESP_RHO``
+    and then brakes at ``C_RESP_BRAKE`` stays more than the gap behind the AV braking at
+    ``C_RESP_FRONT`` from ``t_0`` (RSS's safe longitudinal distance, computed exactly on the
+    piecewise-quadratic motions rather than by the closed form, so that it also holds when
+    the follower brakes harder than the AV, or reaches a speed limit)."""
+    w = C[C_R_NOISE]
+    rv_min, rv_max, hv_min, hv_max = C[C_R_VMIN], C[C_R_VMAX], C[C_H_VMIN], C[C_H_VMAX]
+    s_e, v_e = _profile_state(s_R, v_R, a1 - w, d1, a2 - w, t_0, rv_min, rv_max)
+    s_h, v_h = saturated_step(s_H, v_H, C[C_H_UMAX], t_0, hv_min, hv_max)
+    front = -C[C_RESP_FRONT]
+    return _gap_ok(s_e, v_e, front, 0.0, front, rv_min, rv_max, s_h, v_h, C[C_RESP_ACCEL],
+                   C[C_RESP_RHO], -C[C_RESP_BRAKE], hv_min, hv_max, C[C_GAP] + GAP_MARGIN_M)
 
 
 @njit(cache=True, _nrt=False)
@@ -326,16 +376,23 @@ def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: floa
         t_out_R = profile_reach(s_R, v_R, l1, d1, l2, r_hi, rv_min, rv_max)
         return t_out_R + m < t_in_H - m or t_out_H + m < t_in_R - m
     # a shared lane past r_hi (the merge point)
+    u_lane = C[C_R_UMIN]  # the AV's braking command held to the cut-in rule's in-lane limit
     if s_R >= r_hi:
-        if s_H < s_R:
-            return True  # the human is behind: driving into the AV is its rear-end
+        if s_H < s_R:  # the human is behind: the AV brakes no harder than the rule allows
+            return a1 >= u_lane and a2 >= u_lane
         return _gap_holds(s_R, v_R, f1, d1, f2, s_H, v_H, C)
     t_in_R = profile_reach(s_R, v_R, f1, d1, f2, r_lo, rv_min, rv_max)
     if t_in_R == _INF:
         return True  # it stands before the side zone
     t_0 = profile_reach(s_R, v_R, l1, d1, l2, r_hi, rv_min, rv_max)
     if not past and (t_in_H == _INF or t_0 + m < t_in_H - m):
-        return True  # in the lane (or standing in its side zone) before any human gets near
+        # in the lane (or standing in its side zone) before any human gets near: ahead of
+        # it by the cut-in rule, and from its entry on braking no harder than the rule allows
+        if t_0 == _INF:
+            return True
+        t_enter = profile_reach(s_R, v_R, f1, d1, f2, r_hi, rv_min, rv_max)
+        return (a2 >= u_lane and (t_enter >= d1 or a1 >= u_lane)
+                and cut_in_fair(s_R, v_R, a1, d1, a2, t_0, s_H, v_H, C))
     if past or t_out_H + m < t_in_R - m:  # the human is surely ahead: follow it
         return _gap_holds(s_R, v_R, f1, d1, f2, s_H, v_H, C)
     return False
@@ -381,15 +438,16 @@ def line_binds(s: float, v: float, C: np.ndarray) -> bool:
 @njit(cache=True, _nrt=False)
 def brake_certified(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
                     C: np.ndarray, t_in_H: float, t_out_H: float, past: bool,
-                    binds: bool) -> bool:
-    """"``a``, then ``BRAKE``" is certified; ``binds`` (:func:`line_binds` at the step's
-    start): certified with the AV's interval starting at its stop target,
+                    binds: bool, u_brake: float) -> bool:
+    """"``a``, then ``BRAKE``" is certified, ``BRAKE`` being ``u_brake`` (the filter's, the
+    weakest of its conflicts'; one conflict: its ``C_R_UMIN``); ``binds`` (:func:`line_binds`
+    at the step's start): certified with the AV's interval starting at its stop target,
     :data:`LINE_MARGIN_M` before its yield line, so that it yields there, not at the interval
     (more conservative: the interval only grows). An AV already past its target (within the
     margin before the line: a stop at the target that rolled on by rounding or a simulator's
     integration) may not creep on: it moves forward only when ``GO`` is certified, and
     standing there is certified against the line itself."""
-    u_min = C[C_R_UMIN]
+    u_min = u_brake
     if not binds:
         return certified(s_R, v_R, a, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past)
     line = C[C_R_LINE]
@@ -412,7 +470,7 @@ def admissible(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: flo
     then ``BRAKE``" (with the yield line while it binds, :func:`brake_certified`)."""
     return (certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past)
             or brake_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in_H, t_out_H, past,
-                               line_binds(s_R, v_R, C)))
+                               line_binds(s_R, v_R, C), C[C_R_UMIN]))
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -476,8 +534,10 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     "``a``, then ``F``" is certified against every vehicle for ``F = BRAKE`` (held to the
     yield line of every conflict whose line binds) or for ``F = GO``; otherwise, while some
     line binds, the gentlest stop before every binding line (verdict ``BRAKE``), then
-    ``BRAKE``, then ``GO``; once none binds, ``GO`` before ``BRAKE`` (each if certified
-    against all); otherwise (``UNCERTIFIED``) the fallback whose first possible overlap, over
+    ``BRAKE``, then ``GO``; once none binds, ``GO`` before ``BRAKE``, unless the proposal
+    brakes harder than ``BRAKE`` (each if certified against all). ``BRAKE`` is the weakest
+    braking command of the conflicts: a shared lane holds it to the cut-in rule's in-lane
+    limit (docs/method.md §12.10). Otherwise (``UNCERTIFIED``) the fallback whose first possible overlap, over
     all the vehicles, starts latest, or whose overlaps are shortest in all (ties: brake).
 
     ``lead`` ``(3,)`` [m]: how much further along its path the AV is taken when its first
@@ -499,7 +559,11 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     for j in range(n):
         t_in, t_out, past = human_window(s_H[j], v_H[j], C[j])
         window[j, 0], window[j, 1], window[j, 2] = t_in, t_out, 1.0 if past else 0.0
+    # BRAKE: the weakest braking command of all the conflicts (a shared lane holds it to the
+    # cut-in rule's in-lane limit), so that it is allowed against every one of them
     u_min, u_max = C[0, C_R_UMIN], C[0, C_R_UMAX]
+    for j in range(1, n):
+        u_min = max(u_min, C[j, C_R_UMIN])
     # the yield lines that still bind (the AV can stand before them: docs/method.md §12.8),
     # and the gentlest braking that stands before every one of them
     yielding, a_line = False, u_max
@@ -512,7 +576,9 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
                                             u_min + C[j, C_R_NOISE], u_max) - C[j, C_R_NOISE])
     # candidates: the proposal with either fallback; then, while a line binds, the yield at
     # the line, BRAKE, GO; once committed (no line binds), GO before BRAKE: drive through
-    # rather than stand where it blocks others
+    # rather than stand where it blocks others; but a proposal that brakes harder than BRAKE
+    # (the in-lane limit of a shared lane) gets BRAKE first, the nearest to what it asked
+    brake_first = yielding or (proposal_ok and a < u_min)
     for i in range(0 if proposal_ok else 2, 5):
         if i < 2:
             first, fb, shift, verdict = a, (u_min if i == 0 else u_max), lead[0], ADMITTED
@@ -520,7 +586,7 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
             if not yielding:
                 continue
             first, fb, shift, verdict = a_line, u_min, lead[1], BRAKE
-        elif (i == 3) == yielding:
+        elif (i == 3) == brake_first:
             first, fb, shift, verdict = u_min, u_min, lead[1], BRAKE
         else:
             first, fb, shift, verdict = u_max, u_max, lead[2], GO
@@ -529,7 +595,8 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
             past = window[j, 2] % 2.0 != 0.0
             if fb == u_min:
                 good = brake_certified(s_R[j] + shift, v_R, first, dt, s_H[j], v_H[j], C[j],
-                                       window[j, 0], window[j, 1], past, window[j, 2] >= 2.0)
+                                       window[j, 0], window[j, 1], past, window[j, 2] >= 2.0,
+                                       u_min)
             else:
                 good = certified(s_R[j] + shift, v_R, first, dt, fb, s_H[j], v_H[j], C[j],
                                  window[j, 0], window[j, 1], past)
@@ -598,7 +665,8 @@ def verdict_name(code: int) -> str | None:
 
 __all__ = ["ADMITTED", "BRAKE", "GO", "LINE_MARGIN_M", "N_CONFLICT", "OFF", "TIME_MARGIN_S",
            "UNCERTIFIED", "VERDICTS", "admissible", "brake_certified", "certified",
-           "conflict_vector", "go_certified", "human_window", "line_binds", "line_brake",
+           "conflict_vector", "cut_in_fair", "go_certified", "human_window", "lane_braking",
+           "line_binds", "line_brake",
            "one_buffer", "profile_reach", "reach_time", "shield_filter",
            "shield_filter_one", "shield_step",
            "verdict_name", "yields_before"]
