@@ -36,6 +36,7 @@ def _register() -> None:
     from .fit import fit
     from .highway import highway
     from .plots import animate, plot, plot_compare
+    from .recordings import recordings
     from .reproduce import reproduce
     from .simulate import simulate
     from .sumo import sumo
@@ -46,6 +47,7 @@ def _register() -> None:
     cli.add_command(highway)
     cli.add_command(fit)
     cli.add_command(sumo)
+    cli.add_command(recordings)
     plot.add_command(plot_sweep)
     plot.add_command(plot_compare)
 

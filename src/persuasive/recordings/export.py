@@ -1,0 +1,81 @@
+"""Our own simulator's runs as recordings: ``simulate --out`` logs written in the INTERACTION
+format, for round trips through the recordings' pipeline (docs/guide/recordings.md).
+
+Run ``r`` (in the order given) becomes ``vehicle_tracks_<r>.csv`` (three digits): one file per
+run, since two runs share their times and place and would otherwise be paired with each
+other. Track 1 is the AV, track 2 the HV, both ``car``; frame ``k`` (``frame_id = k + 1``,
+``timestamp_ms = 100 k``) is the run's state ``x_k``, ``k = 0..N`` (the final state
+included). The centre is the scenario's position of the vehicle's path coordinate
+(``Scenario.positions``, as the top-view figure draws it), plus **uniform measurement noise**
+``U(-noise_m, noise_m)`` on ``x`` and on ``y``, independently, drawn from
+``numpy.random.default_rng(seed)`` (one generator for all runs, in order); ``vx, vy`` are the
+true speed along the path's heading, ``psi_rad`` the path's heading, ``length`` and ``width``
+the configuration's vehicle. The runs' step must be INTERACTION's frame, 0.1 s.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .formats import INTERACTION_COLUMNS, RecordingError, write_interaction
+
+
+def run_rows(record, rng: np.random.Generator, noise_m: float) -> dict[str, np.ndarray]:
+    """The INTERACTION rows of one :class:`persuasive.record.RunRecord` (module docstring)."""
+    config = record.config
+    if abs(config.simulation.dt_s - 0.1) > 1e-12:
+        raise RecordingError(f"run step simulation.dt_s = {config.simulation.dt_s:g} s; "
+                             "allowed: 0.1 s (INTERACTION's frame)")
+    scene = record.scenario
+    n = record.states.shape[0]
+    cols: dict[str, list] = {c: [] for c in INTERACTION_COLUMNS}
+    for track, (who, j) in enumerate((("av", 0), ("hv", 2)), start=1):
+        s, v = record.states[:, j], record.states[:, j + 1]
+        x, y, heading = scene.positions(who, s)
+        x = np.asarray(x, float) + rng.uniform(-noise_m, noise_m, n)
+        y = np.asarray(y, float) + rng.uniform(-noise_m, noise_m, n)
+        heading = np.asarray(heading, float)
+        veh = config.vehicle_of(who)
+        cols["track_id"].append(np.full(n, track, np.int64))
+        cols["frame_id"].append(np.arange(1, n + 1, dtype=np.int64))
+        cols["timestamp_ms"].append(np.arange(n, dtype=np.int64) * 100)
+        cols["agent_type"].append(np.full(n, "car", dtype=object))
+        cols["x"].append(x)
+        cols["y"].append(y)
+        cols["vx"].append(v * np.cos(heading))
+        cols["vy"].append(v * np.sin(heading))
+        cols["psi_rad"].append(heading)
+        cols["length"].append(np.full(n, veh.length_m))
+        cols["width"].append(np.full(n, veh.width_m))
+    return {c: np.concatenate(parts) for c, parts in cols.items()}
+
+
+def export_runs(runs: Sequence[str | Path], folder: str | Path, noise_m: float = 0.0,
+                seed: int = 0) -> list[str]:
+    """Write each run log of ``runs`` into ``folder`` (existing) as
+    ``vehicle_tracks_<r>.csv``; the names written. Raises
+    :class:`persuasive.config.ConfigError` (a run that cannot be read) or
+    :class:`RecordingError` before writing anything."""
+    from ..record import load_record
+
+    if not (np.isfinite(noise_m) and noise_m >= 0.0):
+        raise RecordingError(f"--noise-m = {noise_m!r} is out of range; allowed: a number "
+                             ">= 0 m")
+    if len(runs) > 1000:
+        raise RecordingError(f"{len(runs)} runs given; allowed: at most 1000 "
+                             "(vehicle_tracks_000 to _999)")
+    records = [load_record(r) for r in runs]
+    rng = np.random.default_rng(seed)
+    rows = [run_rows(rec, rng, noise_m) for rec in records]
+    names = []
+    for r, cols in enumerate(rows):
+        name = f"vehicle_tracks_{r:03d}.csv"
+        write_interaction(Path(folder) / name, cols)
+        names.append(name)
+    return names
+
+
+__all__ = ["export_runs", "run_rows"]

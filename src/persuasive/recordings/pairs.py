@@ -1,0 +1,540 @@
+"""Crossing pairs from recorded tracks, projected onto the project's scenario form, with labels
+(docs/guide/recordings.md).
+
+**Finding pairs.** Two smoothed vehicle tracks (:mod:`persuasive.recordings.tracks`) of one
+recording are a candidate when they are both present for at least ``min_common_s`` and their
+bounding boxes meet. Their paths must then cross at an angle in ``angle_range_deg`` or merge
+(:mod:`persuasive.recordings.geometry` says how both are found), and both vehicles must be
+**approaching**: each is first seen before its occupancy interval (it is observed arriving),
+and there is a time at which both are within ``near_m`` of the conflict point along their
+paths (``|s| <= near_m``; the two stretches of time overlap).
+
+**Projection.** Each vehicle's path is a :class:`persuasive.envs.external.Polyline` through
+its own smoothed centres (cut to ``CUT_M`` = 30 m before and after the point where the paths
+meet), and
+:func:`persuasive.envs.external.route_conflict` gives the conflict of the pair, with the
+vehicles' recorded lengths and widths: the kind (crossing: the closest approach of the two
+centre lines is the conflict point; merge: the merging vehicle's first point on the other's
+path is the conflict point, ``merge_at``), each vehicle's position of the conflict point on
+its path, and the occupancy intervals (where its footprint can touch the other's path,
+relative to the conflict point). Vehicle 1 is route_conflict's ego: in a merge the merging
+vehicle, in a crossing the lower track ID. Per 10 Hz step that both are present: ``s``
+(relative to the conflict point, negative before it), ``v`` and ``a`` of both.
+
+**Labels** (every approaching pair is kept; the labels never filter):
+
+- ``first``: who passed the conflict point first: the vehicle whose ``s`` reaches 0 earlier
+  (linear interpolation between steps); ``"same time"`` on equal times, ``"neither"`` when
+  neither reaches it while recorded, the one that does when only one does;
+- ``pet_s``: the post-encroachment time on the footprints, as the simulator's
+  (``persuasive.safety.measures``): from the moment the vehicle that entered its occupancy
+  interval first leaves it to the moment the other enters its own; 0 when both were inside
+  at once (the intervals are conservative); NaN when one never enters while recorded, or the
+  first never leaves and its track ends before the other enters;
+- ``second_slowed``: the second passer (the other than ``first``) slowed down: its speed
+  fell by at least ``slow_drop_mps`` (default 1 m/s) below the highest speed it had earlier in
+  its approach, the stretch from the moment it is within ``near_m`` before the conflict
+  point to the moment it reaches it (or its track ends); ``second_speed_drop_mps`` is that
+  largest fall.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .formats import STEP_S, RecordingError
+from .geometry import (CHUNK, G_CROSS, G_CROSS_ANGLE, G_CROSS_SI, G_CROSS_SJ, G_MERGE_IJ,
+                       G_MERGE_IJ_ANGLE, G_MERGE_IJ_SI, G_MERGE_IJ_SJ, G_MERGE_JI,
+                       G_MERGE_JI_ANGLE, G_MERGE_JI_SI, G_MERGE_JI_SJ, N_GEOMETRY, chunk_boxes,
+                       pair_geometry)
+from .tracks import Tracks
+
+#: Kinds of pair (``persuasive.envs.external``'s names).
+CROSSING, MERGE = "crossing", "merge"
+#: The labels of ``first``.
+FIRST_LABELS = ("1", "2", "same time", "neither")
+#: Key of the pairs file's metadata in its Parquet schema.
+PAIRS_METADATA = b"persuasive.pairs"
+#: How far before and after the point where the paths meet the polylines handed to
+#: route_conflict reach [m] (a footprint 1 m wider than the lane touches a path crossed at 20
+#: degrees within 9 m of the point, one merging at 10 degrees within 17 m)
+CUT_M = 30.0
+
+
+@dataclass(frozen=True)
+class PairParams:
+    """How pairs are found and labelled (module docstring)."""
+
+    #: crossing angles kept [deg]: 0 same direction, 90 right angles, 180 head on
+    angle_range_deg: tuple[float, float] = (20.0, 160.0)
+    near_m: float = 40.0  #: both within this of the conflict point at one time [m]
+    min_common_s: float = 1.0  #: both tracks present together at least this long [s]
+    merge_gap_m: float = 1.0  #: on the other's path: centre lines within this [m]
+    merge_apart_m: float = 3.0  #: beside the other's path before: at least this away [m]
+    merge_run_m: float = 15.0  #: on the other's path for at least this arc [m]
+    slow_drop_mps: float = 1.0  #: the second passer slowed: a speed drop of this [m/s]
+    lateral_margin_m: float = 0.5  #: route_conflict's lateral margin [m]
+    long_margin_m: float = 0.05  #: route_conflict's margin along the path [m]
+    step_m: float = 0.25  #: route_conflict's sampling step [m]
+
+    def __post_init__(self) -> None:
+        lo, hi = self.angle_range_deg
+        if not (0.0 <= lo < hi <= 180.0):
+            raise RecordingError(f"angle range = [{lo:g}, {hi:g}] is out of range; allowed: "
+                                 "0 <= low < high <= 180 degrees")
+        for name in ("near_m", "min_common_s", "merge_gap_m", "merge_run_m", "slow_drop_mps",
+                     "step_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise RecordingError(f"{name} = {value!r} is out of range; allowed: a "
+                                     "positive number")
+        if not (math.isfinite(self.merge_apart_m) and self.merge_apart_m > self.merge_gap_m):
+            raise RecordingError(f"merge_apart_m = {self.merge_apart_m!r} is out of range; "
+                                 f"allowed: more than merge_gap_m = {self.merge_gap_m:g}")
+        for name in ("lateral_margin_m", "long_margin_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise RecordingError(f"{name} = {value!r} is out of range; allowed: a "
+                                     "number >= 0")
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One approaching pair (module docstring): identity, conflict, labels and steps.
+
+    Step arrays ``(n,)``: ``t`` [s]; per vehicle ``k`` in 0, 1 (vehicle 1, 2): ``s[k]`` [m]
+    relative to its conflict point, ``v[k]`` [m/s], ``a[k]`` [m/s^2], ``x[k]``, ``y[k]`` [m]
+    (smoothed centre), ``heading[k]`` [rad] (the file's)."""
+
+    pair: int
+    recording: str
+    kind: str
+    angle_deg: float  #: crossing angle, or the merging vehicle's angle to the lane [deg]
+    tracks: tuple[int, int]
+    classes: tuple[str, str]
+    lengths_m: tuple[float, float]
+    widths_m: tuple[float, float]
+    occupancy: tuple[tuple[float, float], tuple[float, float]]  #: [m], per vehicle
+    conflict_xy: tuple[float, float]  #: the conflict point on vehicle 1's path [m]
+    first: str
+    pet_s: float
+    t_pass_s: tuple[float, float]  #: when each reached its conflict point (NaN: never) [s]
+    second_slowed: bool | None  #: None: no second passer
+    second_speed_drop_mps: float
+    t: np.ndarray = field(repr=False)
+    s: np.ndarray = field(repr=False)  #: (2, n)
+    v: np.ndarray = field(repr=False)
+    a: np.ndarray = field(repr=False)
+    x: np.ndarray = field(repr=False)
+    y: np.ndarray = field(repr=False)
+    heading: np.ndarray = field(repr=False)
+    #: indices of the two tracks in the :class:`Tracks` they came from (for figures)
+    index: tuple[int, int] = (-1, -1)
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass(frozen=True)
+class PairsResult:
+    """The pairs of a set of tracks, and how many tracks they came from."""
+
+    pairs: list[Pair]
+    tracks: Tracks = field(repr=False)
+    candidates: int  #: candidate pairs compared (times and boxes meet)
+    params: PairParams
+
+
+def candidates(tracks: Tracks, params: PairParams) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate pairs ``(i, j)``, ``i < j`` in time order: same recording, both present
+    for at least ``min_common_s``, bounding boxes within ``merge_apart_m``."""
+    n = tracks.n_tracks
+    if n < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    st = tracks.starts
+    t0, t1 = tracks.t[st[:-1]], tracks.t[st[1:] - 1]
+    rec = np.unique(tracks.recording, return_inverse=True)[1]
+    order = np.lexsort((t0, rec))
+    r_o, t0_o, t1_o = rec[order], t0[order], t1[order]
+    # the last track of the same recording starting before each track ends (less min_common)
+    key_start = r_o * 1e7 + t0_o
+    key_end = r_o * 1e7 + t1_o - params.min_common_s + 1e-6
+    last = np.searchsorted(key_start, key_end, side="right") - 1
+    counts = np.maximum(last - np.arange(n), 0)
+    a = np.repeat(np.arange(n), counts)
+    b = a + 1 + (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+    i, j = order[a], order[b]
+    common = np.minimum(t1[i], t1[j]) - np.maximum(t0[i], t0[j])
+    keep = common >= params.min_common_s - 1e-9
+    i, j = i[keep], j[keep]
+    box = _track_boxes(tracks)
+    r = params.merge_apart_m
+    meet = ((box[i, 0] <= box[j, 2] + r) & (box[j, 0] <= box[i, 2] + r)
+            & (box[i, 1] <= box[j, 3] + r) & (box[j, 1] <= box[i, 3] + r))
+    return i[meet], j[meet]
+
+
+def _track_boxes(tracks: Tracks) -> np.ndarray:
+    st = tracks.starts[:-1]
+    out = np.empty((tracks.n_tracks, 4))
+    out[:, 0] = np.minimum.reduceat(tracks.x, st)
+    out[:, 1] = np.minimum.reduceat(tracks.y, st)
+    out[:, 2] = np.maximum.reduceat(tracks.x, st)
+    out[:, 3] = np.maximum.reduceat(tracks.y, st)
+    return out
+
+
+def find_pairs(tracks: Tracks, params: PairParams | None = None) -> PairsResult:
+    """Every approaching crossing or merging pair of ``tracks`` (module docstring), in order
+    of recording and time; pair IDs count from 0 in that order."""
+    params = params or PairParams()
+    ci, cj = candidates(tracks, params)
+    out = np.zeros((ci.shape[0], N_GEOMETRY))
+    if ci.shape[0]:
+        cstart, v0, v1, box = chunk_boxes(tracks.x, tracks.y, tracks.starts, CHUNK)
+        lo, hi = params.angle_range_deg
+        pair_geometry(tracks.x, tracks.y, tracks.s, tracks.starts, cstart, v0, v1, box, ci,
+                      cj, float(lo), float(hi), params.merge_gap_m, params.merge_apart_m,
+                      params.merge_run_m, out)
+    pairs: list[Pair] = []
+    for p in np.flatnonzero((out[:, G_CROSS] > 0) | (out[:, G_MERGE_JI] > 0)
+                            | (out[:, G_MERGE_IJ] > 0)):
+        i, j, g = int(ci[p]), int(cj[p]), out[p]
+        if g[G_CROSS] > 0:
+            if tracks.track[i] > tracks.track[j]:
+                i, j = j, i
+                si, sj = g[G_CROSS_SJ], g[G_CROSS_SI]
+            else:
+                si, sj = g[G_CROSS_SI], g[G_CROSS_SJ]
+            found = _project(tracks, params, i, j, CROSSING, si, sj, g[G_CROSS_ANGLE])
+        else:
+            # the merging vehicle is vehicle 1; both merging: the steeper approach merges
+            ji = g[G_MERGE_JI] > 0 and (g[G_MERGE_IJ] == 0
+                                        or g[G_MERGE_JI_ANGLE] >= g[G_MERGE_IJ_ANGLE])
+            if ji:
+                found = _project(tracks, params, j, i, MERGE, g[G_MERGE_JI_SJ],
+                                 g[G_MERGE_JI_SI], g[G_MERGE_JI_ANGLE])
+            else:
+                found = _project(tracks, params, i, j, MERGE, g[G_MERGE_IJ_SI],
+                                 g[G_MERGE_IJ_SJ], g[G_MERGE_IJ_ANGLE])
+        if found is not None:
+            pairs.append(found)
+    pairs.sort(key=lambda q: (q.recording, float(q.t[0]), q.tracks))
+    pairs = [_with_id(q, k) for k, q in enumerate(pairs)]
+    return PairsResult(pairs, tracks, int(ci.shape[0]), params)
+
+
+def _with_id(pair: Pair, k: int) -> Pair:
+    from dataclasses import replace
+
+    return replace(pair, pair=k)
+
+
+def _cut(tracks: Tracks, i: int, s_at: float, reach: float):
+    """Track ``i``'s path from ``s_at - reach`` to ``s_at + reach`` as a Polyline and the arc
+    of its first vertex on the whole path."""
+    from ..envs.external import Polyline
+
+    rows = tracks.rows(i)
+    s = tracks.s[rows]
+    a = max(int(np.searchsorted(s, s_at - reach, side="right")) - 1, 0)
+    b = min(int(np.searchsorted(s, s_at + reach, side="left")) + 1, s.shape[0])
+    xy = np.stack([tracks.x[rows][a:b], tracks.y[rows][a:b]], axis=1)
+    return Polyline.of(xy), float(s[a])
+
+
+def _time_at(t: np.ndarray, s: np.ndarray, target: float) -> float:
+    """When ``s`` (non-decreasing, at times ``t``) first reaches ``target``, interpolated; NaN
+    when it never does (at the first sample already: the moment is unobserved, NaN too)."""
+    k = int(np.searchsorted(s, target, side="left"))
+    if k == 0 or k == s.shape[0]:
+        return math.nan
+    ds = s[k] - s[k - 1]
+    f = (target - s[k - 1]) / ds if ds > 0 else 1.0
+    return float(t[k - 1] + f * (t[k] - t[k - 1]))
+
+
+def _near_window(t: np.ndarray, s: np.ndarray, near: float) -> tuple[float, float]:
+    """The times ``s`` is within ``near`` of 0 (``s`` non-decreasing): ``(first, last)``;
+    ``(inf, -inf)`` when never."""
+    a = int(np.searchsorted(s, -near, side="left"))
+    b = int(np.searchsorted(s, near, side="right")) - 1
+    if a > b:
+        return math.inf, -math.inf
+    return float(t[a]), float(t[b])
+
+
+def _project(tracks: Tracks, params: PairParams, i: int, j: int, kind: str, si: float,
+             sj: float, angle: float) -> Pair | None:
+    """The :class:`Pair` of tracks ``i`` (vehicle 1) and ``j`` whose paths meet at arcs
+    ``si``, ``sj``, or None when they are not both approaching (module docstring)."""
+    from ..envs.external import route_conflict
+
+    ri, rj = tracks.rows(i), tracks.rows(j)
+    ti, tj = tracks.t[ri], tracks.t[rj]
+    # cheap tests first, on the kernel's meeting point: both within near_m at one time
+    a0, a1 = _near_window(ti, tracks.s[ri] - si, params.near_m)
+    b0, b1 = _near_window(tj, tracks.s[rj] - sj, params.near_m)
+    if max(a0, b0) > min(a1, b1) + 1e-9:
+        return None
+    pi_, off_i = _cut(tracks, i, si, CUT_M)
+    pj_, off_j = _cut(tracks, j, sj, CUT_M)
+    if pi_.xy.shape[0] < 2 or pj_.xy.shape[0] < 2:
+        return None
+    size_i = (float(tracks.length_m[i]), float(tracks.width_m[i]))
+    size_j = (float(tracks.length_m[j]), float(tracks.width_m[j]))
+    rc = route_conflict(pi_, pj_, size_i, size_j, params.lateral_margin_m,
+                        params.long_margin_m,
+                        merge_at=(si - off_i, sj - off_j) if kind == MERGE else None,
+                        step_m=params.step_m)
+    if rc is None:
+        return None
+    cp_i, cp_j = off_i + rc.ego_at_m, off_j + rc.other_at_m
+    s_i, s_j = tracks.s[ri] - cp_i, tracks.s[rj] - cp_j
+    occ = (tuple(map(float, rc.ego_occupancy)), tuple(map(float, rc.other_occupancy)))
+    # approaching: each observed before its occupancy interval, both near at one time
+    if not (s_i[0] < occ[0][0] and s_j[0] < occ[1][0]):
+        return None
+    a0, a1 = _near_window(ti, s_i, params.near_m)
+    b0, b1 = _near_window(tj, s_j, params.near_m)
+    if max(a0, b0) > min(a1, b1) + 1e-9:
+        return None
+    # labels
+    t_pass = (_time_at(ti, s_i, 0.0), _time_at(tj, s_j, 0.0))
+    first = _first(*t_pass)
+    pet = _pet(ti, s_i, occ[0], tj, s_j, occ[1])
+    second = {"1": 1, "2": 0}.get(first)
+    if second is None:
+        slowed, drop = None, math.nan
+    else:
+        rows = (ri, rj)[second]
+        t_k, s_k = (ti, tj)[second], (s_i, s_j)[second]
+        drop = _speed_drop(t_k, s_k, tracks.v[rows], params.near_m)
+        slowed = bool(drop >= params.slow_drop_mps)
+    # the steps both are present
+    t_lo, t_hi = max(ti[0], tj[0]), min(ti[-1], tj[-1])
+    n = int(round((t_hi - t_lo) / STEP_S)) + 1
+    ki = int(round((t_lo - ti[0]) / STEP_S)) + np.arange(n)
+    kj = int(round((t_lo - tj[0]) / STEP_S)) + np.arange(n)
+    gi, gj = ri.start + ki, rj.start + kj
+    xy = pi_.at(rc.ego_at_m)
+    return Pair(
+        pair=-1, recording=str(tracks.recording[i]), kind=rc.kind,
+        angle_deg=float(angle), tracks=(int(tracks.track[i]), int(tracks.track[j])),
+        classes=(str(tracks.agent_class[i]), str(tracks.agent_class[j])),
+        lengths_m=(size_i[0], size_j[0]), widths_m=(size_i[1], size_j[1]), occupancy=occ,
+        conflict_xy=(float(xy[0]), float(xy[1])), first=first, pet_s=pet,
+        t_pass_s=t_pass, second_slowed=slowed, second_speed_drop_mps=float(drop),
+        t=np.round(ti[ki], 1), s=np.stack([s_i[ki], s_j[kj]]),
+        v=np.stack([tracks.v[gi], tracks.v[gj]]), a=np.stack([tracks.a[gi], tracks.a[gj]]),
+        x=np.stack([tracks.x[gi], tracks.x[gj]]), y=np.stack([tracks.y[gi], tracks.y[gj]]),
+        heading=np.stack([tracks.heading[gi], tracks.heading[gj]]), index=(i, j))
+
+
+def _first(t1: float, t2: float) -> str:
+    if math.isnan(t1) and math.isnan(t2):
+        return "neither"
+    if math.isnan(t2) or t1 < t2:
+        return "1"
+    if math.isnan(t1) or t2 < t1:
+        return "2"
+    return "same time"
+
+
+def _pet(t1, s1, occ1, t2, s2, occ2) -> float:
+    """Post-encroachment time on the footprints [s] (module docstring)."""
+    in1, out1 = _time_at(t1, s1, occ1[0]), _time_at(t1, s1, occ1[1])
+    in2, out2 = _time_at(t2, s2, occ2[0]), _time_at(t2, s2, occ2[1])
+    if math.isnan(in1) or math.isnan(in2):
+        return math.nan
+    if in1 <= in2:
+        first_out, first_end, second_in = out1, float(t1[-1]), in2
+    else:
+        first_out, first_end, second_in = out2, float(t2[-1]), in1
+    if math.isnan(first_out):
+        # still inside when its track ends: inside when the other came in, if it was seen
+        return 0.0 if first_end >= second_in else math.nan
+    return max(second_in - first_out, 0.0)
+
+
+def _speed_drop(t: np.ndarray, s: np.ndarray, v: np.ndarray, near: float) -> float:
+    """The largest fall of speed below an earlier speed [m/s] over the approach: from when
+    ``s >= -near`` to when ``s`` reaches 0 (or the track ends)."""
+    a = int(np.searchsorted(s, -near, side="left"))
+    b = min(int(np.searchsorted(s, 0.0, side="left")) + 1, s.shape[0])
+    seg = v[a:b]
+    if seg.size == 0:
+        return 0.0
+    return float(np.max(np.maximum.accumulate(seg) - seg))
+
+
+# -- the pairs file --------------------------------------------------------------------------
+
+#: The pair-level columns of the pairs file (repeated on each of the pair's rows).
+PAIR_COLUMNS = ("pair", "recording", "kind", "angle_deg", "track_1", "track_2", "class_1",
+                "class_2", "length_1_m", "width_1_m", "length_2_m", "width_2_m",
+                "occupancy_1_lo_m", "occupancy_1_hi_m", "occupancy_2_lo_m", "occupancy_2_hi_m",
+                "conflict_x_m", "conflict_y_m", "first", "pet_s", "t_pass_1_s", "t_pass_2_s",
+                "second_slowed", "second_speed_drop_mps")
+#: The step columns (one row per pair and step).
+STEP_COLUMNS = ("step", "t_s", "s_1_m", "v_1_mps", "a_1_mps2", "x_1_m", "y_1_m",
+                "heading_1_rad", "s_2_m", "v_2_mps", "a_2_mps2", "x_2_m", "y_2_m",
+                "heading_2_rad")
+
+
+def pairs_frame(pairs: Sequence[Pair]):
+    """One row per pair and step: :data:`PAIR_COLUMNS` then :data:`STEP_COLUMNS`."""
+    import pandas as pd
+
+    n = np.array([p.n_steps for p in pairs], np.int64)
+
+    def rep(values, dtype=None):
+        return np.repeat(np.asarray(values, dtype=dtype), n)
+
+    def cat(get):
+        return np.concatenate([get(p) for p in pairs]) if pairs else np.zeros(0)
+
+    cols = {
+        "pair": rep([p.pair for p in pairs], np.int64),
+        "recording": rep([p.recording for p in pairs], object),
+        "kind": rep([p.kind for p in pairs], object),
+        "angle_deg": rep([p.angle_deg for p in pairs], float),
+        "track_1": rep([p.tracks[0] for p in pairs], np.int64),
+        "track_2": rep([p.tracks[1] for p in pairs], np.int64),
+        "class_1": rep([p.classes[0] for p in pairs], object),
+        "class_2": rep([p.classes[1] for p in pairs], object),
+        "length_1_m": rep([p.lengths_m[0] for p in pairs], float),
+        "width_1_m": rep([p.widths_m[0] for p in pairs], float),
+        "length_2_m": rep([p.lengths_m[1] for p in pairs], float),
+        "width_2_m": rep([p.widths_m[1] for p in pairs], float),
+        "occupancy_1_lo_m": rep([p.occupancy[0][0] for p in pairs], float),
+        "occupancy_1_hi_m": rep([p.occupancy[0][1] for p in pairs], float),
+        "occupancy_2_lo_m": rep([p.occupancy[1][0] for p in pairs], float),
+        "occupancy_2_hi_m": rep([p.occupancy[1][1] for p in pairs], float),
+        "conflict_x_m": rep([p.conflict_xy[0] for p in pairs], float),
+        "conflict_y_m": rep([p.conflict_xy[1] for p in pairs], float),
+        "first": rep([p.first for p in pairs], object),
+        "pet_s": rep([p.pet_s for p in pairs], float),
+        "t_pass_1_s": rep([p.t_pass_s[0] for p in pairs], float),
+        "t_pass_2_s": rep([p.t_pass_s[1] for p in pairs], float),
+        "second_slowed": pd.array(np.repeat(np.array([p.second_slowed for p in pairs],
+                                                     dtype=object), n), dtype="boolean"),
+        "second_speed_drop_mps": rep([p.second_speed_drop_mps for p in pairs], float),
+        "step": cat(lambda p: np.arange(p.n_steps)).astype(np.int64),
+        "t_s": cat(lambda p: p.t),
+    }
+    for k in (0, 1):
+        tag = k + 1
+        cols[f"s_{tag}_m"] = cat(lambda p: p.s[k])
+        cols[f"v_{tag}_mps"] = cat(lambda p: p.v[k])
+        cols[f"a_{tag}_mps2"] = cat(lambda p: p.a[k])
+        cols[f"x_{tag}_m"] = cat(lambda p: p.x[k])
+        cols[f"y_{tag}_m"] = cat(lambda p: p.y[k])
+        cols[f"heading_{tag}_rad"] = cat(lambda p: p.heading[k])
+    return pd.DataFrame(cols, columns=[*PAIR_COLUMNS, *STEP_COLUMNS])
+
+
+def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
+    """Write the pairs file (Parquet, atomically): :func:`pairs_frame` with the parameters,
+    the smoothing and the source files in its metadata (:data:`PAIRS_METADATA`)."""
+    import json
+    from dataclasses import asdict
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from .._files import atomic_write
+    from .._version import __version__
+
+    table = pa.Table.from_pandas(pairs_frame(result.pairs), preserve_index=False)
+    meta = {"params": asdict(result.params), "sources": [str(s) for s in sources],
+            "n_pairs": len(result.pairs), "candidates": result.candidates,
+            "vehicle_tracks": result.tracks.n_tracks, "version": __version__,
+            "step_s": STEP_S}
+    table = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                           PAIRS_METADATA: json.dumps(meta)})
+    atomic_write(path, lambda p: pq.write_table(table, p))
+
+
+def read_pairs(path):
+    """The pairs file ``path`` as ``(frame, metadata)``; :class:`RecordingError` (one line
+    naming it) when it is not one."""
+    import json
+    from pathlib import Path
+
+    import pyarrow.parquet as pq
+
+    name = str(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as exc:
+        raise RecordingError(f"pairs file {name!r} cannot be read: "
+                             f"{(exc.strerror or str(exc)).lower()}") from None
+    if head != b"PAR1":
+        raise RecordingError(f"pairs file {name!r} is not a Parquet file (write it with "
+                             "'persuasive recordings pairs PATHS... --out FILE.parquet')")
+    try:
+        table = pq.read_table(Path(path))
+    except Exception as exc:  # noqa: BLE001 - pyarrow raises several kinds for a bad file
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise RecordingError(f"pairs file {name!r} cannot be read: {text}") from None
+    raw = (table.schema.metadata or {}).get(PAIRS_METADATA)
+    missing = [c for c in (*PAIR_COLUMNS, *STEP_COLUMNS) if c not in table.column_names]
+    if raw is None or missing:
+        raise RecordingError(f"pairs file {name!r} is not a pairs file (write it with "
+                             "'persuasive recordings pairs PATHS... --out FILE.parquet')")
+    frame = table.to_pandas()
+    if frame.empty:
+        raise RecordingError(f"pairs file {name!r} holds no pair")
+    return frame, json.loads(raw)
+
+
+def summary(result: PairsResult) -> dict:
+    """Counts and distributions of a set of pairs (what ``recordings pairs`` prints)."""
+    pairs = result.pairs
+    kinds = [p.kind for p in pairs]
+    angles = np.array([p.angle_deg for p in pairs if p.kind == CROSSING])
+    merge_angles = np.array([p.angle_deg for p in pairs if p.kind == MERGE])
+    pet = np.array([p.pet_s for p in pairs], float)
+    pet = pet[np.isfinite(pet)]
+    edges = np.arange(0.0, 181.0, 20.0)
+    hist = np.histogram(angles, edges)[0] if angles.size else np.zeros(edges.size - 1, int)
+    slowed = [p.second_slowed for p in pairs if p.second_slowed is not None]
+    return {
+        "vehicle_tracks": result.tracks.n_tracks,
+        "recordings": int(np.unique(result.tracks.recording).size),
+        "candidates": result.candidates,
+        "pairs": len(pairs),
+        "crossing": kinds.count(CROSSING),
+        "merge": kinds.count(MERGE),
+        "angle_histogram": {f"{int(a)}-{int(b)}": int(c) for a, b, c in
+                            zip(edges[:-1], edges[1:], hist) if c},
+        "merge_angle_median_deg": float(np.median(merge_angles)) if merge_angles.size
+        else None,
+        "pet_defined": int(pet.size),
+        "pet_quantiles_s": {f"{q}%": float(np.percentile(pet, q)) for q in (5, 25, 50, 75, 95)}
+        if pet.size else {},
+        "first": {label: sum(p.first == label for p in pairs) for label in FIRST_LABELS},
+        "second_slowed": int(sum(slowed)),
+        "second_known": len(slowed),
+    }
+
+
+def pair_of(result: PairsResult, pair_id: int) -> Pair:
+    """Pair ``pair_id`` of ``result``; :class:`RecordingError` when there is none."""
+    for p in result.pairs:
+        if p.pair == pair_id:
+            return p
+    raise RecordingError(f"--pair = {pair_id} is out of range; allowed: a pair ID in "
+                         f"[0, {len(result.pairs) - 1}]")
+
+
+__all__ = ["CROSSING", "FIRST_LABELS", "MERGE", "PAIRS_METADATA", "PAIR_COLUMNS", "Pair",
+           "PairParams", "PairsResult", "STEP_COLUMNS", "candidates", "find_pairs",
+           "pair_of", "pairs_frame", "read_pairs", "summary", "write_pairs"]
