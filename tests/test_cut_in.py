@@ -83,24 +83,30 @@ def test_the_issues_example_is_about_35_m():
     assert smallest_fair_gap(C, 0.0, 13.9) == pytest.approx(13.9 + 13.9 ** 2 / 9.0, abs=1e-5)
 
 
+def positions(s, v, a, t, v_min, v_max):
+    """Positions at times ``t`` (an array) holding ``a`` from ``(s, v)``, the speed saturating
+    at ``v_min``/``v_max`` (the closed loop's kinematics, written out for arrays)."""
+    if a == 0.0:
+        return s + v * t
+    v_lim = v_max if a > 0.0 else v_min
+    t_sat = (v_lim - v) / a
+    free = s + v * t + 0.5 * a * t * t
+    held = s + (v_lim * v_lim - v * v) / (2.0 * a) + v_lim * (t - t_sat)
+    return np.where(t <= t_sat, free, held)
+
+
 def brute_min_gap(C, s_R, v_R, s_H, v_H, step=1e-3, horizon=40.0):
     """The smallest bumper-to-bumper gap on a fine time grid: the AV braking at the rule's
     front braking from now, the human holding its rule acceleration for rho, then braking."""
     L = C[sh.C_GAP]
     rv, hv = (C[sh.C_R_VMIN], C[sh.C_R_VMAX]), (C[sh.C_H_VMIN], C[sh.C_H_VMAX])
-    rho = C[sh.C_RESP_RHO]
-    best = math.inf
-    t = 0.0
-    while t <= horizon:
-        sr, _ = saturated_step(s_R, v_R, -C[sh.C_RESP_FRONT], t, *rv)
-        if t <= rho:
-            sh_, _ = saturated_step(s_H, v_H, C[sh.C_RESP_ACCEL], t, *hv)
-        else:
-            s1, v1 = saturated_step(s_H, v_H, C[sh.C_RESP_ACCEL], rho, *hv)
-            sh_, _ = saturated_step(s1, v1, -C[sh.C_RESP_BRAKE], t - rho, *hv)
-        best = min(best, sr - sh_ - L)
-        t += step
-    return best
+    rho, acc = C[sh.C_RESP_RHO], C[sh.C_RESP_ACCEL]
+    t = np.arange(0.0, horizon, step)
+    s_av = positions(s_R, v_R, -C[sh.C_RESP_FRONT], t, *rv)
+    s1, v1 = saturated_step(s_H, v_H, acc, rho, *hv)
+    s_hv = np.where(t <= rho, positions(s_H, v_H, acc, t, *hv),
+                    positions(s1, v1, -C[sh.C_RESP_BRAKE], t - rho, *hv))
+    return float(np.min(s_av - s_hv - L))
 
 
 def test_the_exact_rule_agrees_with_a_brute_force_grid():
