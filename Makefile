@@ -19,7 +19,7 @@ demo: setup
 	$(BIN)/persuasive reproduce all
 
 test: setup
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 bench: setup
 	$(BIN)/persuasive bench --full --reference
