@@ -267,8 +267,12 @@ def test_every_run_says_whether_the_guarantee_held():
         {"av.shield": "responsive"}), 3)
     assert not responsive.outcome.guarantee_held  # it rests on the human responding
     noisy = simulate(Config(mode="corrected").with_overrides(
+        {"simulation.measurement_noise": "gaussian", "simulation.noise_s_m": 0.2}), 3)
+    assert not noisy.outcome.guarantee_held  # unbounded noise: outside the guarantee
+    boxed = simulate(Config(mode="corrected").with_overrides(
         {"simulation.measurement_noise": "uniform", "simulation.noise_s_m": 0.2}), 3)
-    assert not noisy.outcome.guarantee_held  # noise the shield does not know of
+    # bounded noise the shield certifies against, every step certified: the guarantee held
+    assert boxed.outcome.uncertified_steps == 0 and boxed.outcome.guarantee_held
     known = simulate(Config(mode="corrected").with_overrides(
         {"simulation.accel_noise_mps2": 0.3}), 3)
     assert known.outcome.guarantee_held  # the acceleration noise it certifies against

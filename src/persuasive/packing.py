@@ -57,6 +57,9 @@ ACCEL_NOISE, SHIELD_MARGIN = _slots("ACCEL_NOISE", "SHIELD_MARGIN")
 # braking positive], and the AV's hardest braking in the lane ahead of it [m/s^2, positive]
 RESP_RHO, RESP_ACCEL, RESP_BRAKE, RESP_FRONT_BRAKE = _slots(
     "RESP_RHO", "RESP_ACCEL", "RESP_BRAKE", "RESP_FRONT_BRAKE")
+# The half-widths of a uniform error on every measured position [m] and speed [m/s], which the
+# shield certifies against (``simulation.measurement_noise = "uniform"``; 0 otherwise)
+MEAS_S, MEAS_V = _slots("MEAS_S", "MEAS_V")
 
 # -- per vehicle -------------------------------------------------------------------------------
 # Limits and size (§1); ``H_GO = h_st + v_max / kappa`` of the OVM law (§2)
@@ -176,6 +179,11 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     shared[SHIELD_MARGIN] = config.av.shield_margin_m or 0.0
     shared[RESP_RHO], shared[RESP_ACCEL], shared[RESP_BRAKE], shared[RESP_FRONT_BRAKE] = (
         config.responsibility_rule)
+    sim = config.simulation
+    if sim.measurement_noise == "uniform":
+        # a draw -w + 2 w u may round a hair past w: the box is widened by far more than that
+        shared[MEAS_S], shared[MEAS_V] = (sim.noise_s_m * (1.0 + 1e-9),
+                                          sim.noise_v_mps * (1.0 + 1e-9))
     out = []
     for path in (scenario.av, scenario.hv):
         P = shared.copy()

@@ -482,10 +482,12 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
 
 
 def _noisy(config) -> bool:
-    """The run has noise the shield does not know of (docs/method.md §12.2): measurement
-    noise (the acceleration noise it certifies against)."""
+    """The run has noise the shield does not know of (docs/method.md §12.2): Gaussian
+    measurement noise (unbounded; the uniform one and the acceleration noise it certifies
+    against)."""
     sim = config.simulation
-    return sim.measurement_noise != "none" and (sim.noise_s_m > 0.0 or sim.noise_v_mps > 0.0)
+    return sim.measurement_noise == "gaussian" and (sim.noise_s_m > 0.0
+                                                    or sim.noise_v_mps > 0.0)
 
 
 __all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA",

@@ -55,6 +55,10 @@ when a vehicle appears out of nowhere in an outside simulator, where the guarant
 **Acceleration noise** (``simulation.accel_noise_mps2 = w``, uniform, on both vehicles) is
 certified against: the human's limits widen by ``w`` (:func:`conflict_vector`) and the AV's
 trajectory is any between the slowest and the fastest realisation (:func:`certified`).
+**Uniform measurement noise** is certified against as state sets: a measured state stands for
+the box of true states within the noise's half-widths, bounded by its furthest-and-fastest and
+nearest-and-slowest corners (:func:`_fast`, :func:`_slow`); a step certified on the box is safe
+for every true state in it, but a fresh measurement can leave ``S`` (docs/method.md §12.2).
 
 **The yield line** (docs/method.md §12.8). Each conflict carries the AV's yield line
 ``C_R_LINE <= R_lo``: where it stands when it yields. While the line *binds* (the AV is before
@@ -100,11 +104,14 @@ from ..kinematics import saturated_step
 # cut-in rule of a shared lane (``[responsibility]``, docs/method.md §12.10): the follower's
 # reaction time [s], its acceleration during it, its braking after it and the AV's hardest
 # braking in the lane ahead of it [m/s^2, brakings positive]. In a shared lane ``C_R_UMIN`` is
-# the AV's braking command held to that in-lane limit (its BRAKE fallback there).
+# the AV's braking command held to that in-lane limit (its BRAKE fallback there). Then the
+# half-widths of a uniform error on every measured position [m] and speed [m/s]
+# (``simulation.measurement_noise = "uniform"``; 0 otherwise): each measured state stands for
+# the box of true states around it (:func:`_fast`, :func:`_slow`).
 (C_R_LO, C_R_HI, C_H_LO, C_H_HI, C_SHARED, C_GAP, C_KIND, C_RHO, C_R_UMIN, C_R_UMAX, C_R_VMIN,
  C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX, C_R_LINE, C_R_NOISE, C_RESP_RHO,
- C_RESP_ACCEL, C_RESP_BRAKE, C_RESP_FRONT) = range(22)
-N_CONFLICT = 22
+ C_RESP_ACCEL, C_RESP_BRAKE, C_RESP_FRONT, C_MEAS_S, C_MEAS_V) = range(24)
+N_CONFLICT = 24
 
 #: Verdicts of :func:`shield_filter` (the world logs them per step); ``OFF``: no shield.
 ADMITTED, BRAKE, GO, UNCERTIFIED, OFF = 0, 1, 2, 3, -1
@@ -152,6 +159,26 @@ def conflict_vector(P_av: np.ndarray, P_hv: np.ndarray, out: np.ndarray) -> None
     out[C_RESP_BRAKE], out[C_RESP_FRONT] = P_av[slot.RESP_BRAKE], P_av[slot.RESP_FRONT_BRAKE]
     if out[C_SHARED] != 0.0:
         out[C_R_UMIN] = lane_braking(P_av[slot.U_MIN], P_av[slot.RESP_FRONT_BRAKE], w)
+    out[C_MEAS_S], out[C_MEAS_V] = P_av[slot.MEAS_S], P_av[slot.MEAS_V]
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _fast(s: float, v: float, v_min: float, v_max: float, C: np.ndarray
+          ) -> tuple[float, float]:
+    """The furthest and fastest true state behind a measured ``(s, v)``: ``s + ds`` and
+    ``v + dv`` (at most ``v_max``), ``ds, dv`` the uniform measurement error's
+    half-widths (0: the state itself, exactly). Reach times are monotone in both, so it
+    arrives first of every state in the box."""
+    dv = C[C_MEAS_V]
+    return s + C[C_MEAS_S], (min(v + dv, v_max) if dv > 0.0 else v)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _slow(s: float, v: float, v_min: float, v_max: float, C: np.ndarray
+          ) -> tuple[float, float]:
+    """The nearest and slowest true state behind a measured ``(s, v)`` (:func:`_fast`)."""
+    dv = C[C_MEAS_V]
+    return s - C[C_MEAS_S], (max(v - dv, v_min) if dv > 0.0 else v)
 
 
 
@@ -238,14 +265,16 @@ def human_window(s_H: float, v_H: float, C: np.ndarray) -> tuple[float, float, b
     time after which every human is past ``H_hi`` (``inf`` if one can stop before it); ``past``:
     the human is already past ``H_hi`` (it never occupies again)."""
     lo, hi = C[C_H_LO], C[C_H_HI]
-    if s_H > hi:
-        return _INF, _INF, True
     u_min, u_max, v_min, v_max = C[C_H_UMIN], C[C_H_UMAX], C[C_H_VMIN], C[C_H_VMAX]
+    sl, vl = _slow(s_H, v_H, v_min, v_max, C)  # every true state behind the measured one
+    if sl > hi:
+        return _INF, _INF, True
+    sf, vf = _fast(s_H, v_H, v_min, v_max, C)
     if C[C_KIND] == slot.SHIELD_RESPONSIVE:  # the furthest it gets: u_max for rho, then brake
-        t_in = profile_reach(s_H, v_H, u_max, C[C_RHO], u_min, lo, v_min, v_max)
+        t_in = profile_reach(sf, vf, u_max, C[C_RHO], u_min, lo, v_min, v_max)
     else:
-        t_in = reach_time(s_H, v_H, u_max, lo, v_min, v_max)
-    t_out = reach_time(s_H, v_H, u_min, hi, v_min, v_max)
+        t_in = reach_time(sf, vf, u_max, lo, v_min, v_max)
+    t_out = reach_time(sl, vl, u_min, hi, v_min, v_max)
     return t_in, t_out, False
 
 
@@ -367,34 +396,41 @@ def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: floa
     r_lo, r_hi = C[C_R_LO], C[C_R_HI]
     w = C[C_R_NOISE]
     f1, f2, l1, l2 = a1 + w, a2 + w, a1 - w, a2 - w  # fastest, slowest (w = 0: a1, a2)
+    # the box of true states behind the measured ones: its furthest and fastest corner enters
+    # first, its nearest and slowest leaves last (no measurement error: the state itself)
+    sf, vf = _fast(s_R, v_R, rv_min, rv_max, C)
+    sl, vl = _slow(s_R, v_R, rv_min, rv_max, C)
     if C[C_SHARED] == 0.0:  # a crossing
-        if s_R > r_hi:
+        if sl > r_hi:
             return True
-        t_in_R = profile_reach(s_R, v_R, f1, d1, f2, r_lo, rv_min, rv_max)
+        t_in_R = profile_reach(sf, vf, f1, d1, f2, r_lo, rv_min, rv_max)
         if t_in_R == _INF or t_in_H == _INF:
             return True  # it stands before the human's path, or no human gets to its own
-        t_out_R = profile_reach(s_R, v_R, l1, d1, l2, r_hi, rv_min, rv_max)
+        t_out_R = profile_reach(sl, vl, l1, d1, l2, r_hi, rv_min, rv_max)
         return t_out_R + m < t_in_H - m or t_out_H + m < t_in_R - m
     # a shared lane past r_hi (the merge point)
+    hv_min, hv_max = C[C_H_VMIN], C[C_H_VMAX]
+    hf, hvf = _fast(s_H, v_H, hv_min, hv_max, C)
+    hl, hvl = _slow(s_H, v_H, hv_min, hv_max, C)
     u_lane = C[C_R_UMIN]  # the AV's braking command held to the cut-in rule's in-lane limit
-    if s_R >= r_hi:
-        if s_H < s_R:  # the human is behind: the AV brakes no harder than the rule allows
+    if sl >= r_hi:
+        if hf < sl:  # the human is behind: the AV brakes no harder than the rule allows
             return a1 >= u_lane and a2 >= u_lane
-        return _gap_holds(s_R, v_R, f1, d1, f2, s_H, v_H, C)
-    t_in_R = profile_reach(s_R, v_R, f1, d1, f2, r_lo, rv_min, rv_max)
+        return _gap_holds(sf, vf, f1, d1, f2, hl, hvl, C)
+    t_in_R = profile_reach(sf, vf, f1, d1, f2, r_lo, rv_min, rv_max)
     if t_in_R == _INF:
         return True  # it stands before the side zone
-    t_0 = profile_reach(s_R, v_R, l1, d1, l2, r_hi, rv_min, rv_max)
+    t_0 = profile_reach(sl, vl, l1, d1, l2, r_hi, rv_min, rv_max)
     if not past and (t_in_H == _INF or t_0 + m < t_in_H - m):
         # in the lane (or standing in its side zone) before any human gets near: ahead of
         # it by the cut-in rule, and from its entry on braking no harder than the rule allows
         if t_0 == _INF:
             return True
-        t_enter = profile_reach(s_R, v_R, f1, d1, f2, r_hi, rv_min, rv_max)
+        t_enter = profile_reach(sf, vf, f1, d1, f2, r_hi, rv_min, rv_max)
         return (a2 >= u_lane and (t_enter >= d1 or a1 >= u_lane)
-                and cut_in_fair(s_R, v_R, a1, d1, a2, t_0, s_H, v_H, C))
+                and cut_in_fair(sl, vl, a1, d1, a2, t_0, hf, hvf, C))
     if past or t_out_H + m < t_in_R - m:  # the human is surely ahead: follow it
-        return _gap_holds(s_R, v_R, f1, d1, f2, s_H, v_H, C)
+        return _gap_holds(sf, vf, f1, d1, f2, hl, hvl, C)
     return False
 
 
@@ -407,12 +443,14 @@ def threat(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float, 
     follow a leader). Only used to pick the less bad fallback outside the invariant set."""
     if certified(s_R, v_R, a1, d1, a2, s_H, v_H, C, t_in_H, t_out_H, past):
         return _INF, 0.0
-    if C[C_SHARED] != 0.0 and (s_R >= C[C_R_HI] or past):
-        return 0.0, _INF
     rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
+    sf, vf = _fast(s_R, v_R, rv_min, rv_max, C)
+    sl, vl = _slow(s_R, v_R, rv_min, rv_max, C)
+    if C[C_SHARED] != 0.0 and (sl >= C[C_R_HI] or past):
+        return 0.0, _INF
     w = C[C_R_NOISE]
-    t_in_R = profile_reach(s_R, v_R, a1 + w, d1, a2 + w, C[C_R_LO], rv_min, rv_max)
-    t_out_R = profile_reach(s_R, v_R, a1 - w, d1, a2 - w, C[C_R_HI], rv_min, rv_max)
+    t_in_R = profile_reach(sf, vf, a1 + w, d1, a2 + w, C[C_R_LO], rv_min, rv_max)
+    t_out_R = profile_reach(sl, vl, a1 - w, d1, a2 - w, C[C_R_HI], rv_min, rv_max)
     start = max(t_in_R, t_in_H)
     return start, max(min(t_out_R, t_out_H) - start, 0.0)
 
@@ -431,8 +469,9 @@ def line_binds(s: float, v: float, C: np.ndarray) -> bool:
     """The AV at ``(s, v)`` has a yield line before its occupancy interval and can still
     stand before it by braking now: it has not committed (docs/method.md §12.8)."""
     line = C[C_R_LINE]
-    return line < C[C_R_LO] and s < line and reach_time(
-        s, v, C[C_R_UMIN] + C[C_R_NOISE], line, C[C_R_VMIN], C[C_R_VMAX]) == _INF
+    sf, vf = _fast(s, v, C[C_R_VMIN], C[C_R_VMAX], C)  # every true state behind the measured
+    return line < C[C_R_LO] and sf < line and reach_time(
+        sf, vf, C[C_R_UMIN] + C[C_R_NOISE], line, C[C_R_VMIN], C[C_R_VMAX]) == _INF
 
 
 @njit(cache=True, _nrt=False)
@@ -452,7 +491,7 @@ def brake_certified(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H
         return certified(s_R, v_R, a, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past)
     line = C[C_R_LINE]
     target = line - LINE_MARGIN_M
-    if s_R >= target:
+    if s_R + C[C_MEAS_S] >= target:
         if a > 0.0:
             return False
         target = line
@@ -511,7 +550,8 @@ def go_certified(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: f
 def yields_before(s: float, v: float, C: np.ndarray) -> bool:
     """The AV at ``(s, v)`` can still stand before its occupancy interval by braking now
     (with its weakest braking under acceleration noise)."""
-    return reach_time(s, v, C[C_R_UMIN] + C[C_R_NOISE], C[C_R_LO], C[C_R_VMIN],
+    sf, vf = _fast(s, v, C[C_R_VMIN], C[C_R_VMAX], C)
+    return reach_time(sf, vf, C[C_R_UMIN] + C[C_R_NOISE], C[C_R_LO], C[C_R_VMIN],
                       C[C_R_VMAX]) == _INF
 
 
@@ -572,7 +612,8 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
         window[j, 2] += 2.0 if binds else 0.0
         if binds:
             yielding = True
-            a_line = min(a_line, line_brake(s_R[j] + lead[1], v_R, dt, C[j, C_R_LINE],
+            sf, vf = _fast(s_R[j] + lead[1], v_R, C[j, C_R_VMIN], C[j, C_R_VMAX], C[j])
+            a_line = min(a_line, line_brake(sf, vf, dt, C[j, C_R_LINE],
                                             u_min + C[j, C_R_NOISE], u_max) - C[j, C_R_NOISE])
     # candidates: the proposal with either fallback; then, while a line binds, the yield at
     # the line, BRAKE, GO; once committed (no line binds), GO before BRAKE: drive through
