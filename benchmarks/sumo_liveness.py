@@ -10,7 +10,10 @@ episodes crossed or merged within 60 s by each, the paired difference (planner m
 points, with a 95 % bootstrap interval over seeds), the time loss each caused per episode
 (mean), the time the ego stood inside the junction, SUMO's vehicles it forced to brake (harder
 than 1.5 m/s^2, counted against the same seed without the ego; mean per episode), collisions
-and uncertified steps.
+and uncertified steps; then SUMO's own driver judged by the worst-case shield it does not use:
+of its entries into the junction (or the merge), how many the certificate would have admitted
+as driven, and the share of all its steps it would have admitted (a ceiling on what a planner
+behind that shield could copy of SUMO's driving, issue 25).
 """
 
 from __future__ import annotations
@@ -42,8 +45,9 @@ def main() -> None:
           "driver as the ego")
     print("| scenario | flow veh/h | reckless | crossed: planner / SUMO | difference points "
           "[95 % CI] | time loss caused s: planner / SUMO | stood in junction s: planner / "
-          "SUMO | forced to brake: planner / SUMO | collisions | uncertified |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "SUMO | forced to brake: planner / SUMO | collisions | uncertified | SUMO's entries the "
+          "shield admits | SUMO's steps it admits % |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for scenario in args.scenarios.split(","):
         for flow in (float(x) for x in args.flows.split(",")):
             for foes in (float(x) for x in args.ignore_foes.split(",")):
@@ -65,6 +69,10 @@ def main() -> None:
                 def forced(es):
                     return np.mean([e.forced_to_brake or 0 for e in es])
 
+                def admitted_pct(es):
+                    steps = sum(e.judged_steps for e in es)
+                    return 100.0 * sum(e.judged_admitted for e in es) / max(1, steps)
+
                 print(f"| {scenario} | {flow:g} | {foes:g} | {sum(e.crossed for e in mine)} / "
                       f"{sum(e.crossed for e in ref)} | {diff.mean():+.1f} [{lo:+.1f}, {hi:+.1f}]"
                       f" | {loss(mine):.2f} / {loss(ref):.2f} | "
@@ -72,7 +80,10 @@ def main() -> None:
                       f"{sum(e.junction_stood_s for e in ref):.1f} | "
                       f"{forced(mine):.2f} / {forced(ref):.2f} | "
                       f"{sum(e.collisions for e in mine)} / {sum(e.collisions for e in ref)} | "
-                      f"{sum(e.uncertified for e in mine)} |", flush=True)
+                      f"{sum(e.uncertified for e in mine)} | "
+                      f"{sum(bool(e.entry_admitted) for e in ref)} of "
+                      f"{sum(e.entry_admitted is not None for e in ref)} | "
+                      f"{admitted_pct(ref):.1f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -411,6 +411,19 @@ def test_sumo_reports_the_unprotected_egos_collision(nets):
     assert base.ego_steps == 0 and not base.guarantee_held
 
 
+def test_sumos_own_driver_is_judged_by_the_shield_it_does_not_use(nets):
+    """SUMO's ego, judged step by step by the worst-case shield (with the cut-in rule): in the
+    merge at 900 veh/h it enters in seed 1 by a step the certificate would not admit and in
+    seed 10 by one it admits; most of its other steps are admitted; a planner is not judged."""
+    first = S.run_episode("merge", 1, S.SUMO_DRIVER, 900.0, 0.0, nets["merge"]).result
+    assert first.crossed and first.entry_admitted is False
+    assert 0 < first.judged_admitted < first.judged_steps
+    tenth = S.run_episode("merge", 10, S.SUMO_DRIVER, 900.0, 0.0, nets["merge"]).result
+    assert tenth.crossed and tenth.entry_admitted is True
+    planner = S.run_episode("merge", 1, "yield/worst-case", 900.0, 0.0, nets["merge"]).result
+    assert planner.judged_steps is None and planner.entry_admitted is None
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [26, 49])
 def test_shielded_ego_stays_certified_where_it_once_collided(nets, seed):

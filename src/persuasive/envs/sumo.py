@@ -683,6 +683,13 @@ class EpisodeResult:
     #: without the ego: the vehicles the ego forced to brake (None without the reference)
     hard_braking_vehicles: int = 0
     forced_to_brake: int | None = None
+    #: SUMO's own ego only (None for the others), judged by the worst-case shield it does not
+    #: use: its steps, how many of them the shield would have admitted as they were driven
+    #: (the acceleration of each step against the conflicts at its start), and whether it
+    #: admits the step that took the ego into the junction (None: it never entered)
+    judged_steps: int | None = None
+    judged_admitted: int | None = None
+    entry_admitted: bool | None = None
 
     @property
     def uncertified_steps(self) -> int:
@@ -810,6 +817,13 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
     else:
         ego_limits = Limits.of(planner_config(scenario=scenario), "av")
     with_ego = driver != NO_EGO
+    # SUMO's own ego, judged by the worst-case shield (issue 25: the share of its entries the
+    # certificate would admit); the judge plans nothing, it only filters what SUMO drove
+    judge = (ExternalPlanner(planner_config(scenario=scenario), seed)
+             if driver == SUMO_DRIVER else None)
+    judged = admitted = 0
+    entry_ok: bool | None = None
+    before: tuple[float, list] | None = None
     folder = scratch_dir("sumo-")  # the command's scratch: removed if this worker is killed
     departures = traffic(network, seed, flow_veh_h, ignore_foes, end_s)
     reckless = {d.vehicle for d in departures if d.reckless}
@@ -837,7 +851,8 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                                   ls.lane.getLinks, ls.lane.getShape, ls.lane.getLength)
             cross_lane = f"{network.ego_route[-1]}_0"
             cross_arc = projector.ego.offsets[cross_lane][0] + 0.5 * ego_limits.length_m
-            clear = planner._clear_m if planner is not None else 0.0
+            clear = (planner._clear_m if planner is not None
+                     else judge._clear_m if judge is not None else 0.0)
             slack = ballistic_slack(ego_limits)
             entries = entry_vehicles(network, _type_limits(ls, "human"))
             steered = False
@@ -853,7 +868,8 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                             ls.vehicle.getAcceleration(vid) < -HARD_BRAKE_MPS2:
                         hard.add(vid)
                 if not logs:  # only what the judges and the planner read
-                    ids = (() if "ego" not in ids else ids if planner is not None
+                    ids = (() if "ego" not in ids
+                           else ids if planner is not None or judge is not None
                            else ("ego",))
                 states, ego = [], None
                 for vid in ids:
@@ -877,6 +893,16 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                 if crossed_at is None and arc is not None and \
                         arc - 0.5 * ego.length_m >= cross_arc:
                     crossed_at = t
+                if judge is not None:
+                    if before is not None:  # the step just driven, from its start
+                        _, verdict = judge.shield(before[0], ls.vehicle.getAcceleration("ego"),
+                                                  before[1], DT_S)
+                        judged += 1
+                        admitted += verdict == "admitted"
+                        if entry_ok is None and ego.lane.startswith(":"):
+                            entry_ok = verdict == "admitted"
+                    before = (ego.speed_mps,
+                              conflicts_of(projector, ego, states + entries, clear, slack))
                 if planner is None:
                     continue
                 if not steered:
@@ -927,7 +953,10 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
         junction_stood_s=round(stood_steps * DT_S, 6),
         hard_braking_vehicles=len(hard),
         forced_to_brake=None if reference_hard_braking is None or not with_ego
-        else len(hard) - reference_hard_braking)
+        else len(hard) - reference_hard_braking,
+        judged_steps=judged if judge is not None else None,
+        judged_admitted=admitted if judge is not None else None,
+        entry_admitted=entry_ok)
     return EpisodeOutput(result, steps, decisions, timings)
 
 
@@ -996,6 +1025,11 @@ class SumoReport:
                 "forced_to_brake": sum(e.forced_to_brake for e in eps
                                        if e.forced_to_brake is not None),
                 "junction_stood_episodes": sum(e.junction_stood_s > 0 for e in eps),
+                "entries_judged": sum(e.entry_admitted is not None for e in eps),
+                "entries_admitted": sum(bool(e.entry_admitted) for e in eps),
+                "steps_admitted_pct": (100.0 * sum(e.judged_admitted for e in eps)
+                                       / max(1, sum(e.judged_steps for e in eps)))
+                if any(e.judged_steps is not None for e in eps) else None,
                 "decisions": len(times),
                 "decide_ms_median": float(np.median([m for _, m in times])) if times else None,
                 "decisions_10_in_view": len(ten),
