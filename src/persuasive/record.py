@@ -311,18 +311,23 @@ def static_setup(config: Config) -> tuple[Scenario, np.ndarray, np.ndarray, np.n
 
 
 def setup(config: Config, seed: int, k_av: int | None = None,
-          k_hv: int | None = None, interaction: int = 0) -> Setup:
+          k_hv: int | None = None, interaction: int = 0,
+          x0: np.ndarray | None = None) -> Setup:
     """The scenario, parameter vectors, random streams and initial state of a run.
 
     ``k_av``, ``k_hv``: uniforms per step of each policy (default: the configured kinds').
     A ``replay`` human starts from its recorded initial state. ``interaction``: the repeated
-    interaction with the seed's human (``persuasive.streams.interaction_seed``).
+    interaction with the seed's human (``persuasive.streams.interaction_seed``). ``x0``
+    ``(4,)``: the initial state in place of both (the streams are drawn as ever).
     """
     seed = check_seed(seed)
     scenario, P_av, P_hv, disc = static_setup(config)
     k_av = kind_of(config, kd.AV).draws if k_av is None else k_av
     k_hv = kind_of(config, kd.HV).draws if k_hv is None else k_hv
     streams = draw_streams(config, seed, scenario, k_av, k_hv, interaction)
+    if x0 is not None:
+        return Setup(config, seed, scenario, P_av, P_hv, disc, streams,
+                     np.array(x0, dtype=np.float64).reshape(4))
     x_hv = streams.x_hv
     if config.hv.kind == "replay":
         rec = load_replay(config)

@@ -30,7 +30,8 @@ from .record import (ARRIVAL_LABELS, WORLD_LOG, RunOutcome, RunRecord, check_see
 
 
 def simulate(config: Config, seed: int, timed: bool = False, interaction: int = 0,
-             p_a_prior: np.ndarray | None = None) -> RunRecord:
+             p_a_prior: np.ndarray | None = None, *, x0: np.ndarray | None = None,
+             hv_prm: np.ndarray | None = None) -> RunRecord:
     """Run one closed loop for ``seed``; bit-identical for equal inputs.
 
     ``timed``: also measure the AV's decision time per step (``RunRecord.av_decision_ms``).
@@ -38,13 +39,16 @@ def simulate(config: Config, seed: int, timed: bool = False, interaction: int = 
     and draws from ``persuasive.streams.interaction_seed``; 0 is the seed's own run).
     ``p_a_prior`` ``(mpc.p_a_grid,)``: with ``mpc.p_a_hat = "online"``, the prior masses over
     the grid in place of the Beta prior's (:func:`simulate_interactions` hands each
-    interaction the last one's posterior).
+    interaction the last one's posterior). ``x0`` ``(4,)``: the initial state ``(s_av, v_av,
+    s_hv, v_hv)`` in place of the seed's draw (the rest of the seed's streams unchanged; a
+    recorded start, ``persuasive.recordings.replay``); ``hv_prm``: the human's parameter
+    vector in place of the configuration's (a replay given in memory).
     """
     from .policies.planners import ONLINE_STATE, PRM_ONLINE
     from .world import run_loop
 
     check_interaction(interaction)
-    s = setup(config, seed, interaction=interaction)
+    s = setup(config, seed, interaction=interaction, x0=x0)
     n = config.simulation.n_steps
     av, hv = kind_of(config, kd.AV), kind_of(config, kd.HV)
     states = np.empty((n + 1, 4))
@@ -59,7 +63,8 @@ def simulate(config: Config, seed: int, timed: bool = False, interaction: int = 
     av_prm = policy_params(config, kd.AV, p_a_prior)
     av_st = np.zeros(state_size(av_prm, av.kind))
     run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind, av_prm,
-             hv.kind, policy_params(config, kd.HV), st.draws_av, st.draws_hv, needs, st.noisy,
+             hv.kind, policy_params(config, kd.HV) if hv_prm is None
+             else np.asarray(hv_prm, dtype=np.float64), st.draws_av, st.draws_hv, needs, st.noisy,
              st.meas_noise, st.accel_noise, timed, states, world_log, av_log, hv_log, av_ns,
              work, av_st)
     record = make_record(s, states, world_log, av_log, hv_log,

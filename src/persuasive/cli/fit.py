@@ -9,6 +9,13 @@ likelihood (one parameter set for all runs, or one per participant), prints the 
 written; a bad log, a log given twice (also as another spelling of its path or a link) or a
 ``--sigma-min`` outside [1e-9, 1] m/s^2 ends the command with one line naming it and exit
 status 2.
+
+Given pairs files (``persuasive recordings pairs --out PAIRS.parquet``, told apart by their
+Parquet metadata), it evaluates the models held out instead
+(:mod:`persuasive.recordings.evaluate`): each pair from each driver's view, in memory; fits
+on some recording files and scores the others (``--folds K``, ``--holdout FRACTION``,
+``--test-site NAME``): the log-likelihood per step of the next accelerations, and who passes
+first, beside the baselines, with bootstrap intervals over recording files.
 """
 
 from __future__ import annotations
@@ -150,6 +157,110 @@ def _sigma_min(ctx, param, value):
     return check_sigma_min(value, "--sigma-min")
 
 
+class _BadInput(click.ClickException):
+    """Bad input: one line, exit status 2."""
+
+    exit_code = 2
+
+
+def _fmt_interval(d: dict, digits: int = 3) -> str:
+    value, (lo, hi) = d["value"], d["ci95"]
+    if value is None:
+        return "-"
+    if lo is None or hi is None:
+        return f"{value:.{digits}f}"
+    return f"{value:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+
+
+def _print_evaluation(d: dict, elapsed: float, out: str | None) -> None:
+    sp, pairs, lim = d["split"], d["pairs"], d["limits"]
+    left = ", ".join(f"{k} {v}" for k, v in pairs["left_out"].items() if v)
+    click.echo(f"held-out evaluation: {sp['describe']} (seed {sp['seed']}); {sp['files']} "
+               f"recording files, {pairs['total']} pairs, {pairs['kept']} predicted"
+               + (f"; left out: {left}" if left else ""))
+    mo = d["moment"]
+    lead = mo["lead_time_s_quantiles"]
+    click.echo(f"prediction moment: {mo['rule']}; seen up to {mo['seen_until_s_before']:g} s "
+               "before it (the smoothing's half-window)"
+               + (f"; first arrival {lead['50%']:.2f} s after it (median)" if lead else ""))
+    q = lim["quantiles"]
+    click.echo(f"vehicle limits: the {q[0]:g} and {q[1]:g} quantiles of the "
+               "training files' smoothed accelerations per class; test steps beyond them "
+               f"{100 * lim['share_beyond_fitted']:.1f} %, beyond the paper's [-2, 1] m/s^2 "
+               f"{100 * lim['share_beyond_paper']:.1f} %, above v_max "
+               f"{100 * lim['share_above_v_max']:.1f} %")
+    strongest = d["strongest_baseline"]
+    click.echo("| predictor | log-lik/step | accuracy | AUC | Brier | log-loss | ECE | "
+               f"vs {strongest} (log-loss) |")
+    click.echo("|---|---|---|---|---|---|---|---|")
+    for r in d["rows"]:
+        ll = _fmt_interval(r["loglik_per_step"], 2) if "loglik_per_step" in r else "-"
+        vs = _fmt_interval(r["delta_log_loss"]) if "delta_log_loss" in r else "-"
+        name = r["name"] if r["kind"] == "model" else f"{r['name']} (baseline)"
+        cells = [_fmt_interval(r[k]) for k in ("accuracy", "auc", "brier", "log_loss", "ece")]
+        click.echo(f"| {name} | {ll} | " + " | ".join(cells) + f" | {vs} |")
+    click.echo(f"strongest baseline (smallest log-loss): {strongest}; intervals: 95 % "
+               f"percentile bootstrap over recording files, {d['bootstrap']['resamples']} "
+               f"resamples (seed {d['bootstrap']['seed']})")
+    click.echo(f"time: {elapsed:.2f} s" + (f"; written to {out}" if out else ""))
+
+
+def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_site,
+                    seed) -> None:
+    """``fit PAIRS.parquet...``: the held-out evaluation (module docstring)."""
+    from click.core import ParameterSource
+
+    from .._files import check_output_file
+    from ..fitting import write_json
+    from ..fitting.estimate import MODELS
+    from ..recordings.evaluate import EvalParams, Split, evaluate, read_sites
+    from ..recordings.formats import RecordingError
+
+    ctx = click.get_current_context()
+    for name, flag in (("per_participant", "--per-participant"), ("scenario", "--scenario"),
+                       ("intervals", "--intervals")):
+        if ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE:
+            raise _BadInput(f"{flag} does not apply to pairs files: the held-out evaluation "
+                            "fits point estimates over every pair's own scenario")
+    if sum(x is not None for x in (holdout, folds, test_site)) > 1:
+        raise _BadInput("--holdout, --folds and --test-site are three ways to split: give one")
+    if holdout is not None and not (math.isfinite(holdout) and 0.0 < holdout < 1.0):
+        raise _BadInput(f"--holdout = {holdout:g} is out of range; allowed: (0, 1), the share "
+                        "of recording files tested")
+    if folds is not None and folds < 2:
+        raise _BadInput(f"--folds = {folds} is out of range; allowed: 2 to the number of "
+                        "recording files")
+    if test_site is not None and len(paths) < 2:
+        raise _BadInput("--test-site needs several pairs files (each a site) to train on the "
+                        "others")
+    if out:
+        check_output_file(out, (".json",), "evaluation report")
+    if holdout is not None:
+        split = Split("holdout", fraction=holdout)
+    elif test_site is not None:
+        split = Split("site", test_site=test_site)
+    else:
+        split = Split("folds", k=folds)
+    models = MODELS if model == "all" else (model,)
+    params = EvalParams(seed=seed if seed is not None else 0, sigma_min=sigma_min)
+    try:
+        sites = read_sites(paths)
+        _notice_compile()
+        t0 = time.perf_counter()
+        result = evaluate(sites, split, models, params)
+    except RecordingError as exc:
+        raise _BadInput(str(exc)) from None
+    elapsed = time.perf_counter() - t0
+    payload = result.to_dict()
+    payload["seconds"] = round(elapsed, 3)
+    if out:
+        write_json(out, payload)
+    if as_json:
+        click.echo(json.dumps(payload, allow_nan=False))
+        return
+    _print_evaluation(payload, elapsed, out)
+
+
 @click.command()
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--model", "model", type=click.Choice(list(MODEL_CHOICES)), default="all",
@@ -170,8 +281,21 @@ def _sigma_min(ctx, param, value):
               help="Write the report (.json) or the runs with their smoothed roles "
                    "(.parquet, for 'plot profile --from FILE --run K').")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
-def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_json) -> None:
-    """Fit human models to recorded driving (simulate --out logs, drive trials).
+@click.option("--holdout", type=float, default=None, metavar="FRACTION",
+              help="Pairs files: test on this share of the recording files, in (0, 1); train "
+                   "on the rest.")
+@click.option("--folds", type=int, default=None, metavar="K",
+              help="Pairs files: K folds by recording file, each file tested once [5, or one "
+                   "per file].")
+@click.option("--test-site", default=None, metavar="NAME",
+              help="Pairs files: train on the other pairs files (sites), test on this one "
+                   "(its file name without .parquet).")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=None,
+              help="Pairs files: seed of the split and of the bootstrap [0].")
+def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_json, holdout,
+        folds, test_site, seed) -> None:
+    """Fit human models to recorded driving (simulate --out logs, drive trials), or evaluate
+    them held out on recorded pairs (pairs files of 'persuasive recordings pairs').
 
     Each log counts once: a file given twice (./x and x, a link) is refused. --sigma-min
     [1e-9, 1] m/s^2: below, float rounding of a re-solved game would decide whether data are
@@ -182,6 +306,24 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
     from ..fitting import (OUT_EXTENSIONS, evidence_of, load_logs, report_dict,
                            write_fit_parquet, write_json)
     from ..fitting.estimate import MODELS
+    from ..fitting.evidence import check_distinct
+    from ..recordings.evaluate import is_pairs_file
+
+    kinds = [is_pairs_file(p) for p in logs]
+    if any(kinds):
+        if not all(kinds):
+            other = logs[kinds.index(False)]
+            raise _BadInput(f"{other!r} is not a pairs file: give pairs files "
+                            "('persuasive recordings pairs --out FILE.parquet') or logs, not "
+                            "both")
+        check_distinct(logs)
+        _evaluate_pairs(logs, model, sigma_min, out, as_json, holdout, folds, test_site, seed)
+        return
+    for value, flag in ((holdout, "--holdout"), (folds, "--folds"), (test_site, "--test-site"),
+                        (seed, "--seed")):
+        if value is not None:
+            raise _BadInput(f"{flag} applies to pairs files ('persuasive recordings pairs --out "
+                            "FILE.parquet'), not to logs")
 
     ext = check_output_file(out, OUT_EXTENSIONS, "fit") if out else None
     _notice_compile()

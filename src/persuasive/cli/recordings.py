@@ -5,7 +5,10 @@
   ``--figure FILE --pair ID`` draws one pair from above;
 - ``recordings logs PAIRS.parquet --out DIR``: each pair from each driver's view as a log
   ``persuasive fit`` reads;
-- ``recordings export RUNS... --out DIR``: ``simulate --out`` runs as INTERACTION track files.
+- ``recordings export RUNS... --out DIR``: ``simulate --out`` runs, or SUMO's floating-car
+  data (``--fcd-output`` XML files), as INTERACTION track files;
+- ``recordings replay PAIRS.parquet``: the AV in each recorded driver's seat, against the
+  other driver replayed or a model fitted on the other recordings.
 
 Every input and output is checked before any work; bad input ends the command with one line
 (``error: ...``) and exit status 2, nothing written. Files are written atomically, folders as
@@ -19,7 +22,7 @@ import math
 
 import click
 
-from ..config import MODES, ConfigError
+from ..config import AV_KINDS, MODES, SHIELD_KINDS, ConfigError
 
 
 class _BadInput(click.ClickException):
@@ -41,8 +44,8 @@ def _guard(call, *args, **kwargs):
 
 @click.group()
 def recordings() -> None:
-    """Real drivers from recorded tracks (INTERACTION, inD): crossing pairs, fit logs, and our
-    runs in their format."""
+    """Real drivers from recorded tracks (INTERACTION, inD): crossing pairs, fit logs, the AV in
+    a recorded driver's seat, and our runs and SUMO's in their format."""
 
 
 def _fmt(x: float | None, unit: str = "") -> str:
@@ -164,28 +167,150 @@ def logs_command(pairs_file, out, force, mode, angle_step) -> None:
 
 
 @recordings.command("export")
-@click.argument("runs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--out", type=click.Path(file_okay=False), required=True,
               help="Folder of the track files (written as a whole).")
 @click.option("--noise-m", type=float, default=0.0, show_default=True, metavar="M",
               help="Half-width of the uniform noise added to x and to y [m].")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
               help="Seed of the noise.")
+@click.option("--types", "types", multiple=True, type=click.Path(dir_okay=False),
+              metavar="FILE", help="SUMO route or additional file whose vType elements give "
+                                   "the vehicles' lengths and widths (fcd input only; "
+                                   "repeatable).")
 @click.option("--force", is_flag=True, help="Replace a folder that holds other files.")
-def export_command(runs, out, noise_m, seed, force) -> None:
-    """Write simulate --out runs as INTERACTION track files (vehicle_tracks_NNN.csv, one per
-    run: track 1 the AV, track 2 the HV)."""
+def export_command(inputs, out, noise_m, seed, types, force) -> None:
+    """Write simulate --out runs (.parquet; track 1 the AV, track 2 the HV) or SUMO
+    --fcd-output files (.xml) as INTERACTION track files, vehicle_tracks_NNN.csv, one per
+    input."""
     from .._files import atomic_folder, check_replaceable_folder
-    from ..recordings.export import export_runs
+    from ..recordings.export import export_fcd, export_runs
 
     if not (math.isfinite(noise_m) and noise_m >= 0.0):
         raise _BadInput(f"--noise-m = {noise_m:g} is out of range; allowed: a number >= 0 m")
+    fcd = [str(p).lower().endswith(".xml") for p in inputs]
+    if any(fcd) and not all(fcd):
+        raise _BadInput("give simulate --out runs (.parquet) or SUMO fcd files (.xml), not "
+                        "both in one export")
+    if types and not all(fcd):
+        raise _BadInput("--types is read with SUMO fcd files (.xml) only")
     _guard(check_replaceable_folder, out, force, "tracks folder")
-    # every run is read before anything is written; a failure removes the temporary folder
+    # every input is read before anything is written; a failure removes the temporary folder
     with atomic_folder(out, "tracks folder") as tmp:
-        names = _guard(export_runs, runs, tmp, noise_m, seed)
-    click.echo(f"{len(names)} track file{'s' * (len(names) != 1)} (INTERACTION format, noise "
-               f"U(-{noise_m:g}, {noise_m:g}) m, seed {seed}) in {out}")
+        if all(fcd):
+            names = _guard(export_fcd, inputs, tmp, noise_m, seed, types)
+        else:
+            names = _guard(export_runs, inputs, tmp, noise_m, seed)
+    what = ", from SUMO fcd" if all(fcd) else ""
+    click.echo(f"{len(names)} track file{'s' * (len(names) != 1)} (INTERACTION format{what}, "
+               f"noise U(-{noise_m:g}, {noise_m:g}) m, seed {seed}) in {out}")
 
 
-__all__ = ["export_command", "logs_command", "pairs_command", "recordings"]
+def _print_replay(info: dict, runs: list) -> None:
+    c = info["collisions"]
+    other = "the recorded driver replayed" if info["other"] == "replay" else \
+        f"the {info['model']} model fitted on the other recordings"
+    click.echo(f"{info['runs']} runs of {info['pairs']} pairs: AV {info['av']} with shield "
+               f"{info['shield']} in a recorded driver's seat, the other vehicle {other}")
+    click.echo(f"collisions: {c['collisions']} of {c['runs']} runs (AV-caused "
+               f"{c['av_caused']}, rear-end by the human {c['rear_end_by_human']})")
+    for key, label in (("within_envelope_certified_start", "driver within the envelope, start "
+                        "certified"),
+                       ("beyond_envelope", "driver beyond the envelope"),
+                       ("uncertified_start", "start not certified")):
+        g = info[key]
+        click.echo(f"  {label}: {g['runs']} runs, {g['collisions']} collisions, "
+                   f"{g['av_caused']} AV-caused")
+    click.echo(f"shield: {info['uncertified_steps']} uncertified steps in "
+               f"{info['runs_with_uncertified_steps']} runs; guarantee held in "
+               f"{info['guarantee_held']} of {info['runs']} runs")
+    e = info["envelope"]
+    if runs:
+        lo, hi = runs[0].u_min_mps2, runs[0].u_max_mps2
+        share = 100.0 * (e["excess_share"] or 0.0)
+        click.echo(f"envelope (u in [{lo:g}, {hi:g}] m/s^2): {e['excess_steps']} of "
+                   f"{e['steps']} recorded steps beyond ({share:.1f} %), in "
+                   f"{e['runs_beyond']} of {info['runs']} runs; accelerations "
+                   f"{e['accel_min_mps2']:.2f} to {e['accel_max_mps2']:.2f} m/s^2")
+    invalid = sum(info["invalid"].values())
+    if info["other"] == "replay":
+        detail = ", ".join(f"{k} {v}" for k, v in sorted(info["invalid"].items()))
+        click.echo(f"invalid runs: {invalid}{' (' + detail + ')' if detail else ''}; rule: "
+                   "the replayed driver passed after the replaced vehicle and the AV did not "
+                   "pass first (yielded), or it drove into the AV from behind (rear-end)")
+    first = ", ".join(f"{k} {v}" for k, v in sorted(info["first_replay"].items()))
+    rec = ", ".join(f"{k} {v}" for k, v in sorted(info["first_recorded"].items()))
+    click.echo(f"valid runs: {info['valid']}; first through the conflict point: {first or '-'} "
+               f"(recorded: {rec or '-'})")
+    diff = info["clear_s_paired_diff_mean"]
+    click.echo(f"time to clear, restricted mean over the valid runs: AV "
+               f"{_fmt(info['av_clear_s_rmean'], ' s')}, recorded driver "
+               f"{_fmt(info['recorded_clear_s_rmean'], ' s')}; AV minus recorded where both "
+               f"cleared ({info['both_cleared']} runs): {_fmt(diff, ' s')}")
+
+
+@recordings.command("replay")
+@click.argument("pairs_file", type=click.Path(dir_okay=False))
+@click.option("--av", default="persuasive", show_default=True, metavar="KIND",
+              help=f"The AV's planner: {', '.join(AV_KINDS)}.")
+@click.option("--shield", default="worst-case", show_default=True, metavar="KIND",
+              help=f"The AV's shield: {', '.join(SHIELD_KINDS)}.")
+@click.option("--other", default="replay", show_default=True, metavar="KIND",
+              help="The other vehicle: replay (the recorded driver, open loop) or fitted "
+                   "(a human model fitted on the pairs of the other recordings).")
+@click.option("--model", default=None, metavar="MODEL",
+              help="The fitted model with --other fitted: lfg (default), stubborn, noisy, "
+                   "idm.")
+@click.option("--seat", type=click.Choice(["1", "2", "both"]), default="both",
+              show_default=True, help="The vehicle whose place the AV takes.")
+@click.option("--extra-s", type=float, default=10.0, show_default=True, metavar="S",
+              help="Run on this long after the recording ends.")
+@click.option("--mode", type=click.Choice(list(MODES)), default="corrected",
+              show_default=True, help="The configuration mode (docs/method.md §9).")
+@click.option("--angle-step", type=float, default=5.0, show_default=True, metavar="DEG",
+              help="Round each pair's angle to a multiple of this (as recordings logs).")
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Write one row per run (.parquet or .csv).")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
+def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, angle_step, out,
+                   as_json) -> None:
+    """Put the AV in each recorded driver's seat at the start of each pair: collisions, the
+    shield's uncertified steps, the recorded driver against the shield's envelope, who passed
+    first and the time to clear against the recorded driver's own."""
+    from .._files import atomic_write, check_output_file
+    from ..config import Config
+    from ..recordings.pairs import read_pairs
+    from ..recordings.replay import ReplaySettings, replay_pairs
+
+    if model is not None and other != "fitted":
+        raise _BadInput(f"--model {model} is read with --other fitted only")
+    if not (math.isfinite(angle_step) and 0.0 <= angle_step <= 45.0):
+        raise _BadInput(f"--angle-step = {angle_step:g} is out of range; allowed: [0, 45] "
+                        "degrees")
+    seats = (1, 2) if seat == "both" else (int(seat),)
+    settings = _guard(ReplaySettings, av=av, shield=shield, other=other,
+                      model=model or "lfg", extra_s=extra_s, seats=seats, mode=mode,
+                      angle_step_deg=angle_step)
+    if out:
+        _guard(check_output_file, out, (".parquet", ".csv"), "replay table")
+    frame, _ = _guard(read_pairs, pairs_file)
+    result = _guard(replay_pairs, frame, settings, Config(mode=mode), str(pairs_file))
+    if out:
+        table = result.frame()
+        write = (lambda p: table.to_parquet(p, index=False)) if out.lower().endswith(
+            ".parquet") else (lambda p: table.to_csv(p, index=False))
+        _guard(atomic_write, out, write)
+    info = result.summary()
+    if as_json:
+        click.echo(json.dumps({**info, "fits": result.fits}))
+        return
+    _print_replay(info, result.runs)
+    for rec, params in result.fits.items():
+        click.echo(f"  fitted without {rec}: " + ", ".join(
+            f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in params.items()))
+    if out:
+        click.echo(f"written: {out}")
+
+
+__all__ = ["export_command", "logs_command", "pairs_command", "recordings",
+           "replay_command"]

@@ -1,5 +1,7 @@
-"""Our own simulator's runs as recordings: ``simulate --out`` logs written in the INTERACTION
-format, for round trips through the recordings' pipeline (docs/guide/recordings.md).
+"""Our own simulator's runs, and SUMO's, as recordings: ``simulate --out`` logs and SUMO's
+floating-car data (``--fcd-output``) written in the INTERACTION format, for round trips
+through the recordings' pipeline (docs/guide/recordings.md). SUMO's files are read as
+:mod:`persuasive.recordings.sumo_fcd` says (:func:`export_fcd`); the runs as follows.
 
 Run ``r`` (in the order given) becomes ``vehicle_tracks_<r>.csv`` (three digits): one file per
 run, since two runs share their times and place and would otherwise be paired with each
@@ -78,4 +80,37 @@ def export_runs(runs: Sequence[str | Path], folder: str | Path, noise_m: float =
     return names
 
 
-__all__ = ["export_runs", "run_rows"]
+def export_fcd(files: Sequence[str | Path], folder: str | Path, noise_m: float = 0.0,
+               seed: int = 0, types: Sequence[str | Path] = ()) -> list[str]:
+    """Write each SUMO fcd file of ``files`` into ``folder`` (existing) as
+    ``vehicle_tracks_<r>.csv`` (three digits, in the order given), with the SUMO ID of each
+    track in ``vehicle_ids_<r>.csv`` (``track_id, sumo_id``); the track files' names. Every
+    file is read (:func:`persuasive.recordings.sumo_fcd.read_fcd`, one generator seeded with
+    ``seed`` for the noise, files in order) before anything is written;
+    :class:`RecordingError` otherwise."""
+    import pandas as pd
+
+    from .._files import atomic_write
+    from .sumo_fcd import read_fcd, read_types
+
+    if not (np.isfinite(noise_m) and noise_m >= 0.0):
+        raise RecordingError(f"--noise-m = {noise_m!r} is out of range; allowed: a number "
+                             ">= 0 m")
+    if len(files) > 1000:
+        raise RecordingError(f"{len(files)} fcd files given; allowed: at most 1000 "
+                             "(vehicle_tracks_000 to _999)")
+    vtypes = read_types(types)
+    rng = np.random.default_rng(seed)
+    read = [read_fcd(f, vtypes, rng, noise_m) for f in files]
+    names = []
+    for r, (cols, ids) in enumerate(read):
+        name = f"vehicle_tracks_{r:03d}.csv"
+        write_interaction(Path(folder) / name, cols)
+        table = pd.DataFrame({"track_id": np.arange(1, len(ids) + 1), "sumo_id": ids})
+        atomic_write(Path(folder) / f"vehicle_ids_{r:03d}.csv",
+                     lambda p, table=table: table.to_csv(p, index=False))
+        names.append(name)
+    return names
+
+
+__all__ = ["export_fcd", "export_runs", "run_rows"]

@@ -1,0 +1,729 @@
+"""Held-out evaluation of the human models on recorded pairs: the next accelerations, and who
+passes first (docs/guide/fit.md, "Held-out evaluation on recorded pairs").
+
+**Splits, by recording file.** Pairs of one recording file share their traffic, so a split
+never puts one file's pairs on both sides: ``folds`` (K folds of the files, shuffled by
+``numpy.random.default_rng(seed)``, each file tested once), ``holdout`` (a share of the files,
+at least one, drawn alike, is tested; the rest trains) or ``site`` (several pairs files, each
+a site: train on the others, test on one). Everything fitted (the models, the vehicle limits,
+the baselines' scales and caps) is fitted on the training files only.
+
+**Views.** Each pair gives two runs, each driver once the human (as
+:mod:`persuasive.recordings.logs` writes them, built in memory here): the measured states are
+the smoothed ones, the human's acceleration the smoothed one, the configuration the pair's
+scenario (kind, angle rounded to 5 degrees, recorded sizes), ``dt = 0.1 s``, corrected mode,
+with **vehicle limits from the training data**: per vehicle class, the ``q`` and ``1 - q``
+quantiles (``q = 0.01``) of the smoothed accelerations of every training pair's vehicles of
+that class (all classes pooled for a class absent there), at most -0.1 and at least 0.1
+m/s^2; ``v_max`` the highest training speed rounded up (at least the configured 10 m/s). The
+report gives the share of the test steps beyond those limits (the shield's envelope) and
+beyond the paper's [-2, 1] m/s^2. One parameter set per model is fitted on all training views
+at once, each view re-solved in its own scenario (``persuasive.fitting.fit_models``, point
+estimates).
+
+**Next accelerations.** Each fitted model scores the test views at its training estimate: the
+log-likelihood of every logged acceleration (the hidden-role models through their forward
+filter, ``RoleObjective.run_loglik``; the IDM through its residuals and fitted ``sigma``), per
+step. Two baselines score them too, ``sigma`` fitted on the training views: constant speed (``a
+= 0``) and constant acceleration (``a_k = a_{k-1}``, ``a_0 = 0``).
+
+**The prediction moment** of a pair: ``after_s`` (1 s) after the first step at which both
+vehicles are within ``near_m`` (40 m) of the conflict point and before it (``-near_m <= s <
+0``). The smoothing (a centred window of 1 s) makes a step's values depend on the half second
+after it, so what is *seen* at the moment is the pair's steps up to ``lag_steps`` (5 = 0.5 s)
+before it: the last step whose smoothed values use no sample after the moment. A pair is left
+out, and counted, when both never approach within ``near_m`` together, when its record ends
+before the moment, when the outcome is decided by then (one vehicle has reached the conflict
+point, or is inside its occupancy interval, at the moment) or when it has no first passer
+(``neither``, ``same time``). Counting the moment forwards from the approach keeps the outcome
+open: a horizon counted back from the first arrival gives it away once it is shorter than the
+pair's post-encroachment time.
+
+**P(vehicle 1 passes first).**
+
+- ``lfg``, ``stubborn``, ``noisy``: in the model the leader goes first. Each view's forward
+  filter at the training estimate gives the human's ``P(role = L | its accelerations so far)``
+  at the last step seen, ``P_1`` for vehicle 1's view and ``P_2`` for vehicle 2's. Taking the
+  two views as independent and conditioning on the consistent outcomes (one leads, the other
+  follows): ``P = P_1 (1 - P_2) / (P_1 (1 - P_2) + P_2 (1 - P_1))`` (0.5 when both are
+  certain of the same role). It is what the model itself knows at the moment, with no
+  parameter fitted for the order.
+- ``idm``: deterministic, so a forward rollout: both vehicles drive the fitted IDM from the
+  last step seen (their gap-acceptance state carried along the steps before), each with its
+  own view's lines and limits, at most 30 s; the first to reach the conflict point is
+  predicted, with the training share of pairs where the rollout was right (the rules'
+  calibration of :mod:`persuasive.recordings.baselines`); 0.5 when neither arrives.
+- ``role_belief`` (a baseline: the project's own role belief, online, with no fitted
+  parameter): each driver's Bayes belief about the other's role (§5.5) after the last step
+  seen; ``P_1`` = vehicle 2's belief that vehicle 1 leads, ``P_2`` = vehicle 1's that vehicle
+  2 leads, combined as above.
+
+Scores and intervals: :mod:`persuasive.recordings.scores` (bootstrap over recording files).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .baselines import BASELINE_NAMES, BASELINES, Baselines, Features
+from .formats import STEP_S, RecordingError
+from .pairs import CROSSING, PAIRS_METADATA
+from .scores import PAIR_SCORES, bootstrap, calibration, cluster_weights, log_loss
+
+#: The statuses of a pair at its prediction moment (module docstring).
+KEPT = "kept"
+NEVER_NEAR = "never both approaching within near_m"
+ENDS = "record ends before the moment"
+DECIDED = "decided at the moment"
+NO_PASSER = "no first passer (neither, same time)"
+STATUSES = (KEPT, NEVER_NEAR, ENDS, DECIDED, NO_PASSER)
+#: The IDM rollout's horizon [steps of 0.1 s].
+ROLLOUT_STEPS = 300
+#: The paper's vehicle limits [m/s^2] (persuasive.config.VehicleParams).
+PAPER_LIMITS = (-2.0, 1.0)
+#: The split kinds.
+SPLITS = ("folds", "holdout", "site")
+#: Folds when none are asked for (fewer with fewer recording files).
+DEFAULT_FOLDS = 5
+
+
+@dataclass(frozen=True)
+class EvalParams:
+    """The prediction moment, the vehicle limits, the bootstrap (module docstring)."""
+
+    near_m: float = 40.0  #: both within this of the conflict point, approaching [m]
+    after_s: float = 1.0  #: the moment: this long after that [s]
+    lag_steps: int = 5  #: what is seen ends this many steps before the moment [-]
+    accel_quantile: float = 0.01  #: vehicle limits: the q and 1 - q quantiles [-]
+    n_boot: int = 1000  #: bootstrap resamples of the recording files [-]
+    seed: int = 0  #: the split's and the bootstrap's seed
+    sigma_min: float = 1e-3  #: the fit's floor of sigma [m/s^2]
+
+    def __post_init__(self) -> None:
+        checks = (("near_m", self.near_m > 0), ("after_s", self.after_s >= 0),
+                  ("lag_steps", self.lag_steps >= 0),
+                  ("accel_quantile", 0.0 <= self.accel_quantile < 0.5),
+                  ("n_boot", self.n_boot >= 1), ("seed", self.seed >= 0))
+        for name, ok in checks:
+            if not ok:
+                raise RecordingError(f"{name} = {getattr(self, name)!r} is out of range")
+
+
+@dataclass(frozen=True)
+class Split:
+    """How the recording files are split: ``kind`` in :data:`SPLITS`; ``k`` folds,
+    ``fraction`` tested, or ``test_site`` (``k = None``: :data:`DEFAULT_FOLDS`, at most one per
+    file)."""
+
+    kind: str
+    k: int | None = None
+    fraction: float | None = None
+    test_site: str | None = None
+
+    def describe(self) -> str:
+        if self.kind == "folds":
+            return f"{self.k} folds by recording file"
+        if self.kind == "holdout":
+            return f"{self.fraction:g} of the recording files held out"
+        return f"trained on the other sites, tested on site {self.test_site!r}"
+
+
+@dataclass(frozen=True)
+class PairData:
+    """One pair as the evaluation reads it: identity, labels and steps (``(2, n)`` per
+    vehicle 1, 2: ``s``, ``v``, ``a``, ``x``, ``y``)."""
+
+    site: str
+    file: str  #: the recording file (the cluster of the split and of the bootstrap)
+    pair: int
+    kind: str
+    angle_deg: float
+    classes: tuple[str, str]
+    lengths_m: tuple[float, float]
+    widths_m: tuple[float, float]
+    occupancy: np.ndarray = field(repr=False)  #: (2, 2): per vehicle (lo, hi) [m]
+    first: str = ""
+    pet_s: float = math.nan
+    t_pass_s: tuple[float, float] = (math.nan, math.nan)
+    t: np.ndarray = field(default=None, repr=False)
+    s: np.ndarray = field(default=None, repr=False)
+    v: np.ndarray = field(default=None, repr=False)
+    a: np.ndarray = field(default=None, repr=False)
+    x: np.ndarray = field(default=None, repr=False)
+    y: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def n(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def label(self) -> int | None:
+        """1: vehicle 1 passed first, 0: vehicle 2, None: neither or the same time."""
+        return {"1": 1, "2": 0}.get(self.first)
+
+
+def is_pairs_file(path: str | Path) -> bool:
+    """True when ``path`` is a Parquet file with the pairs metadata
+    (:data:`persuasive.recordings.pairs.PAIRS_METADATA`)."""
+    import pyarrow.parquet as pq
+
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(4) != b"PAR1":
+                return False
+        meta = pq.read_schema(path).metadata or {}
+    except Exception:  # noqa: BLE001 - not readable as Parquet: not a pairs file
+        return False
+    return PAIRS_METADATA in meta
+
+
+def recording_file(recording: str) -> str:
+    """The file a recording came from: an INTERACTION prediction split's ``<file>/case<id>``
+    is its file's."""
+    return recording.split("/case", 1)[0]
+
+
+def pairs_of(frame, site: str, prefix: bool) -> list[PairData]:
+    """The :class:`PairData` of a pairs frame (:func:`persuasive.recordings.pairs
+    .read_pairs`); ``prefix``: name files ``<site>/<file>`` (several sites)."""
+    out = []
+    for pair_id, rows in frame.groupby("pair", sort=True):
+        rows = rows.sort_values("step")
+        r0 = rows.iloc[0]
+
+        def both(q, unit):
+            return np.stack([rows[f"{q}_1_{unit}"].to_numpy(float),
+                             rows[f"{q}_2_{unit}"].to_numpy(float)])
+
+        rec = recording_file(str(r0["recording"]))
+        out.append(PairData(
+            site=site, file=f"{site}/{rec}" if prefix else rec, pair=int(pair_id),
+            kind=str(r0["kind"]), angle_deg=float(r0["angle_deg"]),
+            classes=(str(r0["class_1"]), str(r0["class_2"])),
+            lengths_m=(float(r0["length_1_m"]), float(r0["length_2_m"])),
+            widths_m=(float(r0["width_1_m"]), float(r0["width_2_m"])),
+            occupancy=np.array([[r0["occupancy_1_lo_m"], r0["occupancy_1_hi_m"]],
+                                [r0["occupancy_2_lo_m"], r0["occupancy_2_hi_m"]]], float),
+            first=str(r0["first"]), pet_s=float(r0["pet_s"]),
+            t_pass_s=(float(r0["t_pass_1_s"]), float(r0["t_pass_2_s"])),
+            t=rows["t_s"].to_numpy(float), s=both("s", "m"), v=both("v", "mps"),
+            a=both("a", "mps2"), x=both("x", "m"), y=both("y", "m")))
+    return out
+
+
+def prediction_moment(p: PairData, params: EvalParams) -> tuple[str, int, int]:
+    """``(status, k_moment, k_seen)``: the pair's status (:data:`STATUSES`), the step of its
+    prediction moment and the last step seen then (-1 where there is none)."""
+    near = np.all((p.s >= -params.near_m) & (p.s < 0.0), axis=0)
+    if not near.any():
+        return NEVER_NEAR, -1, -1
+    k0 = int(np.argmax(near))
+    k = k0 + int(round(params.after_s / STEP_S))
+    seen = k - params.lag_steps
+    # the views drop the pair's last step (its state is the run's final one)
+    if k >= p.n - 1 or seen < 0:
+        return ENDS, -1, -1
+    t_k = float(p.t[k])
+    passed = any(math.isfinite(tp) and tp <= t_k for tp in p.t_pass_s)
+    inside = bool(np.any(p.s[:, k] >= p.occupancy[:, 0]))
+    if passed or inside:
+        return DECIDED, k, seen
+    if p.label is None:
+        return NO_PASSER, k, seen
+    return KEPT, k, seen
+
+
+def direction_at(p: PairData, k: int, back: int = 10) -> np.ndarray:
+    """Each vehicle's direction of travel at step ``k`` ``(2,)`` [rad]: of its smoothed
+    centre's displacement over the ``back`` steps before (fewer at the start; the last steps
+    seen only)."""
+    j = max(k - back, 0)
+    if j == k:
+        j, k = k, min(k + 1, p.n - 1)
+    return np.arctan2(p.y[:, k] - p.y[:, j], p.x[:, k] - p.x[:, j])
+
+
+def features_of(pairs: Sequence[PairData], seen: Sequence[int]) -> Features:
+    """The :class:`Features` of each pair at its last step seen."""
+    n = len(pairs)
+    s, v, a, d = (np.zeros((n, 2)) for _ in range(4))
+    lo, hi = np.zeros((n, 2)), np.zeros((n, 2))
+    merge = np.zeros(n, bool)
+    for i, (p, k) in enumerate(zip(pairs, seen)):
+        s[i], v[i], a[i] = p.s[:, k], p.v[:, k], p.a[:, k]
+        d[i] = direction_at(p, k)
+        lo[i], hi[i] = p.occupancy[:, 0], p.occupancy[:, 1]
+        merge[i] = p.kind != CROSSING
+    return Features(s, v, a, d, lo, hi, merge)
+
+
+# -- splits -----------------------------------------------------------------------------------
+
+def fold_tests(files: Sequence[str], split: Split, sites: dict[str, str],
+               seed: int) -> list[list[str]]:
+    """The test files of each fold (every other file trains). ``sites``: file -> site.
+    :class:`RecordingError` for a split the files do not allow."""
+    files = sorted(files)
+    n = len(files)
+    if n < 2:
+        raise RecordingError(f"{n} recording file in the pairs; a held-out evaluation needs at "
+                             "least 2 (pairs of one file are never split)")
+    rng = np.random.default_rng(seed)
+    if split.kind == "folds":
+        if not (2 <= split.k <= n):
+            raise RecordingError(f"--folds = {split.k} is out of range; allowed: 2 to the "
+                                 f"number of recording files, {n}")
+        order = [files[i] for i in rng.permutation(n)]
+        return [sorted(chunk.tolist()) for chunk in np.array_split(np.array(order), split.k)]
+    if split.kind == "holdout":
+        n_test = min(max(int(round(split.fraction * n)), 1), n - 1)
+        return [sorted(files[i] for i in rng.permutation(n)[:n_test])]
+    test = sorted(f for f in files if sites[f] == split.test_site)
+    if not test:
+        known = sorted(set(sites.values()))
+        raise RecordingError(f"--test-site = {split.test_site!r} is not a site; allowed: "
+                             f"{', '.join(known)} (the pairs files' names)")
+    if len(test) == n:
+        raise RecordingError("--test-site needs pairs of at least one other site to train on")
+    return [test]
+
+
+# -- vehicle limits and views -----------------------------------------------------------------
+
+def vehicle_limits(pairs: Sequence[PairData], q: float) -> dict[str, tuple[float, float]]:
+    """Per vehicle class (and ``"*"``, every class pooled): the ``q`` and ``1 - q``
+    quantiles of the smoothed accelerations [m/s^2], at most -0.1 and at least 0.1."""
+    by: dict[str, list[np.ndarray]] = {}
+    for p in pairs:
+        for k in (0, 1):
+            by.setdefault(p.classes[k], []).append(p.a[k])
+            by.setdefault("*", []).append(p.a[k])
+    out = {}
+    for cls, parts in by.items():
+        a = np.concatenate(parts)
+        lo, hi = np.quantile(a, [q, 1.0 - q])
+        out[cls] = (float(min(lo, -0.1)), float(max(hi, 0.1)))
+    return out
+
+
+def limit_of(limits: dict, cls: str) -> tuple[float, float]:
+    return limits.get(cls, limits["*"])
+
+
+def speed_cap(pairs: Sequence[PairData], floor: float) -> float:
+    """``v_max`` [m/s]: the highest training speed rounded up, at least ``floor``."""
+    top = max(float(np.max(p.v)) for p in pairs)
+    return float(max(floor, math.ceil(top)))
+
+
+def envelope_shares(pairs: Sequence[PairData], limits: dict, v_max: float) -> dict:
+    """Shares of the test vehicle-steps beyond the fitted limits, beyond the paper's, and above
+    ``v_max``; and their count."""
+    n = beyond = beyond_paper = fast = 0
+    for p in pairs:
+        for k in (0, 1):
+            lo, hi = limit_of(limits, p.classes[k])
+            a = p.a[k]
+            n += a.size
+            beyond += int(np.sum((a < lo) | (a > hi)))
+            beyond_paper += int(np.sum((a < PAPER_LIMITS[0]) | (a > PAPER_LIMITS[1])))
+            fast += int(np.sum(p.v[k] > v_max))
+    return {"steps": n, "beyond_fitted": beyond, "beyond_paper": beyond_paper,
+            "above_v_max": fast}
+
+
+class ViewBuilder:
+    """The runs of each pair's two views (module docstring) under one fold's limits."""
+
+    def __init__(self, mode: str, limits: dict, v_max: float):
+        from ..config import Config
+
+        self.limits, self.v_max = limits, v_max
+        self.root = Config(mode=mode)
+        self._bases: dict = {}
+
+    def base(self, cls_hv: str, cls_av: str):
+        key = (cls_hv, cls_av)
+        if key not in self._bases:
+            over = {"vehicle.v_max_mps": self.v_max}
+            for who, cls in (("hv", cls_hv), ("av", cls_av)):
+                lo, hi = limit_of(self.limits, cls)
+                over[f"{who}.vehicle.u_min_mps2"] = lo
+                over[f"{who}.vehicle.u_max_mps2"] = hi
+            self._bases[key] = self.root.with_overrides(over)
+        return self._bases[key]
+
+    def view(self, p: PairData, human: int):
+        """The :class:`persuasive.fitting.RunLog` of vehicle ``human`` (1 or 2) as the human."""
+        from ..fitting.evidence import RunLog
+        from .logs import pair_config, scenario_angle
+
+        h, o = human - 1, 2 - human
+        n = p.n - 1
+        sizes = {"hv": (p.lengths_m[h], p.widths_m[h]), "av": (p.lengths_m[o], p.widths_m[o])}
+        config = pair_config(self.base(p.classes[h], p.classes[o]), p.kind,
+                             scenario_angle(p.kind, p.angle_deg), sizes, 0.0, n)
+        states = np.stack([p.s[o, :n], p.v[o, :n], p.s[h, :n], p.v[h, :n]], axis=1)
+        return RunLog(f"{p.file} pair {p.pair} hv{human}", config, p.pair, None,
+                      np.ascontiguousarray(states), np.ascontiguousarray(p.a[h, :n]), {})
+
+
+# -- the models on held-out runs --------------------------------------------------------------
+
+def heldout_loglik(ev, fit, sigma_min: float) -> np.ndarray:
+    """Each run's log-likelihood under a fitted model at its training estimate ``(n_runs,)``."""
+    from ..fitting.estimate import LOG_BETA, RoleObjective
+
+    t = fit.theta
+    if fit.model == "idm":
+        from ..fitting.idm import FITTED, IDMObjective
+        from ..fitting.models import IDM_NAMES
+
+        idm = ev.runs[0].config.hv.idm
+        base = np.array([getattr(idm, name) for name in IDM_NAMES], float)
+        y = np.array([math.log(t[name]) if log else t[name] for name, *_, log in FITTED])
+        sse = IDMObjective(ev, base, sigma_min).sse(y[None])[:, 0]
+        sigma = t["sigma"]
+        steps = np.diff(ev.starts)
+        # the training sigma is held, not re-profiled on the test runs
+        return (-steps * math.log(sigma) - 0.5 * steps * math.log(2 * math.pi)
+                - sse / (2 * sigma ** 2))
+    obj = RoleObjective(ev, fit.model, sigma_min)
+    beta = t["beta"]
+    u = math.log(beta) if math.isfinite(beta) else obj.hi[LOG_BETA]
+    return obj.run_loglik(np.array([t["p_a"], math.log(t["sigma"]), u, t["pi0"]]))
+
+
+def motion_sigma(accel: np.ndarray, starts: np.ndarray, floor: float) -> tuple[float, float]:
+    """ML ``sigma`` [m/s^2] of the constant-speed (``a = 0``) and constant-acceleration
+    (``a_k = a_{k-1}``, ``a_0 = 0``) baselines on the runs ``starts``."""
+    prev = previous_accel(accel, starts)
+    cv = math.sqrt(float(np.mean(accel ** 2))) if accel.size else floor
+    ca = math.sqrt(float(np.mean((accel - prev) ** 2))) if accel.size else floor
+    return max(cv, floor), max(ca, floor)
+
+
+def previous_accel(accel: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    prev = np.concatenate([[0.0], accel[:-1]]) if accel.size else accel.copy()
+    prev[starts[:-1][starts[:-1] < accel.size]] = 0.0
+    return prev
+
+
+def gauss_run_loglik(resid: np.ndarray, starts: np.ndarray, sigma: float) -> np.ndarray:
+    """Per run ``sum log N(resid; 0, sigma^2)``."""
+    ll = -0.5 * (resid / sigma) ** 2 - math.log(sigma) - 0.5 * math.log(2 * math.pi)
+    return np.add.reduceat(ll, starts[:-1]) if resid.size else np.zeros(starts.size - 1)
+
+
+def role_posteriors(ev, fit, seen: np.ndarray) -> np.ndarray:
+    """``P(role = L | accelerations up to step seen[i])`` of each run ``i`` of ``ev`` under a
+    fitted hidden-role model: the last step of the forward-backward over the steps seen, which
+    is the forward filter's posterior there."""
+    from ..fitting.models import EMIT_LFG, EMIT_NOISY, smooth_runs
+
+    rows = [np.arange(ev.starts[i], ev.starts[i] + k + 1) for i, k in enumerate(seen)]
+    take = np.concatenate(rows)
+    starts = np.concatenate([[0], np.cumsum([r.size for r in rows])]).astype(np.int64)
+    out = np.empty(take.size)
+    run_ll = np.empty(len(rows))
+    t = fit.theta
+    kind = EMIT_NOISY if fit.model == "noisy" else EMIT_LFG
+    smooth_runs(kind, starts, ev.accel[take], ev.a_role[take], ev.pl[take], ev.q[take],
+                ev.a_first[take], float(t["p_a"]), float(t["pi0"]), float(t["sigma"]),
+                float(t["beta"]), out, run_ll)
+    return out[starts[1:] - 1]
+
+
+def combine(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+    """``P(vehicle 1 first)`` from ``P_1`` = P(1 leads) and ``P_2`` = P(2 leads), two
+    independent views conditioned on one leading (module docstring); 0.5 where undefined."""
+    p1 = np.nan_to_num(np.asarray(p1, float), nan=0.5)
+    p2 = np.nan_to_num(np.asarray(p2, float), nan=0.5)
+    num = p1 * (1.0 - p2)
+    den = num + p2 * (1.0 - p1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0.0, num / np.where(den > 0.0, den, 1.0), 0.5)
+
+
+def idm_rollout(p: PairData, seen: int, view1, view2, prm: np.ndarray) -> int:
+    """Who reaches the conflict point first when both drive the IDM ``prm`` ``(8,)`` from step
+    ``seen`` (module docstring): 1 (vehicle 1), 0 (vehicle 2) or -1 (neither within
+    :data:`ROLLOUT_STEPS`, or both in the same instant)."""
+    from .. import packing as slot
+    from ..kinematics import saturated_step
+    from ..policies.idm import idm_step
+    from ..record import static_setup
+
+    _, P_av1, P_hv1, _ = static_setup(view1.config)
+    _, P_av2, P_hv2, _ = static_setup(view2.config)
+    dt = STEP_S
+    st1, st2, log = np.zeros(8), np.zeros(8), np.zeros(16)
+    s, v = p.s, p.v
+    for k in range(seen):  # the states seen: the drivers' waiting and commitment follow them
+        idm_step(st1, prm, s[0, k], v[0, k], s[1, k], v[1, k], dt, P_hv1, P_av1, log)
+        idm_step(st2, prm, s[1, k], v[1, k], s[0, k], v[0, k], dt, P_hv2, P_av2, log)
+    s1, v1, s2, v2 = s[0, seen], v[0, seen], s[1, seen], v[1, seen]
+    for _ in range(ROLLOUT_STEPS):
+        a1 = idm_step(st1, prm, s1, v1, s2, v2, dt, P_hv1, P_av1, log)
+        a2 = idm_step(st2, prm, s2, v2, s1, v1, dt, P_hv2, P_av2, log)
+        n1 = saturated_step(s1, v1, a1, dt, P_hv1[slot.V_MIN], P_hv1[slot.V_MAX])
+        n2 = saturated_step(s2, v2, a2, dt, P_hv2[slot.V_MIN], P_hv2[slot.V_MAX])
+        f1 = -s1 / (n1[0] - s1) if n1[0] >= 0.0 > s1 else math.inf
+        f2 = -s2 / (n2[0] - s2) if n2[0] >= 0.0 > s2 else math.inf
+        if math.isfinite(f1) or math.isfinite(f2):
+            return 1 if f1 < f2 else (0 if f2 < f1 else -1)
+        (s1, v1), (s2, v2) = n1, n2
+    return -1
+
+
+# -- the evaluation ---------------------------------------------------------------------------
+
+@dataclass
+class FoldResult:
+    """What one fold predicted and scored (its test pairs and test runs)."""
+
+    test_files: list[str]
+    pair_index: list[int]  #: indices of its kept test pairs in the evaluation's pair list
+    predictions: dict[str, np.ndarray]  #: per predictor, P(vehicle 1 first) per kept pair
+    run_files: list[str]  #: the recording file of each test run (two per test pair)
+    run_steps: np.ndarray
+    run_loglik: dict[str, np.ndarray]  #: per model or motion baseline, per test run
+    limits: dict
+    v_max: float
+    envelope: dict
+    fits: dict
+    baselines: dict
+
+
+def evaluate_fold(pairs: list[PairData], status: list[tuple[str, int, int]],
+                  test_files: set[str], models: Sequence[str], params: EvalParams,
+                  mode: str = "corrected") -> FoldResult:
+    """Fit on the pairs of the other files, predict and score the pairs of ``test_files``."""
+    from ..fitting import evidence_of, fit_models
+    from ..fitting.comparison import ROLE_MODELS
+    from ..fitting.models import IDM_NAMES
+
+    train = [i for i, p in enumerate(pairs) if p.file not in test_files]
+    test = [i for i, p in enumerate(pairs) if p.file in test_files]
+    train_pairs = [pairs[i] for i in train]
+    limits = vehicle_limits(train_pairs, params.accel_quantile)
+    v_max = speed_cap(train_pairs, 10.0)
+    builder = ViewBuilder(mode, limits, v_max)
+    order = train + test
+    views = [builder.view(pairs[i], h) for i in order for h in (1, 2)]
+    ev = evidence_of(views)
+    n_tr = 2 * len(train)
+    ev_train = ev.subset(range(n_tr))
+    ev_test = ev.subset(range(n_tr, len(views)))
+    report = fit_models(ev_train, list(models), params.sigma_min, intervals=False)
+    # next accelerations
+    run_ll = {m: heldout_loglik(ev_test, report.fits[m], params.sigma_min) for m in models}
+    s_cv, s_ca = motion_sigma(ev_train.accel, ev_train.starts, params.sigma_min)
+    run_ll["arrive_cv"] = gauss_run_loglik(ev_test.accel, ev_test.starts, s_cv)
+    prev = previous_accel(ev_test.accel, ev_test.starts)
+    run_ll["arrive_ca"] = gauss_run_loglik(ev_test.accel - prev, ev_test.starts, s_ca)
+    # who passes first: the kept pairs of each side
+    kept_tr = [j for j, i in enumerate(train) if status[i][0] == KEPT]
+    kept_te = [j for j, i in enumerate(test) if status[i][0] == KEPT]
+    seen_tr = [status[train[j]][2] for j in kept_tr]
+    seen_te = [status[test[j]][2] for j in kept_te]
+    y_tr = np.array([pairs[train[j]].label for j in kept_tr], float)
+    f_tr = features_of([pairs[train[j]] for j in kept_tr], seen_tr)
+    f_te = features_of([pairs[test[j]] for j in kept_te], seen_te)
+    base = Baselines.fit(f_tr, y_tr)
+    pred = {}
+    views_te = [(2 * j, 2 * j + 1) for j in kept_te]  # runs of ev_test: hv1, hv2
+    seen2 = np.repeat(np.array(seen_te, np.int64), 2)
+    runs2 = [r for pair in views_te for r in pair]
+    ev_kept = ev_test.subset(runs2) if runs2 else None
+    for m in models:
+        fit = report.fits[m]
+        if not kept_te:
+            pred[m] = np.zeros(0)
+        elif m in ROLE_MODELS:
+            post = role_posteriors(ev_kept, fit, seen2)
+            pred[m] = combine(post[0::2], post[1::2])
+        else:
+            prm = np.array([fit.theta[name] for name in IDM_NAMES], float)
+
+            def rolls(idx, seen, offset, side):
+                return np.array([idm_rollout(pairs[side[j]], k, views[offset + 2 * j],
+                                             views[offset + 2 * j + 1], prm)
+                                 for j, k in zip(idx, seen)], np.int64)
+
+            r_tr = rolls(kept_tr, seen_tr, 0, train)
+            r_te = rolls(kept_te, seen_te, n_tr, test)
+            known = r_tr >= 0
+            hit = float((np.sum(r_tr[known] == y_tr[known]) + 1.0) / (known.sum() + 2.0))
+            pred[m] = np.where(r_te < 0, 0.5, np.where(r_te == 1, hit, 1.0 - hit))
+    pred.update(base.predict(f_te))
+    if kept_te:
+        # each driver's belief about the other after the last step seen (row seen + 1 is
+        # updated from the states up to `seen` only, docs/method.md §5.5)
+        rows = ev_kept.starts[:-1] + seen2 + 1
+        b = ev_kept.belief[rows, 0]  # P(the other leads)
+        pred["role_belief"] = combine(b[1::2], b[0::2])
+    else:
+        pred["role_belief"] = np.zeros(0)
+    test_pairs = [pairs[i] for i in test]
+    return FoldResult(
+        test_files=sorted(test_files), pair_index=[test[j] for j in kept_te],
+        predictions=pred, run_files=[pairs[i].file for i in test for _ in (1, 2)],
+        run_steps=np.diff(ev_test.starts).astype(np.int64), run_loglik=run_ll,
+        limits=limits, v_max=v_max, envelope=envelope_shares(test_pairs, limits, v_max),
+        fits={m: {k: _plain(v) for k, v in report.fits[m].theta.items()} for m in models},
+        baselines=base.to_dict())
+
+
+def _plain(x: float):
+    """A float for JSON: ``"inf"`` for an infinite one (the noisy human's ``beta``)."""
+    x = float(x)
+    return x if math.isfinite(x) else ("inf" if x > 0 else "-inf")
+
+
+@dataclass
+class Evaluation:
+    """A held-out evaluation: the pairs, their statuses, the folds, the pooled scores."""
+
+    split: Split
+    params: EvalParams
+    models: list[str]
+    pairs: list[PairData] = field(repr=False)
+    status: list[tuple[str, int, int]] = field(repr=False)
+    folds: list[FoldResult] = field(repr=False)
+    rows: list[dict]
+    strongest: str
+    calibration: dict[str, list[dict]]
+
+    @property
+    def predictors(self) -> list[str]:
+        return [*self.models, *BASELINES]
+
+    def to_dict(self) -> dict:
+        counts = {s: sum(st[0] == s for st in self.status) for s in STATUSES}
+        lead = np.array([min(t for t in p.t_pass_s if math.isfinite(t)) - p.t[st[1]]
+                         for p, st in zip(self.pairs, self.status) if st[0] == KEPT])
+        env = {k: sum(f.envelope[k] for f in self.folds) for k in self.folds[0].envelope}
+        steps = max(env["steps"], 1)
+        return {
+            "split": {"kind": self.split.kind, "k": self.split.k,
+                      "fraction": self.split.fraction, "test_site": self.split.test_site,
+                      "seed": self.params.seed, "describe": self.split.describe(),
+                      "files": len({p.file for p in self.pairs}),
+                      "test_files": [f.test_files for f in self.folds]},
+            "moment": {"rule": f"{self.params.after_s:g} s after both vehicles are within "
+                               f"{self.params.near_m:g} m of the conflict point and before it",
+                       "near_m": self.params.near_m, "after_s": self.params.after_s,
+                       "seen_until_s_before": self.params.lag_steps * STEP_S,
+                       "lead_time_s_quantiles": {f"{q}%": float(np.percentile(lead, q))
+                                                 for q in (5, 50, 95)} if lead.size else {}},
+            "pairs": {"total": len(self.pairs), "kept": counts[KEPT],
+                      "left_out": {s: counts[s] for s in STATUSES if s != KEPT}},
+            "limits": {"quantiles": [self.params.accel_quantile,
+                                     1.0 - self.params.accel_quantile],
+                       "per_fold": [{"accel_mps2": f.limits, "v_max_mps": f.v_max}
+                                    for f in self.folds],
+                       "test_vehicle_steps": env["steps"],
+                       "share_beyond_fitted": env["beyond_fitted"] / steps,
+                       "share_beyond_paper": env["beyond_paper"] / steps,
+                       "share_above_v_max": env["above_v_max"] / steps},
+            "bootstrap": {"unit": "recording file", "resamples": self.params.n_boot,
+                          "seed": self.params.seed, "interval": "95 % percentile"},
+            "strongest_baseline": self.strongest,
+            "rows": self.rows,
+            "calibration": self.calibration,
+            "fits": [f.fits for f in self.folds],
+            "baselines": [f.baselines for f in self.folds],
+        }
+
+
+def evaluate(sites: Sequence[tuple[str, object]], split: Split,
+             models: Sequence[str] | None = None, params: EvalParams | None = None,
+             mode: str = "corrected") -> Evaluation:
+    """The held-out evaluation of ``models`` on the pairs frames ``sites`` (``(name,
+    frame)`` each, :func:`persuasive.recordings.pairs.read_pairs`); module docstring.
+    :class:`RecordingError` for a split the files do not allow or no pair to predict."""
+    from ..fitting.estimate import MODELS
+
+    params = params or EvalParams()
+    models = [m for m in MODELS if m in (models or MODELS)]
+    pairs = [p for name, frame in sites for p in pairs_of(frame, name, len(sites) > 1)]
+    status = [prediction_moment(p, params) for p in pairs]
+    site_of = {p.file: p.site for p in pairs}
+    if split.kind == "folds" and split.k is None:  # the default: 5 folds, or one per file
+        split = replace(split, k=min(DEFAULT_FOLDS, len(site_of)))
+    tests = fold_tests(list(site_of), split, site_of, params.seed)
+    tested = {f for t in tests for f in t}
+    kept = [i for i, st in enumerate(status) if st[0] == KEPT and pairs[i].file in tested]
+    if not kept:
+        counts = {s: sum(st[0] == s for st in status) for s in STATUSES if s != KEPT}
+        raise RecordingError(f"no pair left to predict among the {len(pairs)} pairs of the test "
+                             "files: " + ", ".join(f"{s} {c}" for s, c in counts.items()))
+    folds = [evaluate_fold(pairs, status, set(t), models, params, mode) for t in tests]
+    return score(split, params, models, pairs, status, folds)
+
+
+def score(split: Split, params: EvalParams, models: list[str], pairs: list[PairData],
+          status: list, folds: list[FoldResult]) -> Evaluation:
+    """Pool the folds' predictions and scores, with bootstrap intervals over files."""
+    predictors = [*models, *BASELINES]
+    idx = [i for f in folds for i in f.pair_index]
+    y = np.array([pairs[i].label for i in idx], float)
+    pred = {k: np.concatenate([f.predictions[k] for f in folds]) for k in predictors}
+    pair_files = [pairs[i].file for i in idx]
+    run_files = [r for f in folds for r in f.run_files]
+    steps = np.concatenate([f.run_steps for f in folds])
+    run_ll = {k: np.concatenate([f.run_loglik[k] for f in folds]) for k in folds[0].run_loglik}
+    names = sorted(set(run_files))
+    w_pairs = cluster_weights(pair_files, params.n_boot, params.seed, names)
+    w_runs = cluster_weights(run_files, params.n_boot, params.seed, names)
+    ll_base = {k: log_loss(y, pred[k]) for k in BASELINES}
+    strongest = min(BASELINES, key=lambda k: (ll_base[k], BASELINES.index(k)))
+    rows = []
+    for k in predictors:
+        row = {"name": k, "kind": "model" if k in models else "baseline",
+               "describe": k if k in models else BASELINE_NAMES[k]}
+        if k in run_ll:
+            ll = run_ll[k]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                row["loglik_per_step"] = bootstrap(
+                    lambda w, ll=ll: (w @ ll) / (w @ steps), w_runs).to_dict()
+        for name, fn in PAIR_SCORES.items():
+            row[name] = bootstrap(lambda w, p=pred[k], fn=fn: fn(y, p, w), w_pairs).to_dict()
+        if k in models:
+            row["strongest_baseline"] = strongest
+            row["delta_log_loss"] = bootstrap(
+                lambda w, p=pred[k], q=pred[strongest]: log_loss(y, p, w) - log_loss(y, q, w),
+                w_pairs).to_dict()
+        rows.append(row)
+    cal = {k: calibration(y, pred[k]) for k in predictors}
+    return Evaluation(split, params, models, pairs, status, folds, rows, strongest, cal)
+
+
+def read_sites(paths: Sequence[str | Path]) -> list[tuple[str, object]]:
+    """Each pairs file as ``(site, frame)``, the site its file's stem;
+    :class:`RecordingError` for a file that is not a pairs file or two of one name."""
+    from .pairs import read_pairs
+
+    out, seen = [], {}
+    for path in paths:
+        name = Path(path).stem
+        if name in seen:
+            raise RecordingError(f"pairs files {seen[name]!r} and {str(path)!r} have one name, "
+                                 f"{name!r}: each names a site; rename one")
+        seen[name] = str(path)
+        frame, _ = read_pairs(path)
+        out.append((name, frame))
+    return out
+
+
+__all__ = ["DECIDED", "ENDS", "EvalParams", "Evaluation", "FoldResult", "KEPT", "NEVER_NEAR",
+           "NO_PASSER", "PairData", "STATUSES", "SPLITS", "Split", "ViewBuilder", "combine",
+           "evaluate", "evaluate_fold", "features_of", "fold_tests", "heldout_loglik",
+           "idm_rollout", "is_pairs_file", "motion_sigma", "pairs_of", "prediction_moment",
+           "read_sites", "recording_file", "role_posteriors", "score", "vehicle_limits"]

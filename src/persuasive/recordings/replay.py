@@ -1,0 +1,449 @@
+"""The planner in a recorded driver's seat: each recorded pair replayed with the AV in place of
+one of its two vehicles (docs/guide/recordings.md, "Replay").
+
+**A run.** For a pair of :mod:`persuasive.recordings.pairs` and a *seat* (the vehicle, 1 or 2,
+whose place the AV takes), the configuration is the pair's view with the other vehicle as the
+human (:func:`persuasive.recordings.logs.view_log`: the scenario form of the pair, the recorded
+sizes, ``v_max`` raised to the pair's highest speed, ``dt = 0.1 s``), with the AV kind and
+shield asked for, no noise, and ``simulation.n_steps`` the recorded steps plus ``extra_s``.
+The closed loop (the compiled loop of :func:`persuasive.simulation.simulate`) starts from the
+**recorded first state of both vehicles**: the AV at the replaced vehicle's ``(s, v)``, the
+human at its own. The human is
+
+- ``replay``: the recorded driver, open loop (``hv.kind = "replay"``): at step ``k`` the
+  acceleration ``(v_{k+1} - v_k) / dt`` of its smoothed speeds, so that the replay reproduces
+  the recorded speeds exactly (positions up to the trapezoid rule's error: within 1 cm over
+  120 steps of our own runs exported with 5 cm of noise), then coasting once the recording
+  ends; it does not react to the AV;
+- ``fitted``: the human model ``model`` (``lfg``, ``stubborn``, ``noisy``, ``idm``) with the
+  parameters fitted (point estimates, ``persuasive.fitting.fit_models``) on **both views of
+  every pair of the other recordings** of the pairs file (leave one recording out: a driver is
+  never replayed against a model fitted on its own recording); the parameters are taken to be
+  the drivers', whatever the pair's angle. Its initial role is the likelier one under the
+  fitted ``pi0`` (leader on a tie); it runs without noise.
+
+**The envelope** (the shield's assumption about the human, docs/method.md §12.2): each step of
+the recorded driver's replayed acceleration within the human vehicle's ``[u_min, u_max]`` and
+its speed within ``[v_min, v_max]`` of the run's configuration, to ``ENVELOPE_TOL``. The
+recorded driver is tested whichever ``other`` drives; its steps beyond are counted. (``v_max``
+of a pair's configuration is raised to the pair's highest speed, so only an acceleration can
+leave the envelope.)
+
+**Whether the start is certified.** The AV's recorded start is in the shield's invariant set
+``S`` when it can stand before its occupancy interval by braking
+(:meth:`persuasive.scenarios.Scenario.av_stands_before_occupancy`) or the shield had a
+certified choice at the first step (:func:`start_in_s`); the guarantee is claimed from such
+starts only.
+
+**Invalid runs** (a non-reactive replay only). A replayed driver drove as it did in the
+presence of the recorded vehicle; where that vehicle's timing shaped its drive and the AV does
+not reproduce it, the run says nothing about the AV. The rule: a run is *invalid* when
+
+1. ``yielded``: in the recording the replayed driver passed the conflict point after the
+   replaced vehicle (its timing was set by that vehicle), and in the replay the AV did not pass
+   it first: the driver now arrives where the AV still is, or waits for a car that is not
+   there; or
+2. ``rear-end``: the replayed driver drove into the AV from behind (a rear-end by the human,
+   docs/method.md §12.6), which a driver who saw the AV would not have done.
+
+Times are compared on valid runs only; collisions are reported on all runs, valid or not.
+
+**Times.** The AV's time to clear (``RunOutcome.av_time_to_clear_s``) beside the replaced
+vehicle's own, the first recorded step at which its ``s`` is past the scenario's clearing
+position (NaN when it did not clear while recorded); the summary gives restricted means, a
+time that is NaN counted as the run's horizon, over the valid runs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..config import AV_KINDS, SHIELD_KINDS, Config
+from .formats import STEP_S, RecordingError
+from .logs import ANGLE_STEP_DEG, view_log
+
+#: Who drives the other vehicle.
+OTHERS = ("replay", "fitted")
+#: The human models a ``fitted`` other can be.
+FITTED_MODELS = ("lfg", "stubborn", "noisy", "idm")
+#: Tolerance of the envelope test [m/s^2, m/s]: float rounding of the speed differences.
+ENVELOPE_TOL = 1e-9
+#: Reasons of an invalid run (module docstring).
+INVALID_YIELDED, INVALID_REAR_END = "yielded", "rear-end"
+
+
+@dataclass(frozen=True)
+class ReplaySettings:
+    """What ``recordings replay`` runs (module docstring)."""
+
+    av: str = "persuasive"  #: the AV kind (``persuasive.config.AV_KINDS``)
+    shield: str = "worst-case"  #: the shield (``persuasive.config.SHIELD_KINDS``)
+    other: str = "replay"  #: ``replay`` (the recorded driver) or ``fitted`` (a fitted model)
+    model: str = "lfg"  #: the fitted model of ``other = "fitted"``
+    extra_s: float = 10.0  #: the run goes on this long after the recording ends [s]
+    seats: tuple[int, ...] = (1, 2)  #: the vehicles whose place the AV takes, in turn
+    mode: str = "corrected"  #: the configuration's mode (docs/method.md §9)
+    angle_step_deg: float = ANGLE_STEP_DEG  #: the pair's angle rounded to this [deg]
+
+    def __post_init__(self) -> None:
+        for name, value, allowed in (("--av", self.av, AV_KINDS),
+                                     ("--shield", self.shield, SHIELD_KINDS),
+                                     ("--other", self.other, OTHERS),
+                                     ("--model", self.model, FITTED_MODELS)):
+            if value not in allowed:
+                raise RecordingError(f"{name} = {value!r} is not allowed; allowed: "
+                                     f"{', '.join(allowed)}")
+        if not (isinstance(self.extra_s, (int, float)) and math.isfinite(self.extra_s)
+                and 0.0 <= self.extra_s <= 600.0):
+            raise RecordingError(f"--extra-s = {self.extra_s!r} is out of range; allowed: "
+                                 "[0, 600] s")
+        if not self.seats or any(s not in (1, 2) for s in self.seats) or \
+                len(set(self.seats)) != len(self.seats):
+            raise RecordingError(f"seats = {self.seats!r} is not allowed; allowed: 1, 2 or "
+                                 "both, each once")
+
+
+@dataclass(frozen=True)
+class SeatRun:
+    """One replayed run: a pair with the AV in vehicle ``seat``'s place (module docstring)."""
+
+    pair: int
+    recording: str
+    kind: str  #: crossing or merge
+    angle_deg: float  #: the scenario's (rounded) angle [deg]
+    seat: int  #: the vehicle the AV replaces (1 or 2); the other is the human
+    steps: int  #: closed-loop steps (recorded steps + extra)
+    recorded_steps: int  #: the recording's steps of the pair
+    start_certified: bool  #: the AV's start is in the shield's invariant set
+    # the recorded driver of the other vehicle against the envelope
+    envelope_steps: int  #: replayed steps tested
+    excess_steps: int  #: steps beyond the envelope
+    within_envelope: bool
+    accel_min_mps2: float  #: the replayed driver's strongest braking (signed) [m/s^2]
+    accel_max_mps2: float  #: its strongest acceleration [m/s^2]
+    u_min_mps2: float  #: the envelope it was tested against [m/s^2]
+    u_max_mps2: float
+    # the closed loop's outcome
+    collision: bool
+    collision_caused_by_av: bool
+    rear_end_by_human: bool
+    uncertified_steps: int
+    guarantee_held: bool
+    shield_interventions: int
+    min_gap_m: float
+    first_recorded: str  #: who passed the conflict point first: "replaced", "other", ...
+    first_replay: str  #: the same in the replay ("AV", "other", "neither", "same step")
+    av_clear_s: float  #: the AV's time to clear [s] (NaN: never)
+    recorded_clear_s: float  #: the replaced vehicle's own while recorded [s] (NaN: never)
+    other_clear_s: float  #: the human's time to clear in the replay [s]
+    valid: bool
+    invalid_reason: str  #: "" when valid, else :data:`INVALID_YIELDED` / ``REAR_END``
+    fitted: dict = field(default_factory=dict)  #: the fitted model's parameters, if any
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """Every replayed run, the settings, and the fits of a ``fitted`` other (per recording
+    left out)."""
+
+    runs: list[SeatRun]
+    settings: ReplaySettings
+    fits: dict[str, dict] = field(default_factory=dict)
+
+    def frame(self):
+        """One row per run (the fields of :class:`SeatRun`; ``fitted`` as JSON text)."""
+        import json
+
+        import pandas as pd
+
+        rows = []
+        for r in self.runs:
+            row = asdict(r)
+            row["fitted"] = json.dumps(row["fitted"], sort_keys=True)
+            rows.append(row)
+        return pd.DataFrame(rows, columns=list(SeatRun.__dataclass_fields__))
+
+    def summary(self) -> dict:
+        """What ``recordings replay`` prints (see :func:`summarise`)."""
+        return summarise(self.runs, self.settings)
+
+
+def _share(k: int, n: int) -> float | None:
+    return k / n if n else None
+
+
+def _rmean(x: Sequence[float], horizon: Sequence[float]) -> float | None:
+    """The restricted mean of times ``x``: a NaN counts as its run's horizon."""
+    if not len(x):
+        return None
+    x, h = np.asarray(x, float), np.asarray(horizon, float)
+    return float(np.mean(np.where(np.isnan(x), h, np.minimum(x, h))))
+
+
+def summarise(runs: Sequence[SeatRun], settings: ReplaySettings) -> dict:
+    """Counts over the runs: collisions (AV-caused or not, split by the envelope and the
+    start), the shield's uncertified steps, the envelope's excesses, the invalid runs, who
+    passed first and the times to clear over the valid runs."""
+    runs = list(runs)
+    premises = [r for r in runs if r.within_envelope and r.start_certified]
+    outside = [r for r in runs if not (r.within_envelope and r.start_certified)]
+
+    def collisions(rs):
+        return {"runs": len(rs), "collisions": sum(r.collision for r in rs),
+                "av_caused": sum(r.collision_caused_by_av for r in rs),
+                "rear_end_by_human": sum(r.rear_end_by_human for r in rs)}
+
+    valid = [r for r in runs if r.valid]
+    firsts: dict[str, int] = {}
+    rec_firsts: dict[str, int] = {}
+    for r in valid:
+        firsts[r.first_replay] = firsts.get(r.first_replay, 0) + 1
+        rec_firsts[r.first_recorded] = rec_firsts.get(r.first_recorded, 0) + 1
+    horizon = [r.steps * STEP_S for r in valid]
+    both = [r for r in valid if not (math.isnan(r.av_clear_s) or math.isnan(r.recorded_clear_s))]
+    reasons: dict[str, int] = {}
+    for r in runs:
+        if not r.valid:
+            reasons[r.invalid_reason] = reasons.get(r.invalid_reason, 0) + 1
+    steps = sum(r.envelope_steps for r in runs)
+    excess = sum(r.excess_steps for r in runs)
+    return {
+        "av": settings.av, "shield": settings.shield, "other": settings.other,
+        "model": settings.model if settings.other == "fitted" else None,
+        "runs": len(runs), "pairs": len({r.pair for r in runs}),
+        "collisions": collisions(runs),
+        "within_envelope_certified_start": collisions(premises),
+        "beyond_envelope_or_uncertified_start": collisions(outside),
+        "beyond_envelope": collisions([r for r in runs if not r.within_envelope]),
+        "uncertified_start": collisions([r for r in runs if not r.start_certified]),
+        "uncertified_steps": sum(r.uncertified_steps for r in runs),
+        "runs_with_uncertified_steps": sum(r.uncertified_steps > 0 for r in runs),
+        "guarantee_held": sum(r.guarantee_held for r in runs),
+        "envelope": {"steps": steps, "excess_steps": excess,
+                     "excess_share": _share(excess, steps),
+                     "runs_beyond": sum(not r.within_envelope for r in runs),
+                     "accel_min_mps2": min((r.accel_min_mps2 for r in runs), default=None),
+                     "accel_max_mps2": max((r.accel_max_mps2 for r in runs), default=None)},
+        "invalid": reasons, "valid": len(valid),
+        "first_replay": firsts, "first_recorded": rec_firsts,
+        "av_clear_s_rmean": _rmean([r.av_clear_s for r in valid], horizon),
+        "recorded_clear_s_rmean": _rmean([r.recorded_clear_s for r in valid], horizon),
+        "both_cleared": len(both),
+        "clear_s_paired_diff_mean": float(np.mean([r.av_clear_s - r.recorded_clear_s
+                                                   for r in both])) if both else None,
+    }
+
+
+# -- one run ------------------------------------------------------------------------------------
+
+
+def run_from(config: Config, x0, hv_prm: np.ndarray | None = None, seed: int = 0):
+    """One closed loop of ``config`` from the initial state ``x0 = (s_av, v_av, s_hv, v_hv)``
+    (the configuration's own draw replaced); ``hv_prm``: the human's parameter vector, in
+    place of the configuration's (a replay given in memory): ``simulate(config, seed, x0=...,
+    hv_prm=...)``."""
+    from ..simulation import simulate
+
+    return simulate(config, seed, x0=x0, hv_prm=hv_prm)
+
+
+def replay_accelerations(v: np.ndarray, dt: float = STEP_S) -> np.ndarray:
+    """The open-loop accelerations that reproduce the speeds ``v`` ``(n,)`` step by step:
+    ``(v_{k+1} - v_k) / dt``, ``(n - 1,)`` [m/s^2]."""
+    return np.diff(np.asarray(v, float)) / dt
+
+
+def envelope_excess(a: np.ndarray, v: np.ndarray, vehicle) -> np.ndarray:
+    """Per replayed step, whether the driver left the envelope: its acceleration ``a[k]``
+    outside ``[u_min, u_max]`` or its speed ``v[k + 1]`` outside ``[v_min, v_max]`` (both to
+    :data:`ENVELOPE_TOL`); ``(n - 1,)`` bool for ``a`` ``(n - 1,)`` and ``v`` ``(n,)``."""
+    tol = ENVELOPE_TOL
+    return ((a < vehicle.u_min_mps2 - tol) | (a > vehicle.u_max_mps2 + tol)
+            | (v[1:] < vehicle.v_min_mps - tol) | (v[1:] > vehicle.v_max_mps + tol))
+
+
+def start_in_s(record, s0: float, v0: float) -> bool:
+    """Whether the AV's start ``(s0, v0)`` is in the shield's invariant set ``S``: it can
+    stand before its occupancy interval by braking (braking for ever is certified), or the
+    shield had a certified choice at the first step (docs/method.md §12.2)."""
+    from ..safety.shield import UNCERTIFIED
+
+    if record.scenario.av_stands_before_occupancy(s0, v0):
+        return True
+    verdict = record.log.get("shield_verdict")
+    return bool(verdict is not None and len(verdict) and 0 <= verdict[0] != UNCERTIFIED)
+
+
+def _recorded_first(first: str, seat: int) -> str:
+    if first in ("1", "2"):
+        return "replaced" if int(first) == seat else "other"
+    return first
+
+
+def _first_time(hit: np.ndarray) -> float:
+    """The time of the first state ``x_{k+1}`` flagged in ``hit`` (states from ``x_1``), as
+    :func:`persuasive.record.outcome` times arrivals [s]; NaN when none is."""
+    k = np.flatnonzero(hit)
+    return float((k[0] + 1) * STEP_S) if k.size else math.nan
+
+
+def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: str = "",
+             fitted: dict | None = None) -> SeatRun:
+    """The run of one pair (its rows of the pairs file, in step order) with the AV in vehicle
+    ``seat``'s place (module docstring). ``fitted``: the config overrides and parameters of a
+    ``fitted`` other (:func:`fitted_overrides`)."""
+    from ..record import ARRIVAL_LABELS
+
+    human = 3 - seat
+    config, _, _ = view_log(rows, human, base, settings.angle_step_deg)
+    n = len(rows)
+    extra = int(round(settings.extra_s / STEP_S))
+    overrides = {"av.kind": settings.av, "av.shield": settings.shield,
+                 "simulation.n_steps": n - 1 + extra,
+                 "simulation.measurement_noise": "none", "simulation.accel_noise_mps2": 0.0}
+    # the draw is replaced by the recorded start; a draw without spread never retries
+    for who in ("av", "hv"):
+        overrides[f"scenario.{who}_s0_halfwidth_m"] = 0.0
+        overrides[f"scenario.{who}_v0_halfwidth_mps"] = 0.0
+    s_av, v_av = rows[f"s_{seat}_m"].to_numpy(float), rows[f"v_{seat}_mps"].to_numpy(float)
+    s_hv, v_hv = rows[f"s_{human}_m"].to_numpy(float), rows[f"v_{human}_mps"].to_numpy(float)
+    a_rec = replay_accelerations(v_hv)
+    hv_prm = None
+    params: dict = {}
+    if settings.other == "replay":
+        overrides.update({"hv.kind": "replay", "hv.replay.file": source or "pairs",
+                          "hv.replay.vehicle": "hv"})
+        hv_prm = np.concatenate([[float(a_rec.size)], a_rec])
+    else:
+        overrides.update(fitted["overrides"])
+        params = dict(fitted["params"])
+    config = config.with_overrides(overrides)
+    record = run_from(config, (s_av[0], v_av[0], s_hv[0], v_hv[0]), hv_prm,
+                      seed=int(rows["pair"].iloc[0]))
+    out = record.outcome
+    scenario = record.scenario
+    veh = config.vehicle_of("hv")
+    excess = envelope_excess(a_rec, v_hv, veh)
+    first_rec = _recorded_first(str(rows["first"].iloc[0]), seat)
+    label = ARRIVAL_LABELS[out.first_at_conflict_point]
+    first_replay = {"HV": "other"}.get(label, label)
+    reason = ""
+    if settings.other == "replay":
+        if first_rec == "replaced" and out.first_at_conflict_point != 1:
+            reason = INVALID_YIELDED
+        elif out.rear_end_by_human:
+            reason = INVALID_REAR_END
+    recorded_clear = _first_time(scenario.cleared("av", s_av[1:]))
+    first = rows.iloc[0]
+    return SeatRun(
+        pair=int(first["pair"]), recording=str(first["recording"]), kind=config.scenario.kind,
+        angle_deg=float(config.scenario.angle_deg), seat=seat, steps=config.simulation.n_steps,
+        recorded_steps=n,
+        start_certified=start_in_s(record, s_av[0], v_av[0]),
+        envelope_steps=int(excess.size), excess_steps=int(excess.sum()),
+        within_envelope=not bool(excess.any()),
+        accel_min_mps2=float(a_rec.min()), accel_max_mps2=float(a_rec.max()),
+        u_min_mps2=veh.u_min_mps2, u_max_mps2=veh.u_max_mps2,
+        collision=out.collision, collision_caused_by_av=out.collision_caused_by_av,
+        rear_end_by_human=out.rear_end_by_human, uncertified_steps=out.uncertified_steps,
+        guarantee_held=out.guarantee_held, shield_interventions=out.shield_interventions,
+        min_gap_m=out.min_gap_m, first_recorded=first_rec, first_replay=first_replay,
+        av_clear_s=out.av_time_to_clear_s, recorded_clear_s=recorded_clear,
+        other_clear_s=out.hv_time_to_clear_s, valid=not reason, invalid_reason=reason,
+        fitted=params)
+
+
+# -- the fitted other ---------------------------------------------------------------------------
+
+
+def pair_run_logs(frame, base: Config, step_deg: float = ANGLE_STEP_DEG) -> list:
+    """Both views of every pair of a pairs frame as :class:`persuasive.fitting.RunLog` (what
+    ``recordings logs`` writes, in memory)."""
+    from ..fitting.evidence import RunLog
+
+    out = []
+    for pair_id, rows in frame.groupby("pair", sort=True):
+        rows = rows.sort_values("step")
+        for human in (1, 2):
+            config, log, meta = view_log(rows, human, base, step_deg)
+            states = log[["av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m",
+                          "hv_meas_v_mps"]].to_numpy(float)
+            out.append(RunLog(f"pair {int(pair_id)} vehicle {human}", config, int(pair_id),
+                              None, states, log["hv_accel_mps2"].to_numpy(float), meta))
+    return out
+
+
+def fitted_overrides(model: str, theta: dict) -> dict:
+    """The configuration overrides of a fitted human (point estimates ``theta``) and its
+    parameters as reported."""
+    if model == "idm":
+        names = ("desired_speed_mps", "time_gap_s", "max_accel_mps2", "comfort_decel_mps2",
+                 "critical_gap_s", "impatience_per_s")
+        over = {"hv.kind": "idm", **{f"hv.idm.{k}": float(theta[k]) for k in names}}
+        return {"overrides": over, "params": {k: float(theta[k]) for k in names}}
+    role = "leader" if float(theta["pi0"]) >= 0.5 else "follower"
+    over = {"hv.kind": model, "hv.role": role}
+    params = {"pi0": float(theta["pi0"]), "role": role}
+    if model in ("lfg", "noisy"):
+        over["roles.p_a"] = float(theta["p_a"])
+        params["p_a"] = float(theta["p_a"])
+    if model == "noisy":
+        over["hv.noisy.beta"] = float(theta["beta"])
+        params["beta"] = float(theta["beta"])
+    return {"overrides": over, "params": params}
+
+
+def fit_left_out(frame, settings: ReplaySettings, base: Config) -> dict[str, dict]:
+    """Per recording of the pairs frame, the model fitted on the pairs of every other
+    recording (:func:`fitted_overrides`). :class:`RecordingError` with fewer than two
+    recordings."""
+    from ..fitting import evidence_of, fit_models
+
+    recordings = sorted(frame["recording"].unique())
+    if len(recordings) < 2:
+        raise RecordingError(f"--other fitted needs pairs of at least two recordings (the "
+                             f"model is fitted on the recordings other than the replayed "
+                             f"one); the pairs file holds {len(recordings)}: "
+                             f"{', '.join(map(str, recordings))}")
+    logs = pair_run_logs(frame, base, settings.angle_step_deg)
+    rec_of = {int(p): str(r) for p, r in frame.groupby("pair")["recording"].first().items()}
+    ev = evidence_of(logs)
+    out = {}
+    for rec in recordings:
+        keep = [i for i, log in enumerate(logs) if rec_of[log.seed] != rec]
+        report = fit_models(ev.subset(keep), [settings.model], intervals=False)
+        fit = report.fits[settings.model]
+        entry = fitted_overrides(settings.model, fit.theta)
+        entry["params"]["sigma"] = float(fit.theta["sigma"])
+        entry["params"]["fitted_runs"] = len(keep)
+        out[rec] = entry
+    return out
+
+
+def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | None = None,
+                 source: str = "") -> ReplayResult:
+    """Every pair of a pairs frame (:func:`persuasive.recordings.pairs.read_pairs`) replayed
+    with the AV in each seat of ``settings.seats`` (module docstring)."""
+    settings = settings or ReplaySettings()
+    base = base if base is not None else Config(mode=settings.mode)
+    fits = fit_left_out(frame, settings, base) if settings.other == "fitted" else {}
+    runs = []
+    for _, rows in frame.groupby("pair", sort=True):
+        rows = rows.sort_values("step")
+        if len(rows) < 2:
+            raise RecordingError(f"pair {int(rows['pair'].iloc[0])} has {len(rows)} step; a "
+                                 "replay needs two")
+        rec = str(rows["recording"].iloc[0])
+        for seat in settings.seats:
+            runs.append(run_seat(rows, seat, settings, base, source, fits.get(rec)))
+    return ReplayResult(runs, settings, {k: v["params"] for k, v in fits.items()})
+
+
+__all__ = ["ENVELOPE_TOL", "FITTED_MODELS", "INVALID_REAR_END", "INVALID_YIELDED", "OTHERS",
+           "ReplayResult", "ReplaySettings", "SeatRun", "envelope_excess", "fit_left_out",
+           "fitted_overrides", "pair_run_logs", "replay_accelerations", "replay_pairs",
+           "run_from", "run_seat", "summarise"]

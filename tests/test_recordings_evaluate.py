@@ -1,0 +1,300 @@
+"""The held-out evaluation on recorded pairs (persuasive.recordings.evaluate, scores,
+baselines) and ``persuasive fit PAIRS.parquet``: scores by hand, splits by file, the bootstrap
+over files, no look at the future, the CLI and its bad input (one line, exit 2, nothing
+written)."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from persuasive import Config, simulate
+from persuasive.cli import main
+from persuasive.recordings.baselines import arrival_ca, arrival_cv, right_of_way, sumo_rule
+from persuasive.recordings.evaluate import (DECIDED, ENDS, KEPT, NEVER_NEAR, EvalParams,
+                                            PairData, Split, ViewBuilder, combine, evaluate,
+                                            features_of, fold_tests,
+                                            prediction_moment, read_sites, role_posteriors,
+                                            vehicle_limits)
+from persuasive.recordings.export import export_runs
+from persuasive.recordings.formats import RecordingError, read_tracks
+from persuasive.recordings.pairs import find_pairs, write_pairs
+from persuasive.recordings.scores import (accuracy, auc, bootstrap, brier, cluster_weights,
+                                          ece, log_loss)
+from persuasive.recordings.tracks import smooth_tracks
+
+N_FILES = 6
+
+
+@pytest.fixture(scope="module")
+def pairs_file(tmp_path_factory):
+    """Six simulated crossings (two LFG players, the roles swapped every other seed, so that
+    either vehicle passes first), one INTERACTION file each, paired."""
+    folder = tmp_path_factory.mktemp("pairs")
+    runs = []
+    for seed in range(1, N_FILES + 1):
+        lead = seed % 2 == 1
+        config = Config(mode="corrected").with_overrides({
+            "scenario.kind": "crossing", "scenario.angle_deg": 90.0,
+            "simulation.n_steps": 70, "av.kind": "lfg",
+            "hv.role": "leader" if lead else "follower",
+            "av.role": "follower" if lead else "leader"})
+        path = folder / f"run{seed}.parquet"
+        simulate(config, seed).save(path)
+        runs.append(path)
+    tracks = folder / "tracks"
+    tracks.mkdir()
+    export_runs(runs, tracks, noise_m=0.05, seed=0)
+    result = find_pairs(smooth_tracks(read_tracks([tracks])))
+    assert len(result.pairs) == N_FILES
+    target = folder / "pairs.parquet"
+    write_pairs(target, result, [str(tracks)])
+    return target
+
+
+@pytest.fixture(scope="module")
+def evaluation(pairs_file):
+    return evaluate(read_sites([pairs_file]), Split("folds", k=3),
+                    params=EvalParams(n_boot=200))
+
+
+def run(capsys, *args):
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    err = "".join(line for line in err.splitlines(keepends=True)
+                  if not line.startswith("compiling the numerical kernels once"))
+    return code, out, err
+
+
+# -- scores by hand (exact up to float rounding: 1e-12) ---------------------------------------
+
+def test_scores_against_hand_computed_values():
+    y = np.array([1, 0, 1, 0])
+    p = np.array([0.9, 0.2, 0.4, 0.4])
+    # AUC: positive-negative pairs 0.9>0.2, 0.9>0.4, 0.4>0.2, and a tie 0.4=0.4 (half)
+    assert auc(y, p) == pytest.approx(3.5 / 4, abs=1e-12)
+    assert brier(y, p) == pytest.approx((0.01 + 0.04 + 0.36 + 0.16) / 4, abs=1e-12)
+    want = -(math.log(0.9) + math.log(0.8) + math.log(0.4) + math.log(0.6)) / 4
+    assert log_loss(y, p) == pytest.approx(want, abs=1e-12)
+    assert accuracy(y, p) == 0.75
+    assert accuracy([1, 0], [0.5, 0.5]) == 0.5  # an even call counts half
+    # calibration bins: 0.9 (|1 - 0.9|), 0.2 (|0 - 0.2|), the two 0.4 (|0.5 - 0.4|, twice)
+    assert ece(y, p) == pytest.approx((0.1 + 0.2 + 2 * 0.1) / 4, abs=1e-12)
+    assert math.isnan(auc([1, 1], [0.2, 0.7]))  # one class: undefined
+    # the predictions are clipped at 1e-3 for the log-loss
+    assert log_loss([1], [0.0]) == pytest.approx(-math.log(1e-3), abs=1e-12)
+    # weights count a pair that many times (a bootstrap resample)
+    w = np.array([2.0, 1.0, 0.0, 3.0])
+    rep = np.repeat(np.arange(4), w.astype(int))
+    for fn in (auc, brier, log_loss, accuracy, ece):
+        assert fn(y, p, w) == pytest.approx(fn(y[rep], p[rep]), abs=1e-12)
+
+
+def test_two_views_combine_into_one_order():
+    # both sure of the same role: no information; one sure to lead, the other to follow
+    np.testing.assert_allclose(combine([1.0, 1.0, 0.5, 0.8], [1.0, 0.0, 0.5, 0.2]),
+                               [0.5, 1.0, 0.5, 0.64 / (0.64 + 0.04)], atol=1e-12)
+
+
+# -- the bootstrap resamples files ------------------------------------------------------------
+
+def test_bootstrap_resamples_whole_files_and_is_wider_than_over_pairs():
+    files = np.repeat([f"f{i}" for i in range(10)], 20)  # 10 files of 20 pairs
+    w = cluster_weights(files, 300, seed=0)
+    assert w.shape == (300, 200)
+    # every pair of a file is drawn as often as its file; a resample draws 10 files
+    assert np.all(w.reshape(300, 10, 20) == w.reshape(300, 10, 20)[:, :, :1])
+    np.testing.assert_array_equal(w.sum(axis=1), 200)
+    assert np.array_equal(w, cluster_weights(files, 300, seed=0))  # seeded
+    # pairs of one file share their outcome and their prediction (fully correlated)
+    rng = np.random.default_rng(1)
+    y_file, p_file = rng.integers(0, 2, 10), rng.uniform(0.2, 0.8, 10)
+    y, p = np.repeat(y_file, 20), np.repeat(p_file, 20)
+    by_file = bootstrap(lambda ww: brier(y, p, ww), w)
+    by_pair = bootstrap(lambda ww: brier(y, p, ww), cluster_weights(np.arange(200), 300, 0))
+    assert by_file.value == by_pair.value
+    assert by_file.high - by_file.low > 2 * (by_pair.high - by_pair.low)
+
+
+# -- splits by file ---------------------------------------------------------------------------
+
+def test_splits_never_put_one_file_on_both_sides(evaluation):
+    files = [f"r{i}" for i in range(7)]
+    sites = {f: "a" for f in files}
+    tests = fold_tests(files, Split("folds", k=3), sites, seed=4)
+    assert sorted(f for t in tests for f in t) == files  # each file tested exactly once
+    assert [len(t) for t in tests] == [3, 2, 2]
+    assert fold_tests(files, Split("holdout", fraction=0.3), sites, 4)[0].__len__() == 2
+    assert fold_tests(files, Split("holdout", fraction=0.01), sites, 4)[0].__len__() == 1
+    assert fold_tests(files, Split("holdout", fraction=0.99), sites, 4)[0].__len__() == 6
+    sites2 = {f: ("a" if i < 4 else "b") for i, f in enumerate(files)}
+    assert fold_tests(files, Split("site", test_site="b"), sites2, 0) == [files[4:]]
+    for split, words in ((Split("folds", k=8), "--folds = 8"),
+                         (Split("site", test_site="c"), "not a site")):
+        with pytest.raises(RecordingError, match=words):
+            fold_tests(files, split, sites2, 0)
+    with pytest.raises(RecordingError, match="at least 2"):
+        fold_tests(files[:1], Split("folds", k=2), sites, 0)
+    # the evaluation: each fold's predicted pairs come from its test files only
+    pairs = evaluation.pairs
+    tested = [f for fold in evaluation.folds for f in fold.test_files]
+    assert sorted(tested) == sorted({p.file for p in pairs}) and len(tested) == N_FILES
+    for fold in evaluation.folds:
+        assert {pairs[i].file for i in fold.pair_index} <= set(fold.test_files)
+        assert set(fold.run_files) == set(fold.test_files)
+
+
+# -- the moment, and nothing seen after it ----------------------------------------------------
+
+def _pair(s1, s2, first="1", occ=((-3.0, 3.0), (-3.0, 3.0))):
+    n = len(s1)
+    t = np.round(np.arange(n) * 0.1, 1)
+    s = np.array([s1, s2], float)
+    t_pass = tuple(float(np.interp(0.0, row, t)) if row[-1] >= 0 > row[0] else math.nan
+                   for row in s)
+    v = np.gradient(s, 0.1, axis=1)
+    return PairData("site", "f", 0, "crossing", 90.0, ("car", "car"), (4.5, 4.5), (1.8, 1.8),
+                    np.array(occ, float), first, 1.0, t_pass, t, s, v, np.zeros_like(s),
+                    np.array([s1, np.zeros(n)]), np.array([np.zeros(n), s2]))
+
+
+def test_the_prediction_moment_by_hand():
+    params = EvalParams()
+    # both within 40 m from step 10 (vehicle 2 at -40 m), the moment 1 s later, seen 0.5 s
+    s1 = np.linspace(-30.0, 10.0, 81)  # 5 m/s
+    s2 = np.linspace(-45.0, 3.0, 81)  # 6 m/s: -40 m at step 8.33 -> step 9
+    status, k, seen = prediction_moment(_pair(s1, s2), params)
+    assert (status, k, seen) == (KEPT, 19, 14)
+    assert prediction_moment(_pair(s1, s2 - 100.0), params)[0] == NEVER_NEAR
+    assert prediction_moment(_pair(s1[:19], s2[:19]), params)[0] == ENDS
+    # vehicle 1 inside its occupancy interval at the moment: decided
+    assert prediction_moment(_pair(s1 + 20.0, s2), params)[0] == DECIDED
+
+
+def test_nothing_after_the_moment_is_seen(evaluation):
+    pairs, status = evaluation.pairs, evaluation.status
+    kept = [(p, st) for p, st in zip(pairs, status) if st[0] == KEPT]
+    assert len(kept) == N_FILES
+    for p, (_, k, seen) in kept:
+        # the moment comes before both first arrivals, and what is seen before the moment
+        assert p.t[k] < min(t for t in p.t_pass_s if math.isfinite(t))
+        assert seen == k - 5
+    # the baselines' features and the models' role posteriors read no step after `seen`
+    p, (_, k, seen) = kept[0]
+    late = replace(p, s=p.s.copy(), v=p.v.copy(), a=p.a.copy(), x=p.x.copy(), y=p.y.copy())
+    for arr in (late.s, late.v, late.a, late.x, late.y):
+        arr[:, seen + 1:] += 7.0
+    f0, f1 = features_of([p], [seen]), features_of([late], [seen])
+    for name in ("s", "v", "a", "direction"):
+        np.testing.assert_array_equal(getattr(f0, name), getattr(f1, name))
+    from persuasive.fitting import evidence_of
+
+    builder = ViewBuilder("corrected", vehicle_limits([p], 0.01), 12.0)
+    ev = evidence_of([builder.view(q, h) for q in (p, late) for h in (1, 2)])
+    fit = SimpleNamespace(model="lfg", theta={"p_a": 0.3, "pi0": 0.6, "sigma": 0.4,
+                                              "beta": math.inf})
+    post = role_posteriors(ev, fit, np.array([seen] * 4))
+    np.testing.assert_array_equal(post[:2], post[2:])
+
+
+def test_the_baselines_by_hand():
+    from persuasive.recordings.baselines import Features
+
+    f = Features(s=np.array([[-20.0, -10.0], [-10.0, -20.0]]), v=np.array([[10.0, 2.0],
+                                                                          [5.0, 10.0]]),
+                 a=np.array([[0.0, -1.0], [2.0, 0.0]]),
+                 direction=np.array([[math.pi, math.pi / 2], [0.0, math.pi / 2]]),
+                 occ_lo=np.full((2, 2), -3.0), occ_hi=np.full((2, 2), 3.0),
+                 merge=np.array([False, False]))
+    np.testing.assert_allclose(arrival_cv(f), [[2.0, 5.0], [2.0, 2.0]])
+    # 2 m/s braking at 1 m/s^2 stops after 2 m: never arrives; 5 m/s at 2 m/s^2: 10 = 5t + t^2
+    ca = arrival_ca(f)
+    assert ca[0, 0] == 2.0 and math.isinf(ca[0, 1])
+    assert ca[1, 0] == pytest.approx((-5 + math.sqrt(65)) / 2, abs=1e-12)
+    # pair 0: vehicle 1 heads west, vehicle 2 north: 1 comes from 2's right; pair 1: east
+    np.testing.assert_array_equal(right_of_way(f), [1, 0])
+    # pair 1: vehicle 1 is the minor one; it leaves (13 / 5 = 2.6 s) less than 1 s before
+    # vehicle 2 enters (17 / 10 = 1.7 s): vehicle 2 goes first. Pair 0: the major goes first.
+    np.testing.assert_array_equal(sumo_rule(f), [1, 0])
+
+
+# -- the evaluation and the CLI ---------------------------------------------------------------
+
+def test_the_evaluation_reports_every_model_and_baseline(evaluation):
+    d = evaluation.to_dict()
+    names = [r["name"] for r in d["rows"]]
+    assert names == ["lfg", "stubborn", "noisy", "idm", "majority", "arrive_cv", "arrive_ca",
+                     "logistic_gap", "right_of_way", "sumo_rule", "role_belief"]
+    assert d["pairs"] == {"total": N_FILES, "kept": N_FILES,
+                          "left_out": {NEVER_NEAR: 0, ENDS: 0, DECIDED: 0,
+                                       "no first passer (neither, same time)": 0}}
+    for r in d["rows"]:
+        assert 0.0 <= r["brier"]["value"] <= 1.0
+        lo, hi = r["log_loss"]["ci95"]
+        assert lo <= r["log_loss"]["value"] <= hi
+        assert ("loglik_per_step" in r) == (r["kind"] == "model"
+                                           or r["name"] in ("arrive_cv", "arrive_ca"))
+        assert (r.get("strongest_baseline") == d["strongest_baseline"]) == (r["kind"] == "model")
+    assert d["strongest_baseline"] in names[4:]
+    lim = d["limits"]
+    assert len(lim["per_fold"]) == 3 and 0.0 <= lim["share_beyond_fitted"] <= 0.05
+    car = lim["per_fold"][0]["accel_mps2"]["car"]
+    assert car[0] < 0 < car[1]
+    json.dumps(d, allow_nan=False)
+
+
+def test_fit_evaluates_a_pairs_file_held_out(capsys, pairs_file, tmp_path):
+    code, out, err = run(capsys, "fit", pairs_file, "--holdout", "0.34", "--model", "lfg")
+    assert code == 0 and err == ""
+    assert "0.34 of the recording files held out (seed 0); 6 recording files, 6 pairs" in out
+    assert "| predictor | log-lik/step | accuracy | AUC | Brier | log-loss | ECE | vs " in out
+    assert "| lfg | " in out and "| logistic_gap (baseline) | " in out
+    assert "strongest baseline (smallest log-loss): " in out
+    report = tmp_path / "report.json"
+    code, out, err = run(capsys, "fit", pairs_file, "--folds", "2", "--model", "stubborn",
+                         "--json", "--out", report, "--seed", "3")
+    assert code == 0 and err == ""
+    payload = json.loads(out)
+    assert json.loads(report.read_text()) == {**payload, "seconds": payload["seconds"]}
+    assert payload["split"]["k"] == 2 and payload["split"]["seed"] == 3
+    assert [r["name"] for r in payload["rows"]][0] == "stubborn"
+
+
+def test_bad_input_ends_in_one_line_and_exit_2_writing_nothing(capsys, pairs_file, tmp_path):
+    one = tmp_path / "one.parquet"  # the pairs of a single recording file
+    table = pq.read_table(pairs_file)
+    keep = np.asarray(table.column("recording").to_pylist()) == "vehicle_tracks_000"
+    pq.write_table(table.filter(keep), one)
+    log = tmp_path / "run.parquet"
+    simulate(Config(mode="corrected").with_overrides({"simulation.n_steps": 5}), 1).save(log)
+    target = tmp_path / "r.json"
+    cases = [
+        (("--holdout", "0"), "--holdout = 0 is out of range"),
+        (("--holdout", "1.5"), "--holdout = 1.5 is out of range"),
+        (("--folds", "1"), "--folds = 1 is out of range"),
+        (("--folds", "9"), "--folds = 9 is out of range"),
+        (("--folds", "2", "--holdout", "0.5"), "give one"),
+        (("--test-site", "x"), "needs several pairs files"),
+        (("--per-participant",), "--per-participant does not apply"),
+        (("--intervals", "none"), "--intervals does not apply"),
+    ]
+    for extra, words in cases:
+        code, out, err = run(capsys, "fit", pairs_file, *extra, "--out", target)
+        assert code == 2 and out == "" and err.count("\n") == 1, (extra, err)
+        assert err.startswith("error: ") and words in err, (extra, err)
+    for args, words in (((one,), "1 recording file"),
+                        ((pairs_file, log), "is not a pairs file"),
+                        ((log, "--holdout", "0.3"), "--holdout applies to pairs files"),
+                        ((pairs_file, pairs_file), "is the same file"),
+                        ((pairs_file, "--out", tmp_path / "r.parquet"), "unsupported extension")):
+        code, out, err = run(capsys, "fit", *args, *(() if "--out" in args else
+                                                      ("--out", target)))
+        assert code == 2 and out == "" and err.count("\n") == 1, (args, err)
+        assert words in err, (args, err)
+    assert not target.exists() and not (tmp_path / "r.parquet").exists()
