@@ -27,7 +27,8 @@ def test_readme_opens_with_the_two_commands_and_ci_runs_the_test_one():
     assert [line.split("#")[0].strip() for line in first] == ["make demo", "make test"]
     makefile = (ROOT / "Makefile").read_text()
     assert re.search(r"^demo: setup\n\t.*persuasive reproduce all$", makefile, re.M)
-    assert re.search(r"^test: setup\n\t.*-m pytest$", makefile, re.M)
+    # the suite in two workers, a test file per worker (README "Tests")
+    assert re.search(r"^test: setup\n\t.*-m pytest -n 2 --dist loadfile$", makefile, re.M)
     assert "make test" in (ROOT / ".ci" / "run").read_text()
 
 
