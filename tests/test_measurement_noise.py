@@ -65,16 +65,25 @@ def test_a_verdict_on_the_box_holds_for_every_state_in_it(scenario, s_R, v_R, s_
         (scenario, (s_R, v_R), (s_H, v_H), tR, tH)
 
 
-def test_without_noise_the_box_is_the_state():
-    C = conflict("intersection", 0.0, 0.0)
-    assert C[sh.C_MEAS_S] == 0.0 == C[sh.C_MEAS_V]
-    # the same verdicts as the exact check, bit for bit, on a grid of states
+def test_the_humans_window_is_its_corners():
+    """The box's window: the earliest arrival is the exact one of the furthest and fastest
+    corner, the latest exit that of the nearest and slowest, and a human past its interval
+    only when even its nearest corner is."""
+    C = conflict("intersection", DS, DV)
+    exact = C.copy()
+    exact[sh.C_MEAS_S] = exact[sh.C_MEAS_V] = 0.0
+    ds, dv = C[sh.C_MEAS_S], C[sh.C_MEAS_V]
     rng = np.random.default_rng(3)
     for _ in range(200):
-        x = rng.uniform([-20, 0, -20, 0], [5, 10, 5, 10])
-        a = float(rng.choice([-2.0, 0.0, 1.0]))
-        assert sh.shield_step(x[0], x[1], a, 0.1, x[2], x[3], C) == sh.shield_step(
-            x[0], x[1], a, 0.1, x[2], x[3], C.copy())
+        s, v = rng.uniform(-20.0, 2.0), rng.uniform(0.5, 9.5)
+        t_in, t_out, past = sh.human_window(s, v, C)
+        assert t_in == sh.human_window(s + ds, v + dv, exact)[0]
+        assert t_out == sh.human_window(s - ds, v - dv, exact)[1]
+        assert past == (s - ds > C[sh.C_H_HI])
+    # without noise the box is the state: the same window as the exact check
+    C0 = conflict("intersection", 0.0, 0.0)
+    assert C0[sh.C_MEAS_S] == 0.0 == C0[sh.C_MEAS_V]
+    assert sh.human_window(-7.0, 4.0, C0) == sh.human_window(-7.0, 4.0, exact)
 
 
 def test_a_box_certifies_less_than_its_centre():
