@@ -32,8 +32,9 @@ within ``ego width / 2 + its half-diagonal +`` :data:`TRACK_MARGIN_M` of the ego
 stretch of the ego's path facing it (widened by ``ego length / 2 + its half-diagonal``); a vehicle
 whose lanes stay in that band to their end joins the ego's lane (a merge, with its merge point
 where its lane centre comes within :data:`SAME_LANE_M` of the ego's line), one in the ego's lane
-ahead of it is followed. Its limits are highway-env's own: ``IDMVehicle`` accelerates at most at
-its ``COMFORT_ACC_MAX``, brakes at most at its ``ACC_MAX`` and never drives faster than the larger
+ahead of it is followed (the traffic is :class:`ForwardIDMVehicle`, highway-env's ``IDMVehicle``
+that stops at rest instead of driving backwards). Its limits are highway-env's own: ``IDMVehicle``
+accelerates at most at its ``COMFORT_ACC_MAX``, brakes at most at its ``ACC_MAX`` and never drives faster than the larger
 of its speed and the speed limit of every lane on its way (:func:`speed_bound`: the IDM clips its
 target to the lane's limit, whatever target ``RegulatedRoad`` sets while it makes a vehicle yield
 and after); every episode checks that every vehicle stayed inside that envelope
@@ -176,7 +177,43 @@ def highway_config(config: Config) -> dict[str, Any]:
         "destination": DESTINATION,
         "simulation_frequency": FREQUENCY_HZ,
         "policy_frequency": FREQUENCY_HZ,
+        "other_vehicles_type": TRAFFIC_VEHICLE,
     }
+
+
+#: The class of highway-env's traffic (and of its own ego driver): :class:`ForwardIDMVehicle`.
+TRAFFIC_VEHICLE = "persuasive.envs.highway.ForwardIDMVehicle"
+
+
+def _forward_idm_class():
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    class ForwardIDMVehicle(IDMVehicle):
+        """highway-env's ``IDMVehicle`` that never drives backwards: a braking step ends at rest
+        at the latest. highway-env's own lets the IDM's braking behind a close leader carry the
+        speed below 0 (its ``MIN_SPEED`` is -40 m/s, and its clip acts only from the next step),
+        so its vehicles reversed, out of the envelope the shield assumes (``v_min = 0``); cars
+        waiting at a junction do not roll backwards. Everything else is highway-env's (the env
+        sets the same IDM parameters on it as on its default class)."""
+
+        def step(self, dt: float) -> None:
+            if not self.crashed and self.speed >= 0.0:
+                self.action["acceleration"] = max(float(self.action["acceleration"]),
+                                                  -self.speed / dt)
+            super().step(dt)
+
+    ForwardIDMVehicle.__module__ = __name__
+    ForwardIDMVehicle.__qualname__ = "ForwardIDMVehicle"
+    return ForwardIDMVehicle
+
+
+def __getattr__(name: str):
+    # built on first use, so that importing this module does not import highway-env
+    if name == "ForwardIDMVehicle":
+        cls = _forward_idm_class()
+        globals()[name] = cls
+        return cls
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def make_highway_env(config: Config, render_mode: str | None = None):
@@ -733,12 +770,13 @@ def clear_distance(config: Config) -> float:
 
 
 def install_default_ego(env) -> Any:
-    """Replace the ego by one of highway-env's own ``IDMVehicle`` (module docstring)."""
-    from highway_env.vehicle.behavior import IDMVehicle
+    """Replace the ego by one of highway-env's own ``IDMVehicle`` (module docstring; the
+    traffic's class, :class:`ForwardIDMVehicle`, with the parameters the env sets on it)."""
+    from highway_env import utils
 
     u = env.unwrapped
     old = u.vehicle
-    ego = IDMVehicle(u.road, np.array(old.position, float), heading=old.heading,
+    ego = utils.class_from_path(u.config["other_vehicles_type"])(u.road, np.array(old.position, float), heading=old.heading,
                      speed=old.speed, target_lane_index=old.lane_index,
                      enable_lane_change=False)
     ego.plan_route_to(DESTINATION)
