@@ -167,13 +167,16 @@ def test_the_rule_judges_the_furthest_and_fastest_human_at_entry():
 
 def test_in_the_lane_ahead_the_av_brakes_no_harder_than_the_rule():
     C, _ = merge_conflict(**{"responsibility.front_brake_mps2": 1.0})
-    assert C[sh.C_R_UMIN] == -1.0  # the AV's braking command in the shared lane
+    assert C[sh.C_R_ULANE] == -1.0  # the AV's braking command in the lane ahead of a human
+    assert C[sh.C_R_UMIN] == -2.0  # its own, before the lane and against other conflicts
+    assert sh.braking(10.0, 5.0, -30.0, 5.0, C) == -1.0  # in the lane, the human behind
+    assert sh.braking(-20.0, 5.0, -30.0, 5.0, C) == -2.0  # before the merge point
     # the human behind: a proposal harder than the rule is overridden by the rule's braking
     assert sh.shield_step(10.0, 5.0, -2.0, 0.1, -30.0, 5.0, C) == (-1.0, sh.BRAKE)
     assert sh.shield_step(10.0, 5.0, -0.5, 0.1, -30.0, 5.0, C) == (-0.5, sh.ADMITTED)
     # before the merge point the rule limits the fallback, not a proposal that stops early
     C2, _ = merge_conflict()
-    assert C2[sh.C_R_UMIN] == -2.0  # the default: the follower's 4.5 taken at its own 2
+    assert C2[sh.C_R_ULANE] == -2.0  # the default: the follower's 4.5 taken at its own 2
 
 
 def test_merging_ahead_needs_the_rules_gap():

@@ -136,8 +136,8 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
         # the ego's braking command is held to the rule's in-lane limit
         rule = config.responsibility.resolved(o, ego)
         row[sh.C_RESP_RHO], row[sh.C_RESP_ACCEL], row[sh.C_RESP_BRAKE], row[sh.C_RESP_FRONT] = rule
-        if c.kind == MERGE:
-            row[sh.C_R_UMIN] = sh.lane_braking(ego.u_min_mps2, rule[3], 0.0)
+        row[sh.C_R_ULANE] = (sh.lane_braking(ego.u_min_mps2, rule[3], 0.0) if c.kind == MERGE
+                             else ego.u_min_mps2)
         rows.append(row)
     C = np.array(rows, float).reshape(len(rows), sh.N_CONFLICT)
     return (np.array(s_R, float), np.array(s_H, float), np.array(v_H, float), C)

@@ -103,15 +103,17 @@ from ..kinematics import saturated_step
 # (``simulation.accel_noise_mps2``; the human's limits are widened by it already). Last, the
 # cut-in rule of a shared lane (``[responsibility]``, docs/method.md §12.10): the follower's
 # reaction time [s], its acceleration during it, its braking after it and the AV's hardest
-# braking in the lane ahead of it [m/s^2, brakings positive]. In a shared lane ``C_R_UMIN`` is
-# the AV's braking command held to that in-lane limit (its BRAKE fallback there). Then the
+# braking in the lane ahead of it [m/s^2, brakings positive]. Then the
 # half-widths of a uniform error on every measured position [m] and speed [m/s]
 # (``simulation.measurement_noise = "uniform"``; 0 otherwise): each measured state stands for
-# the box of true states around it (:func:`_fast`, :func:`_slow`).
+# the box of true states around it (:func:`_fast`, :func:`_slow`). Last, the AV's braking
+# command in the lane ahead of this vehicle (its ``C_R_UMIN`` held to the cut-in rule's in-lane
+# limit in a shared lane, :func:`lane_braking`; ``C_R_UMIN`` elsewhere): the filter's BRAKE
+# while the AV is there (:func:`braking`).
 (C_R_LO, C_R_HI, C_H_LO, C_H_HI, C_SHARED, C_GAP, C_KIND, C_RHO, C_R_UMIN, C_R_UMAX, C_R_VMIN,
  C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX, C_R_LINE, C_R_NOISE, C_RESP_RHO,
- C_RESP_ACCEL, C_RESP_BRAKE, C_RESP_FRONT, C_MEAS_S, C_MEAS_V) = range(24)
-N_CONFLICT = 24
+ C_RESP_ACCEL, C_RESP_BRAKE, C_RESP_FRONT, C_MEAS_S, C_MEAS_V, C_R_ULANE) = range(25)
+N_CONFLICT = 25
 
 #: Verdicts of :func:`shield_filter` (the world logs them per step); ``OFF``: no shield.
 ADMITTED, BRAKE, GO, UNCERTIFIED, OFF = 0, 1, 2, 3, -1
@@ -157,8 +159,8 @@ def conflict_vector(P_av: np.ndarray, P_hv: np.ndarray, out: np.ndarray) -> None
     out[C_R_LINE] = min(P_av[slot.SHIELD_LINE], P_av[slot.SHIELD_OCC_LO])
     out[C_RESP_RHO], out[C_RESP_ACCEL] = P_av[slot.RESP_RHO], P_av[slot.RESP_ACCEL]
     out[C_RESP_BRAKE], out[C_RESP_FRONT] = P_av[slot.RESP_BRAKE], P_av[slot.RESP_FRONT_BRAKE]
-    if out[C_SHARED] != 0.0:
-        out[C_R_UMIN] = lane_braking(P_av[slot.U_MIN], P_av[slot.RESP_FRONT_BRAKE], w)
+    out[C_R_ULANE] = (lane_braking(P_av[slot.U_MIN], P_av[slot.RESP_FRONT_BRAKE], w)
+                      if out[C_SHARED] != 0.0 else out[C_R_UMIN])
     out[C_MEAS_S], out[C_MEAS_V] = P_av[slot.MEAS_S], P_av[slot.MEAS_V]
 
 
@@ -412,7 +414,7 @@ def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: floa
     hv_min, hv_max = C[C_H_VMIN], C[C_H_VMAX]
     hf, hvf = _fast(s_H, v_H, hv_min, hv_max, C)
     hl, hvl = _slow(s_H, v_H, hv_min, hv_max, C)
-    u_lane = C[C_R_UMIN]  # the AV's braking command held to the cut-in rule's in-lane limit
+    u_lane = C[C_R_ULANE]  # the AV's braking command held to the cut-in rule's in-lane limit
     if sl >= r_hi:
         if hf < sl:  # the human is behind: the AV brakes no harder than the rule allows
             return a1 >= u_lane and a2 >= u_lane
@@ -502,6 +504,30 @@ def brake_certified(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H
     return ok
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def in_lane_ahead(s_R: float, v_R: float, s_H: float, v_H: float, C: np.ndarray) -> bool:
+    """The AV is surely in the shared lane (past the merge point) and the human surely behind
+    it: the cut-in rule's in-lane braking limit holds (docs/method.md §12.10)."""
+    if C[C_SHARED] == 0.0:
+        return False
+    sl, _ = _slow(s_R, v_R, C[C_R_VMIN], C[C_R_VMAX], C)
+    hf, _ = _fast(s_H, v_H, C[C_H_VMIN], C[C_H_VMAX], C)
+    return sl >= C[C_R_HI] and hf < sl
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def braking(s_R: float, v_R: float, s_H: float, v_H: float, C: np.ndarray) -> float:
+    """The BRAKE fallback's command against this conflict [m/s^2]: the AV's ``u_min``, or
+    the in-lane limit while it is in the lane ahead of the human (:func:`in_lane_ahead`).
+    Held to the limit only there, not before the merge point: the limit of a merge conflict
+    does not weaken the AV's braking against the others until it has entered the lane (a
+    merge conflict appearing while the AV approaches a crossing leaves its certificate for
+    that crossing as it was)."""
+    if in_lane_ahead(s_R, v_R, s_H, v_H, C):
+        return C[C_R_ULANE]
+    return C[C_R_UMIN]
+
+
 @njit(cache=True, _nrt=False)
 def admissible(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
                C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
@@ -509,7 +535,7 @@ def admissible(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: flo
     then ``BRAKE``" (with the yield line while it binds, :func:`brake_certified`)."""
     return (certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past)
             or brake_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in_H, t_out_H, past,
-                               line_binds(s_R, v_R, C), C[C_R_UMIN]))
+                               line_binds(s_R, v_R, C), braking(s_R, v_R, s_H, v_H, C)))
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -575,9 +601,9 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     yield line of every conflict whose line binds) or for ``F = GO``; otherwise, while some
     line binds, the gentlest stop before every binding line (verdict ``BRAKE``), then
     ``BRAKE``, then ``GO``; once none binds, ``GO`` before ``BRAKE``, unless the proposal
-    brakes harder than ``BRAKE`` (each if certified against all). ``BRAKE`` is the weakest
-    braking command of the conflicts: a shared lane holds it to the cut-in rule's in-lane
-    limit (docs/method.md §12.10). Otherwise (``UNCERTIFIED``) the fallback whose first possible overlap, over
+    brakes harder than ``BRAKE`` (each if certified against all). ``BRAKE`` is the AV's
+    ``u_min``, held to the cut-in rule's in-lane limit while it is in the lane ahead of a
+    vehicle (:func:`braking`, docs/method.md §12.10). Otherwise (``UNCERTIFIED``) the fallback whose first possible overlap, over
     all the vehicles, starts latest, or whose overlaps are shortest in all (ties: brake).
 
     ``lead`` ``(3,)`` [m]: how much further along its path the AV is taken when its first
@@ -599,11 +625,11 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     for j in range(n):
         t_in, t_out, past = human_window(s_H[j], v_H[j], C[j])
         window[j, 0], window[j, 1], window[j, 2] = t_in, t_out, 1.0 if past else 0.0
-    # BRAKE: the weakest braking command of all the conflicts (a shared lane holds it to the
-    # cut-in rule's in-lane limit), so that it is allowed against every one of them
+    # BRAKE: the AV's u_min, held to the cut-in rule's in-lane limit while it is in the lane
+    # ahead of some vehicle (the weakest such command, allowed against every conflict)
     u_min, u_max = C[0, C_R_UMIN], C[0, C_R_UMAX]
-    for j in range(1, n):
-        u_min = max(u_min, C[j, C_R_UMIN])
+    for j in range(n):
+        u_min = max(u_min, braking(s_R[j], v_R, s_H[j], v_H[j], C[j]))
     # the yield lines that still bind (the AV can stand before them: docs/method.md §12.8),
     # and the gentlest braking that stands before every one of them
     yielding, a_line = False, u_max
@@ -706,7 +732,8 @@ def verdict_name(code: int) -> str | None:
 
 __all__ = ["ADMITTED", "BRAKE", "GO", "LINE_MARGIN_M", "N_CONFLICT", "OFF", "TIME_MARGIN_S",
            "UNCERTIFIED", "VERDICTS", "admissible", "brake_certified", "certified",
-           "conflict_vector", "cut_in_fair", "go_certified", "human_window", "lane_braking",
+           "braking", "conflict_vector", "cut_in_fair", "go_certified", "human_window",
+           "in_lane_ahead", "lane_braking",
            "line_binds", "line_brake",
            "one_buffer", "profile_reach", "reach_time", "shield_filter",
            "shield_filter_one", "shield_step",
