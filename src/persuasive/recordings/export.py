@@ -55,6 +55,17 @@ def run_rows(record, rng: np.random.Generator, noise_m: float) -> dict[str, np.n
     return {c: np.concatenate(parts) for c, parts in cols.items()}
 
 
+def _check_export(noise_m: float, count: int, what: str) -> None:
+    """The checks every export makes first: the noise's size and at most 1000 inputs (three
+    digits in the names); :class:`RecordingError` otherwise."""
+    if not (np.isfinite(noise_m) and noise_m >= 0.0):
+        raise RecordingError(f"--noise-m = {noise_m!r} is out of range; allowed: a number "
+                             ">= 0 m")
+    if count > 1000:
+        raise RecordingError(f"{count} {what} given; allowed: at most 1000 "
+                             "(vehicle_tracks_000 to _999)")
+
+
 def export_runs(runs: Sequence[str | Path], folder: str | Path, noise_m: float = 0.0,
                 seed: int = 0) -> list[str]:
     """Write each run log of ``runs`` into ``folder`` (existing) as
@@ -63,12 +74,7 @@ def export_runs(runs: Sequence[str | Path], folder: str | Path, noise_m: float =
     :class:`RecordingError` before writing anything."""
     from ..record import load_record
 
-    if not (np.isfinite(noise_m) and noise_m >= 0.0):
-        raise RecordingError(f"--noise-m = {noise_m!r} is out of range; allowed: a number "
-                             ">= 0 m")
-    if len(runs) > 1000:
-        raise RecordingError(f"{len(runs)} runs given; allowed: at most 1000 "
-                             "(vehicle_tracks_000 to _999)")
+    _check_export(noise_m, len(runs), "runs")
     records = [load_record(r) for r in runs]
     rng = np.random.default_rng(seed)
     rows = [run_rows(rec, rng, noise_m) for rec in records]
@@ -93,12 +99,7 @@ def export_fcd(files: Sequence[str | Path], folder: str | Path, noise_m: float =
     from .._files import atomic_write
     from .sumo_fcd import read_fcd, read_types
 
-    if not (np.isfinite(noise_m) and noise_m >= 0.0):
-        raise RecordingError(f"--noise-m = {noise_m!r} is out of range; allowed: a number "
-                             ">= 0 m")
-    if len(files) > 1000:
-        raise RecordingError(f"{len(files)} fcd files given; allowed: at most 1000 "
-                             "(vehicle_tracks_000 to _999)")
+    _check_export(noise_m, len(files), "fcd files")
     vtypes = read_types(types)
     rng = np.random.default_rng(seed)
     read = [read_fcd(f, vtypes, rng, noise_m) for f in files]
