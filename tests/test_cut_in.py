@@ -49,7 +49,7 @@ def rss_distance(v_rear, v_front, rho, acc, brake, front):
 
 def fair_now(C, v_R, s_H, v_H):
     """The rule for an AV at the merge point now (``t_0 = 0``)."""
-    return sh.cut_in_fair(C[sh.C_R_HI], v_R, 0.0, 0.1, 0.0, 0.0, s_H, v_H, C)
+    return sh.cut_in_fair(C[sh.C_R_HI], v_R, 0.0, 0.1, 0.0, math.inf, 0.0, 0.0, s_H, v_H, C)
 
 
 def smallest_fair_gap(C, v_R, v_H):
@@ -158,8 +158,8 @@ def test_the_rule_judges_the_furthest_and_fastest_human_at_entry():
     # placed so that the human's *current* state would pass but its full-throttle one fails
     assert r_hi - C[sh.C_GAP] - (-40.0) > rss_distance(6.0, v_R, 1.0, 1.0, 2.0, 2.0)
     assert r_hi - C[sh.C_GAP] - s_far < need
-    assert not sh.cut_in_fair(s_R, v_R, 0.0, 0.1, 0.0, t_0, -40.0, 6.0, C)
-    assert sh.cut_in_fair(s_R, v_R, 0.0, 0.1, 0.0, t_0, -60.0, 6.0, C)
+    assert not sh.cut_in_fair(s_R, v_R, 0.0, 0.1, 0.0, math.inf, 0.0, t_0, -40.0, 6.0, C)
+    assert sh.cut_in_fair(s_R, v_R, 0.0, 0.1, 0.0, math.inf, 0.0, t_0, -60.0, 6.0, C)
 
 
 # -- the shield in the lane ----------------------------------------------------------------

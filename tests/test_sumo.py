@@ -302,7 +302,7 @@ def test_go_is_never_certified_behind_a_leader():
     c = X.Conflict("a", X.MERGE, -11.367, 80.68, 13.84, (-9.597, 0.0), (-9.7, 7.5), other)
     s_R, s_H, v_H, C = X.conflict_arrays([c], cfg, ego)
     v = 3.361317352812848
-    assert not sh._gap_holds(s_R[0], v, 2.6, 0.1, 2.6, s_H[0], v_H[0], C[0])
+    assert not sh._gap_holds(s_R[0], v, 2.6, 0.1, 2.6, math.inf, 2.6, s_H[0], v_H[0], C[0])
     a, code = _filter(v, 2.6, s_R, s_H, v_H, C)
     assert code != sh.GO and not (code == sh.ADMITTED and a == 2.6 and not sh.certified(
         s_R[0], v, 2.6, 0.1, -4.5, s_H[0], v_H[0], C[0], *sh.human_window(s_H[0], v_H[0], C[0])))
@@ -412,16 +412,28 @@ def test_sumo_reports_the_unprotected_egos_collision(nets):
 
 
 def test_sumos_own_driver_is_judged_by_the_shield_it_does_not_use(nets):
-    """SUMO's ego, judged step by step by the worst-case shield (with the cut-in rule): in the
-    merge at 900 veh/h it enters in seed 1 by a step the certificate would not admit and in
-    seed 10 by one it admits; most of its other steps are admitted; a planner is not judged."""
-    first = S.run_episode("merge", 1, S.SUMO_DRIVER, 900.0, 0.0, nets["merge"]).result
+    """SUMO's ego, judged step by step by the worst-case shield (with the cut-in rule and
+    enter-then-follow): in the merge at 900 veh/h it enters in seed 2 by a step the
+    certificate would not admit and in seed 10 by one it admits; most of its other steps are
+    admitted; a planner is not judged."""
+    first = S.run_episode("merge", 2, S.SUMO_DRIVER, 900.0, 0.0, nets["merge"]).result
     assert first.crossed and first.entry_admitted is False
     assert 0 < first.judged_admitted < first.judged_steps
     tenth = S.run_episode("merge", 10, S.SUMO_DRIVER, 900.0, 0.0, nets["merge"]).result
     assert tenth.crossed and tenth.entry_admitted is True
     planner = S.run_episode("merge", 1, "yield/worst-case", 900.0, 0.0, nets["merge"]).result
     assert planner.judged_steps is None and planner.entry_admitted is None
+
+
+@pytest.mark.parametrize("seed", [2, 71])
+def test_the_ego_merges_between_cars_and_keeps_its_commitment(nets, seed):
+    """Merge, 900 veh/h: without the enter-then-follow fallback the shielded ego merged in
+    neither seed (7874a73); with it, but admitting a slowing proposal on BRAKE after its line,
+    seed 71 stood 27.7 s inside the junction. Now both merge, every step certified, 0 s
+    stood inside the junction (docs/method.md §12.8, §12.11)."""
+    r = S.run_episode("merge", seed, "persuasive/worst-case", 900.0, 0.0, nets["merge"]).result
+    assert r.crossed and r.junction_stood_s == 0.0
+    assert r.uncertified == 0 and not r.collision and r.guarantee_held
 
 
 @pytest.mark.slow

@@ -275,7 +275,8 @@ def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float
     a = float(accel_av[k]) if e > 0 else 0.0
     t_0 = 0.0 if e == 0 else sh.profile_reach(s_R, v_R, a, dt, a, r_hi, C[sh.C_R_VMIN],
                                               C[sh.C_R_VMAX])
-    fair = math.isfinite(t_0) and sh.cut_in_fair(s_R, v_R, a, dt, a, t_0, s_H, v_H, C)
+    fair = math.isfinite(t_0) and sh.cut_in_fair(s_R, v_R, a, dt, a, math.inf, a, t_0, s_H,
+                                                 v_H, C)
     out = np.zeros_like(rear)
     if fair:
         gentle = np.asarray(accel_av, float)[k:] >= -C[sh.C_RESP_FRONT] - 1e-9

@@ -69,6 +69,16 @@ tries the gentlest stop at the line (:func:`line_brake`); once committed, an ove
 answer is still certified from the current state and ``S`` is unchanged: the line chooses among
 certified answers, never adds one. A line at ``R_lo`` (the default) never binds.
 
+**Enter, then follow** (docs/method.md §12.11). A merge between two cars of the main road is
+certified by neither fallback (``GO`` for ever reaches the car ahead, ``BRAKE`` stops in the
+side zone where the car behind arrives), so a third family joins them: ``FOLLOW(m)``, ``u_max``
+for ``m`` whole steps after the step (until the AV is past every merge point in view,
+:func:`follow_steps`), then the in-lane braking for ever, certified exactly on the three-piece
+motion (:func:`certified3`). Its switch falls on a step boundary, so a step that carries it out
+lands on its remainder, ``FOLLOW(m - 1)``: the invariant above holds for ``S`` the states from
+which ``BRAKE``, ``GO`` or some ``FOLLOW(m)`` is certified, which contains the old ``S``. It is
+tried only with the exact kinematics (no noise, no simulator lead), where that holds.
+
 **Conservative, never optimistic.** Every time compared carries a margin of
 :data:`TIME_MARGIN_S` against the AV and every interval is widened by rounding margins when it
 is built (``persuasive.packing``), so floating-point rounding cannot turn an unsafe verdict into
@@ -228,23 +238,39 @@ def reach_time(s: float, v: float, a: float, target: float, v_min: float,
 
 
 @njit(cache=True, _nrt=False, inline="always")
-def profile_reach(s: float, v: float, a1: float, d1: float, a2: float, target: float,
-                  v_min: float, v_max: float) -> float:
-    """:func:`reach_time` of the profile "``a1`` for ``d1`` seconds, then ``a2`` for ever"."""
+def profile3_reach(s: float, v: float, a1: float, d1: float, a2: float, d2: float, a3: float,
+                   target: float, v_min: float, v_max: float) -> float:
+    """:func:`reach_time` of the profile "``a1`` for ``d1`` seconds, then ``a2`` for ``d2``,
+    then ``a3`` for ever" (``d2 = inf``: two pieces)."""
     t = reach_time(s, v, a1, target, v_min, v_max)
     if t <= d1:
         return t
     s1, v1 = saturated_step(s, v, a1, d1, v_min, v_max)
-    return d1 + reach_time(s1, v1, a2, target, v_min, v_max)
+    t = reach_time(s1, v1, a2, target, v_min, v_max)
+    if t <= d2:
+        return d1 + t
+    s2, v2 = saturated_step(s1, v1, a2, d2, v_min, v_max)
+    return d1 + d2 + reach_time(s2, v2, a3, target, v_min, v_max)
 
 
 @njit(cache=True, _nrt=False, inline="always")
-def _profile_state(s: float, v: float, a1: float, d1: float, a2: float, t: float,
-                   v_min: float, v_max: float) -> tuple[float, float]:
+def profile_reach(s: float, v: float, a1: float, d1: float, a2: float, target: float,
+                  v_min: float, v_max: float) -> float:
+    """:func:`reach_time` of the profile "``a1`` for ``d1`` seconds, then ``a2`` for ever"."""
+    return profile3_reach(s, v, a1, d1, a2, _INF, a2, target, v_min, v_max)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _profile_state(s: float, v: float, a1: float, d1: float, a2: float, d2: float, a3: float,
+                   t: float, v_min: float, v_max: float) -> tuple[float, float]:
+    """The state at time ``t`` of "``a1`` for ``d1``, then ``a2`` for ``d2``, then ``a3``"."""
     if t <= d1:
         return saturated_step(s, v, a1, t, v_min, v_max)
     s1, v1 = saturated_step(s, v, a1, d1, v_min, v_max)
-    return saturated_step(s1, v1, a2, t - d1, v_min, v_max)
+    if t - d1 <= d2:
+        return saturated_step(s1, v1, a2, t - d1, v_min, v_max)
+    s2, v2 = saturated_step(s1, v1, a2, d2, v_min, v_max)
+    return saturated_step(s2, v2, a3, t - d1 - d2, v_min, v_max)
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -309,39 +335,47 @@ def _next_after(t: float, b0: float, b1: float, b2: float, b3: float) -> float:
 @njit(cache=True, _nrt=False)
 def _gap_ok(s_L: float, v_L: float, la1: float, ld1: float, la2: float, lv_min: float,
             lv_max: float, s_F: float, v_F: float, fa1: float, fd1: float, fa2: float,
-            fv_min: float, fv_max: float, L: float) -> bool:
-    """A follower ("``fa1`` for ``fd1`` seconds, then ``fa2``", speeds in ``fv_min..fv_max``)
-    stays more than ``L`` behind a leader ("``la1`` for ``ld1``, then ``la2``"):
-    ``s_L(t) - s_F(t) > L`` for all ``t >= 0``, exactly.
+            fd2: float, fa3: float, fv_min: float, fv_max: float, L: float) -> bool:
+    """A follower ("``fa1`` for ``fd1`` seconds, then ``fa2`` for ``fd2``, then ``fa3``",
+    speeds in ``fv_min..fv_max``; ``fd2 = inf``: two pieces) stays more than ``L`` behind a
+    leader ("``la1`` for ``ld1``, then ``la2``"): ``s_L(t) - s_F(t) > L`` for all ``t >= 0``,
+    exactly.
 
     Both positions are piecewise quadratic in ``t``; the gap's minimum lies at a breakpoint
     (a change of acceleration or a saturation) or where the speeds are equal inside a piece,
     and after the last breakpoint both speeds are constant."""
-    # breakpoints: each vehicle's saturation in its first piece, its switch, its saturation
-    # after the switch
+    # breakpoints: each vehicle's saturation in each piece and its switches
     b0 = _saturation_time(v_F, fa1, fv_min, fv_max)
     b0 = b0 if b0 < fd1 else _INF
     _, v1 = saturated_step(s_F, v_F, fa1, fd1, fv_min, fv_max)
     b2 = fd1 + _saturation_time(v1, fa2, fv_min, fv_max)
+    sw2, b4 = _INF, _INF
+    if fd2 < _INF:  # a third piece
+        sw2 = fd1 + fd2
+        b2 = b2 if b2 < sw2 else _INF
+        _, v2 = saturated_step(0.0, v1, fa2, fd2, fv_min, fv_max)
+        b4 = sw2 + _saturation_time(v2, fa3, fv_min, fv_max)
     c0 = _saturation_time(v_L, la1, lv_min, lv_max)
     c0 = c0 if c0 < ld1 else _INF
     _, w1 = saturated_step(s_L, v_L, la1, ld1, lv_min, lv_max)
     c2 = ld1 + _saturation_time(w1, la2, lv_min, lv_max)
     t = 0.0
     while True:
-        sr, vr = _profile_state(s_F, v_F, fa1, fd1, fa2, t, fv_min, fv_max)
-        sh, vh = _profile_state(s_L, v_L, la1, ld1, la2, t, lv_min, lv_max)
+        sr, vr = _profile_state(s_F, v_F, fa1, fd1, fa2, fd2, fa3, t, fv_min, fv_max)
+        sh, vh = _profile_state(s_L, v_L, la1, ld1, la2, _INF, la2, t, lv_min, lv_max)
         if not sh - sr > L:
             return False
-        t_next = min(_next_after(t, b0, fd1, b2, _INF), _next_after(t, c0, ld1, c2, _INF))
+        t_next = min(_next_after(t, b0, fd1, b2, sw2), _next_after(t, b4, c0, ld1, c2))
         # constant accelerations until t_next (0 once a speed limit is reached)
-        ar = _held(fa1 if t < fd1 else fa2, vr, fv_min, fv_max)
+        ar = _held(fa1 if t < fd1 else (fa2 if t < sw2 else fa3), vr, fv_min, fv_max)
         ah = _held(la1 if t < ld1 else la2, vh, lv_min, lv_max)
         if ah != ar:  # the gap's stationary point inside the piece
             t_star = t + (vr - vh) / (ah - ar)
             if t < t_star < t_next:
-                srs, _ = _profile_state(s_F, v_F, fa1, fd1, fa2, t_star, fv_min, fv_max)
-                shs, _ = _profile_state(s_L, v_L, la1, ld1, la2, t_star, lv_min, lv_max)
+                srs, _ = _profile_state(s_F, v_F, fa1, fd1, fa2, fd2, fa3, t_star, fv_min,
+                                        fv_max)
+                shs, _ = _profile_state(s_L, v_L, la1, ld1, la2, _INF, la2, t_star, lv_min,
+                                        lv_max)
                 if not shs - srs > L:
                     return False
         if t_next == _INF:
@@ -354,50 +388,56 @@ def _gap_ok(s_L: float, v_L: float, la1: float, ld1: float, la2: float, lv_min: 
 
 
 @njit(cache=True, _nrt=False, inline="always")
-def _gap_holds(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float,
-               v_H: float, C: np.ndarray) -> bool:
-    """The AV following (``a1`` for ``d1``, then ``a2``) never closes to within ``L`` of a
-    human leader braking at its ``u_min`` from now (:func:`_gap_ok`)."""
+def _gap_holds(s_R: float, v_R: float, a1: float, d1: float, a2: float, d2: float, a3: float,
+               s_H: float, v_H: float, C: np.ndarray) -> bool:
+    """The AV following ("``a1`` for ``d1``, then ``a2`` for ``d2``, then ``a3``") never closes
+    to within ``L`` of a human leader braking at its ``u_min`` from now (:func:`_gap_ok`)."""
     hu = C[C_H_UMIN]
-    return _gap_ok(s_H, v_H, hu, 0.0, hu, C[C_H_VMIN], C[C_H_VMAX], s_R, v_R, a1, d1, a2,
-                   C[C_R_VMIN], C[C_R_VMAX], C[C_GAP] + GAP_MARGIN_M)
+    return _gap_ok(s_H, v_H, hu, 0.0, hu, C[C_H_VMIN], C[C_H_VMAX], s_R, v_R, a1, d1, a2, d2,
+                   a3, C[C_R_VMIN], C[C_R_VMAX], C[C_GAP] + GAP_MARGIN_M)
 
 
 @njit(cache=True, _nrt=False)
-def cut_in_fair(s_R: float, v_R: float, a1: float, d1: float, a2: float, t_0: float,
-                s_H: float, v_H: float, C: np.ndarray) -> bool:
+def cut_in_fair(s_R: float, v_R: float, a1: float, d1: float, a2: float, d2: float, a3: float,
+                t_0: float, s_H: float, v_H: float, C: np.ndarray) -> bool:
     """The cut-in rule (docs/method.md §12.10) for the AV trajectory "``a1`` for ``d1``, then
-    ``a2``" (its slowest realisation under acceleration noise) that reaches the merge point at
-    ``t_0``: against the furthest and fastest human at ``t_0`` (full throttle from now: every
-    human is behind it and slower), a follower that holds ``C_RESP_ACCEL`` for ``C_RESP_RHO``
-    and then brakes at ``C_RESP_BRAKE`` stays more than the gap behind the AV braking at
-    ``C_RESP_FRONT`` from ``t_0`` (RSS's safe longitudinal distance, computed exactly on the
-    piecewise-quadratic motions rather than by the closed form, so that it also holds when
-    the follower brakes harder than the AV, or reaches a speed limit)."""
+    ``a2`` for ``d2``, then ``a3``" (its slowest realisation under acceleration noise) that
+    reaches the merge point at ``t_0``: against the furthest and fastest human at ``t_0``
+    (full throttle from now: every human is behind it and slower), a follower that holds
+    ``C_RESP_ACCEL`` for ``C_RESP_RHO`` and then brakes at ``C_RESP_BRAKE`` stays more than
+    the gap behind the AV braking at ``C_RESP_FRONT`` from ``t_0`` (RSS's safe longitudinal
+    distance, computed exactly on the piecewise-quadratic motions rather than by the closed
+    form, so that it also holds when the follower brakes harder than the AV, or reaches a
+    speed limit)."""
     w = C[C_R_NOISE]
     rv_min, rv_max, hv_min, hv_max = C[C_R_VMIN], C[C_R_VMAX], C[C_H_VMIN], C[C_H_VMAX]
-    s_e, v_e = _profile_state(s_R, v_R, a1 - w, d1, a2 - w, t_0, rv_min, rv_max)
+    s_e, v_e = _profile_state(s_R, v_R, a1 - w, d1, a2 - w, d2, a3 - w, t_0, rv_min, rv_max)
     s_h, v_h = saturated_step(s_H, v_H, C[C_H_UMAX], t_0, hv_min, hv_max)
     front = -C[C_RESP_FRONT]
     return _gap_ok(s_e, v_e, front, 0.0, front, rv_min, rv_max, s_h, v_h, C[C_RESP_ACCEL],
-                   C[C_RESP_RHO], -C[C_RESP_BRAKE], hv_min, hv_max, C[C_GAP] + GAP_MARGIN_M)
+                   C[C_RESP_RHO], -C[C_RESP_BRAKE], _INF, -C[C_RESP_BRAKE], hv_min, hv_max,
+                   C[C_GAP] + GAP_MARGIN_M)
 
 
 @njit(cache=True, _nrt=False)
-def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float,
-              v_H: float, C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
-    """Whether the AV trajectory "``a1`` for ``d1`` seconds, then ``a2`` for ever" is
-    certified against every human of the model (module docstring); ``t_in_H, t_out_H,
-    past``: the human's :func:`human_window`. With acceleration noise of half-width
+def certified3(s_R: float, v_R: float, a1: float, d1: float, a2: float, d2: float, a3: float,
+               s_H: float, v_H: float, C: np.ndarray, t_in_H: float, t_out_H: float,
+               past: bool) -> bool:
+    """Whether the AV trajectory "``a1`` for ``d1`` seconds, then ``a2`` for ``d2``, then
+    ``a3`` for ever" is certified against every human of the model (module docstring);
+    ``t_in_H, t_out_H, past``: the human's :func:`human_window`. ``d2 = inf`` is the
+    two-piece trajectory of :func:`certified`; a finite ``d2`` is the enter-then-follow
+    fallback (:func:`follow_steps`). With acceleration noise of half-width
     ``w = C[C_R_NOISE]`` the AV's actual trajectory lies between the slowest ("``a1 - w``,
-    then ``a2 - w``") and the fastest (``+ w``), position being monotone in every step's
+    then ``a2 - w``, ...") and the fastest (``+ w``), position being monotone in every step's
     acceleration: it enters no earlier than the fastest, leaves no later than the slowest,
     stands before a line if the fastest does, and follows no closer than the fastest."""
     m = TIME_MARGIN_S
     rv_min, rv_max = C[C_R_VMIN], C[C_R_VMAX]
     r_lo, r_hi = C[C_R_LO], C[C_R_HI]
     w = C[C_R_NOISE]
-    f1, f2, l1, l2 = a1 + w, a2 + w, a1 - w, a2 - w  # fastest, slowest (w = 0: a1, a2)
+    # fastest, slowest (w = 0: a1, a2, a3)
+    f1, f2, f3, l1, l2, l3 = a1 + w, a2 + w, a3 + w, a1 - w, a2 - w, a3 - w
     # the box of true states behind the measured ones: its furthest and fastest corner enters
     # first, its nearest and slowest leaves last (no measurement error: the state itself)
     sf, vf = _fast(s_R, v_R, rv_min, rv_max, C)
@@ -405,10 +445,10 @@ def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: floa
     if C[C_SHARED] == 0.0:  # a crossing
         if sl > r_hi:
             return True
-        t_in_R = profile_reach(sf, vf, f1, d1, f2, r_lo, rv_min, rv_max)
+        t_in_R = profile3_reach(sf, vf, f1, d1, f2, d2, f3, r_lo, rv_min, rv_max)
         if t_in_R == _INF or t_in_H == _INF:
             return True  # it stands before the human's path, or no human gets to its own
-        t_out_R = profile_reach(sl, vl, l1, d1, l2, r_hi, rv_min, rv_max)
+        t_out_R = profile3_reach(sl, vl, l1, d1, l2, d2, l3, r_hi, rv_min, rv_max)
         return t_out_R + m < t_in_H - m or t_out_H + m < t_in_R - m
     # a shared lane past r_hi (the merge point)
     hv_min, hv_max = C[C_H_VMIN], C[C_H_VMAX]
@@ -417,23 +457,32 @@ def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: floa
     u_lane = C[C_R_ULANE]  # the AV's braking command held to the cut-in rule's in-lane limit
     if sl >= r_hi:
         if hf < sl:  # the human is behind: the AV brakes no harder than the rule allows
-            return a1 >= u_lane and a2 >= u_lane
-        return _gap_holds(sf, vf, f1, d1, f2, hl, hvl, C)
-    t_in_R = profile_reach(sf, vf, f1, d1, f2, r_lo, rv_min, rv_max)
+            return a1 >= u_lane and a2 >= u_lane and a3 >= u_lane
+        return _gap_holds(sf, vf, f1, d1, f2, d2, f3, hl, hvl, C)
+    t_in_R = profile3_reach(sf, vf, f1, d1, f2, d2, f3, r_lo, rv_min, rv_max)
     if t_in_R == _INF:
         return True  # it stands before the side zone
-    t_0 = profile_reach(sl, vl, l1, d1, l2, r_hi, rv_min, rv_max)
+    t_0 = profile3_reach(sl, vl, l1, d1, l2, d2, l3, r_hi, rv_min, rv_max)
     if not past and (t_in_H == _INF or t_0 + m < t_in_H - m):
         # in the lane (or standing in its side zone) before any human gets near: ahead of
         # it by the cut-in rule, and from its entry on braking no harder than the rule allows
         if t_0 == _INF:
             return True
-        t_enter = profile_reach(sf, vf, f1, d1, f2, r_hi, rv_min, rv_max)
-        return (a2 >= u_lane and (t_enter >= d1 or a1 >= u_lane)
-                and cut_in_fair(sl, vl, a1, d1, a2, t_0, hf, hvf, C))
+        t_enter = profile3_reach(sf, vf, f1, d1, f2, d2, f3, r_hi, rv_min, rv_max)
+        return (a3 >= u_lane and (t_enter >= d1 + d2 or a2 >= u_lane)
+                and (t_enter >= d1 or a1 >= u_lane)
+                and cut_in_fair(sl, vl, a1, d1, a2, d2, a3, t_0, hf, hvf, C))
     if past or t_out_H + m < t_in_R - m:  # the human is surely ahead: follow it
-        return _gap_holds(sf, vf, f1, d1, f2, hl, hvl, C)
+        return _gap_holds(sf, vf, f1, d1, f2, d2, f3, hl, hvl, C)
     return False
+
+
+@njit(cache=True, _nrt=False)
+def certified(s_R: float, v_R: float, a1: float, d1: float, a2: float, s_H: float,
+              v_H: float, C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
+    """Whether the AV trajectory "``a1`` for ``d1`` seconds, then ``a2`` for ever" is
+    certified against every human of the model (:func:`certified3` with two pieces)."""
+    return certified3(s_R, v_R, a1, d1, a2, _INF, a2, s_H, v_H, C, t_in_H, t_out_H, past)
 
 
 @njit(cache=True, _nrt=False)
@@ -528,14 +577,47 @@ def braking(s_R: float, v_R: float, s_H: float, v_H: float, C: np.ndarray) -> fl
     return C[C_R_UMIN]
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def follow_steps(v: float, first: float, dt: float, dist: float, u_max: float, v_min: float,
+                 v_max: float) -> int:
+    """How many whole steps of ``u_max`` after a first step of ``first`` (from speed ``v``)
+    carry the AV ``dist`` metres or more: the GO part of the enter-then-follow fallback
+    (docs/method.md §12.11); -1 if none does. Whole steps, so that the fallback's switch
+    falls on a step boundary and the step that carries it out lands exactly on its remainder
+    (the next step's fallback has one step less); a relative 1e-6 of a step is forgiven so
+    that rounding cannot add a step, and the filter also tries one more."""
+    x1, v1 = saturated_step(0.0, v, first, dt, v_min, v_max)
+    t = reach_time(x1, v1, u_max, dist, v_min, v_max)
+    if t == _INF:
+        return -1
+    return max(0, int(math.ceil(t / dt - 1e-6)))
+
+
 @njit(cache=True, _nrt=False)
 def admissible(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: float,
                C: np.ndarray, t_in_H: float, t_out_H: float, past: bool) -> bool:
     """The shield admits ``a`` for one step: "``a``, then ``GO``" is certified, or "``a``,
-    then ``BRAKE``" (with the yield line while it binds, :func:`brake_certified`)."""
-    return (certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past)
+    then ``BRAKE``" (with the yield line while it binds, :func:`brake_certified`), or, in a
+    shared lane with the exact kinematics, "``a``, then enter-then-follow" (the filter's
+    ``FOLLOW(m)`` and ``FOLLOW(m + 1)``, docs/method.md §12.11): some fallback certifies it.
+    The filter tries them in its own order, so a proposal admitted here on ``BRAKE`` alone
+    may still be overridden by ``GO`` while the AV is committed before an interval
+    (:func:`shield_filter`)."""
+    if (certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past)
             or brake_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in_H, t_out_H, past,
-                               line_binds(s_R, v_R, C), braking(s_R, v_R, s_H, v_H, C)))
+                               line_binds(s_R, v_R, C), braking(s_R, v_R, s_H, v_H, C))):
+        return True
+    if C[C_SHARED] == 0.0 or C[C_R_NOISE] != 0.0 or C[C_MEAS_S] != 0.0 \
+            or C[C_MEAS_V] != 0.0 or not math.isfinite(a):
+        return False
+    u_max = C[C_R_UMAX]
+    m = follow_steps(v_R, a, dt, C[C_R_HI] - s_R, u_max, C[C_R_VMIN], C[C_R_VMAX])
+    if m < 0:
+        return False
+    a_f = max(braking(s_R, v_R, s_H, v_H, C), C[C_R_ULANE])
+    return (certified3(s_R, v_R, a, dt, u_max, m * dt, a_f, s_H, v_H, C, t_in_H, t_out_H, past)
+            or certified3(s_R, v_R, a, dt, u_max, (m + 1) * dt, a_f, s_H, v_H, C, t_in_H,
+                          t_out_H, past))
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -601,7 +683,9 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     yield line of every conflict whose line binds) or for ``F = GO``; otherwise, while some
     line binds, the gentlest stop before every binding line (verdict ``BRAKE``), then
     ``BRAKE``, then ``GO``; once none binds, ``GO`` before ``BRAKE``, unless the proposal
-    brakes harder than ``BRAKE`` (each if certified against all). ``BRAKE`` is the AV's
+    brakes harder than ``BRAKE`` (each if certified against all); with a shared lane in view
+    and the exact kinematics the enter-then-follow fallbacks join both lists (after ``GO``:
+    docs/method.md §12.11; verdict ``GO``). ``BRAKE`` is the AV's
     ``u_min``, held to the cut-in rule's in-lane limit while it is in the lane ahead of a
     vehicle (:func:`braking`, docs/method.md §12.10). Otherwise (``UNCERTIFIED``) the fallback whose first possible overlap, over
     all the vehicles, starts latest, or whose overlaps are shortest in all (ties: brake).
@@ -632,35 +716,87 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
         u_min = max(u_min, braking(s_R[j], v_R, s_H[j], v_H[j], C[j]))
     # the yield lines that still bind (the AV can stand before them: docs/method.md §12.8),
     # and the gentlest braking that stands before every one of them
-    yielding, a_line = False, u_max
+    # and whether the AV is committed: past a line (or unable to stop before it) but still
+    # before that conflict's interval, where standing would block the others (§12.8)
+    yielding, committed, a_line = False, False, u_max
     for j in range(n):
         binds = line_binds(s_R[j] + lead[1], v_R, C[j])
         window[j, 2] += 2.0 if binds else 0.0
+        if not binds and C[j, C_R_LINE] < C[j, C_R_LO] and s_R[j] + lead[1] < C[j, C_R_LO]:
+            committed = True
         if binds:
             yielding = True
             sf, vf = _fast(s_R[j] + lead[1], v_R, C[j, C_R_VMIN], C[j, C_R_VMAX], C[j])
             a_line = min(a_line, line_brake(sf, vf, dt, C[j, C_R_LINE],
                                             u_min + C[j, C_R_NOISE], u_max) - C[j, C_R_NOISE])
-    # candidates: the proposal with either fallback; then, while a line binds, the yield at
-    # the line, BRAKE, GO; once committed (no line binds), GO before BRAKE: drive through
-    # rather than stand where it blocks others; but a proposal that brakes harder than BRAKE
-    # (the in-lane limit of a shared lane) gets BRAKE first, the nearest to what it asked
+    # the enter-then-follow fallbacks (docs/method.md §12.11): GO for whole steps until the
+    # AV is past every merge point in view, then the in-lane braking a_f; only with the
+    # exact kinematics (no noise, no lead), where the step lands where it was certified to
+    follow, dist, a_f = False, 0.0, u_min
+    for j in range(n):
+        if C[j, C_SHARED] != 0.0:
+            follow = True
+            dist = max(dist, C[j, C_R_HI] - s_R[j])
+            a_f = max(a_f, C[j, C_R_ULANE])
+            if C[j, C_R_NOISE] != 0.0 or C[j, C_MEAS_S] != 0.0 or C[j, C_MEAS_V] != 0.0:
+                follow = False
+                break
+    if follow and (lead[0] != 0.0 or lead[1] != 0.0 or lead[2] != 0.0):
+        follow = False
+    m_a = follow_steps(v_R, a, dt, dist, u_max, C[0, C_R_VMIN], C[0, C_R_VMAX]) \
+        if follow and proposal_ok else -1
+    m_g = follow_steps(v_R, u_max, dt, dist, u_max, C[0, C_R_VMIN], C[0, C_R_VMAX]) \
+        if follow else -1
+    # candidates (the first step, the fallback after it, the fallback's GO steps): 0, 1 the
+    # proposal with BRAKE or GO, 2, 3 with enter-then-follow; then, while a line binds, 4 the
+    # yield at the line, 5 BRAKE, 6 GO, 7, 8 enter-then-follow; once no line binds, GO,
+    # enter-then-follow, then BRAKE: drive through rather than stand where it blocks others;
+    # but a proposal that brakes harder than BRAKE (the in-lane limit of a shared lane) gets
+    # BRAKE first, the nearest to what it asked; last 9, the in-lane braking a_f alone (where
+    # an enter-then-follow fallback ends). Committed between a line and its interval, the
+    # proposal is admitted with BRAKE only after every way through has failed (it would
+    # stand there)
     brake_first = yielding or (proposal_ok and a < u_min)
-    for i in range(0 if proposal_ok else 2, 5):
-        if i < 2:
-            first, fb, shift, verdict = a, (u_min if i == 0 else u_max), lead[0], ADMITTED
-        elif i == 2:
+    if brake_first:
+        order = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9)
+    elif committed:
+        order = (1, 2, 3, 6, 7, 8, 0, 5, 9, 4)
+    else:
+        order = (0, 1, 2, 3, 4, 6, 7, 8, 5, 9)
+    for p in range(10):
+        c = order[p]
+        if c < 4 and not proposal_ok:
+            continue
+        steps = -1
+        if c < 2:
+            first, fb, shift, verdict = a, (u_min if c == 0 else u_max), lead[0], ADMITTED
+        elif c < 4:
+            if m_a < 0:
+                continue
+            first, fb, shift, verdict, steps = a, a_f, lead[0], ADMITTED, m_a + c - 2
+        elif c == 4:
             if not yielding:
                 continue
             first, fb, shift, verdict = a_line, u_min, lead[1], BRAKE
-        elif (i == 3) == brake_first:
+        elif c == 5:
             first, fb, shift, verdict = u_min, u_min, lead[1], BRAKE
-        else:
+        elif c == 6:
             first, fb, shift, verdict = u_max, u_max, lead[2], GO
+        elif c < 9:
+            if m_g < 0:
+                continue
+            first, fb, shift, verdict, steps = u_max, a_f, lead[2], GO, m_g + c - 7
+        else:
+            if not follow or a_f == u_min:
+                continue
+            first, fb, shift, verdict = a_f, a_f, lead[1], BRAKE
         ok = True
         for j in range(n):
             past = window[j, 2] % 2.0 != 0.0
-            if fb == u_min:
+            if steps >= 0:
+                good = certified3(s_R[j] + shift, v_R, first, dt, u_max, steps * dt, fb,
+                                  s_H[j], v_H[j], C[j], window[j, 0], window[j, 1], past)
+            elif fb == u_min:
                 good = brake_certified(s_R[j] + shift, v_R, first, dt, s_H[j], v_H[j], C[j],
                                        window[j, 0], window[j, 1], past, window[j, 2] >= 2.0,
                                        u_min)
@@ -732,9 +868,10 @@ def verdict_name(code: int) -> str | None:
 
 __all__ = ["ADMITTED", "BRAKE", "GO", "LINE_MARGIN_M", "N_CONFLICT", "OFF", "TIME_MARGIN_S",
            "UNCERTIFIED", "VERDICTS", "admissible", "brake_certified", "certified",
-           "braking", "conflict_vector", "cut_in_fair", "go_certified", "human_window",
+           "braking", "certified3", "conflict_vector", "cut_in_fair", "follow_steps",
+           "go_certified", "human_window",
            "in_lane_ahead", "lane_braking",
            "line_binds", "line_brake",
-           "one_buffer", "profile_reach", "reach_time", "shield_filter",
+           "one_buffer", "profile3_reach", "profile_reach", "reach_time", "shield_filter",
            "shield_filter_one", "shield_step",
            "verdict_name", "yields_before"]
