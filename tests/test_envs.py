@@ -620,6 +620,38 @@ def test_every_vehicle_stays_inside_the_bound_the_shield_assumed():
     assert planned.guarantee_held
 
 
+@pytest.mark.slow
+def test_a_crash_between_two_other_vehicles_is_counted_apart_and_voids_the_guarantee():
+    """Seed 15 with the shielded planner: two other vehicles collide, and highway-env sets
+    both to the slower one's speed at once, 3 vehicle-steps of speed loss beyond the IDM's
+    ACC_MAX. No driver braked that hard (no envelope excess); the crash is counted apart and
+    the episode does not claim the guarantee, which assumes no such crash."""
+    from persuasive.envs.highway import EnvelopeCheck, run_episode
+
+    r = run_episode(15, "persuasive")
+    assert r.envelope_excesses == 0 and r.crash_stops == 3
+    assert r.uncertified_steps == 0 and not r.guarantee_held
+
+    class Car:  # a vehicle losing 1 m/s in one step, limits of -6 m/s^2 at 15 Hz
+        def __init__(self, speed, crashed):
+            self.speed, self.crashed = speed, crashed
+
+    from persuasive.envs.external import Limits
+
+    limits = Limits(5.0, 2.0, -6.0, 3.0, 0.0, 20.0)
+    check = EnvelopeCheck(1.0 / 15.0, limits=lambda v: limits)
+    car = Car(5.0, False)
+    check.observe([car], None)
+    car.speed, car.crashed = 4.0, True
+    check.observe([car], None)
+    assert check.crash_stops == 1 and check.excesses == 0
+    other = Car(5.0, False)
+    check.observe([other], None)
+    other.speed = 4.0  # the same loss without a crash: a driver's excess
+    check.observe([other], None)
+    assert check.kinds["over_brake"] == 1 and check.crash_stops == 1
+
+
 def test_the_traffic_stops_at_rest_where_highway_envs_idm_reverses():
     """A braking step from 0.2 m/s at the IDM's hardest braking: highway-env's own
     ``IDMVehicle`` ends it at -0.2 m/s, the traffic's class at rest; from 1 m/s both at

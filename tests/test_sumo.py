@@ -434,6 +434,9 @@ def test_the_ego_merges_between_cars_and_keeps_its_commitment(nets, seed):
     r = S.run_episode("merge", seed, "persuasive/worst-case", 900.0, 0.0, nets["merge"]).result
     assert r.crossed and r.junction_stood_s == 0.0
     assert r.uncertified == 0 and not r.collision and r.guarantee_held
+    # the planner does not plan inside the shield here: it is overridden, and the episode
+    # says by how much (issue 25 item 6)
+    assert 0 < r.shield_overrides < r.ego_steps and 0.0 < r.override_mps2 < 7.1
 
 
 @pytest.mark.slow

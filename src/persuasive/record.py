@@ -104,6 +104,12 @@ class RunOutcome:
     deadlock_at_s: float = math.nan
     av_wait_s: float = 0.0
     hv_wait_s: float = 0.0
+    # what the shield's overrides cost (issue 25 item 6, after SHARP: Hu, Nakamura, Fisac,
+    # RA-L 2022): the share of the AV's steps it overrode, and the mean over the AV's steps of
+    # how far it moved the proposal, |applied - proposed| [m/s^2] (0 where it admitted it; a
+    # non-finite proposal, always overridden, adds nothing to the mean); 0 with the shield off
+    override_share: float = 0.0
+    override_mps2: float = 0.0
 
 
 #: Outcome fields that are times or distances (floats), for tables.
@@ -483,6 +489,7 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
         deadlock_at_s=stood,
         av_wait_s=measures.waiting_time(states[:, 1], cleared_av, dt),
         hv_wait_s=measures.waiting_time(states[:, 3], cleared_hv, dt),
+        **measures.override_cost(verdicts, log.get("av_proposed_accel_mps2"), accel),
     )
 
 

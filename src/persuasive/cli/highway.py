@@ -109,6 +109,8 @@ def highway(episodes, planner, seed, shield, as_json, video) -> None:
                    f"{s['envelope_excesses']} vehicle-steps of other vehicles outside the "
                    f"envelope the shield assumes"
                    + (f" ({kinds}; largest {s['max_envelope_excess_mps']:.2f} m/s)"
-                      if kinds else ""))
+                      if kinds else "")
+                   + f"; {s['crash_stops']} vehicle-steps of crash stops between other "
+                     f"vehicles in {s['crash_stop_episodes']} episodes (outside the guarantee)")
     if video:
         click.echo(f"video of seed {first} ({report.planner}) written to {video}")

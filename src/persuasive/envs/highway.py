@@ -610,7 +610,10 @@ class EnvelopeCheck:
 
     #: the kinds of excess: above the speed bound, below ``v_min`` (driving backwards: the
     #: IDM's braking behind a close leader does not stop at 0), a speed gain beyond ``u_max``,
-    #: a speed loss beyond ``u_min`` (a crash between two other vehicles stops them at once)
+    #: a speed loss beyond ``u_min`` by a driver. A speed loss beyond ``u_min`` of a vehicle
+    #: that crashed in that step (highway-env sets both vehicles of a collision to the slower
+    #: one's speed at once) is no driver's braking: it is counted apart, in
+    #: :attr:`crash_stops`, and the guarantee assumes none (docs/method.md §12.7)
     KINDS = ("over_speed", "reversing", "over_accel", "over_brake")
 
     def __init__(self, dt_s: float, limits=None):
@@ -619,6 +622,9 @@ class EnvelopeCheck:
         self._last: dict[int, tuple[float, Any]] = {}
         self.kinds = dict.fromkeys(self.KINDS, 0)  #: vehicle-steps per kind of excess
         self.max_excess_mps = 0.0  #: the largest excess of speed or speed change [m/s]
+        #: vehicle-steps in which a vehicle that crashed (into another, not the ego) lost
+        #: more speed than its ``u_min`` allows
+        self.crash_stops = 0
 
     @property
     def excesses(self) -> int:
@@ -637,8 +643,12 @@ class EnvelopeCheck:
                 terms = (speed - lim.v_max_mps, lim.v_min_mps - speed,
                          speed - v0 - lim.u_max_mps2 * self.dt_s,
                          v0 + lim.u_min_mps2 * self.dt_s - speed)
+                crashed = bool(getattr(v, "crashed", False))
                 for kind, excess in zip(self.KINDS, terms):
                     if excess > self.TOL_MPS:
+                        if kind == "over_brake" and crashed:
+                            self.crash_stops += 1
+                            continue
                         self.kinds[kind] += 1
                         self.max_excess_mps = max(self.max_excess_mps, excess)
             seen[id(v)] = (speed, self._limits(v))
@@ -823,8 +833,12 @@ class EpisodeResult:
     envelope_excess_kinds: dict = field(default_factory=dict)
     uncertified_steps: int = 0  #: steps where the shield had no certified choice
     #: the worst-case guarantee covered the episode: a planner ego with the worst-case shield,
-    #: every step certified and every other vehicle inside the envelope the shield assumed
+    #: every step certified, every other vehicle inside the envelope the shield assumed and
+    #: no crash between two other vehicles (:attr:`crash_stops`)
     guarantee_held: bool = False
+    #: vehicle-steps in which another vehicle, crashing into a third, lost more speed than
+    #: its ``u_min`` allows (not a driver's braking: outside the envelope's assumption)
+    crash_stops: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -942,7 +956,9 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             envelope_excess_kinds=dict(envelope.kinds),
             uncertified_steps=0 if planner is None else planner.uncertified,
             guarantee_held=bool(planner is not None and config.shield == "worst-case"
-                                and planner.uncertified == 0 and envelope.excesses == 0))
+                                and planner.uncertified == 0 and envelope.excesses == 0
+                                and envelope.crash_stops == 0),
+            crash_stops=envelope.crash_stops)
     finally:
         env.close()
 
@@ -986,6 +1002,8 @@ class HighwayReport:
                                                default=0.0),
                 "envelope_excess_kinds": {k: sum(e.envelope_excess_kinds.get(k, 0) for e in eps)
                                           for k in EnvelopeCheck.KINDS},
+                "crash_stops": sum(e.crash_stops for e in eps),
+                "crash_stop_episodes": sum(e.crash_stops > 0 for e in eps),
                 "uncertified_steps": sum(e.uncertified_steps for e in eps),
                 "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
             }

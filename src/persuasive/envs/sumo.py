@@ -690,6 +690,9 @@ class EpisodeResult:
     judged_steps: int | None = None
     judged_admitted: int | None = None
     entry_admitted: bool | None = None
+    #: what the shield's overrides cost (issue 25 item 6): the mean over the planner's steps
+    #: of |applied - proposed| [m/s^2] (0 where admitted; 0 for sumo and none)
+    override_mps2: float = 0.0
 
     @property
     def uncertified_steps(self) -> int:
@@ -839,6 +842,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
     timings: list[tuple[int, float]] = []
     pairs: dict[tuple[str, str], str] = {}
     overrides = uncertified = ego_steps = max_view = 0
+    override_sum = 0.0
     stood_steps = 0
     hard: set[str] = set()
     crossed_at = depart_at = None
@@ -917,7 +921,10 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                                  ego_limits.v_min_mps), ego_limits.v_max_mps)
                 ls.vehicle.setSpeed("ego", v_next)
                 ego_steps += 1
-                overrides += decision.verdict not in (None, "admitted")
+                overridden = decision.verdict not in (None, "admitted")
+                overrides += overridden
+                if overridden and math.isfinite(decision.proposed_mps2):
+                    override_sum += abs(decision.accel_mps2 - decision.proposed_mps2)
                 uncertified += decision.verdict == "uncertified"
                 max_view = max(max_view, in_view)
                 timings.append((in_view, ms))
@@ -956,7 +963,8 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
         else len(hard) - reference_hard_braking,
         judged_steps=judged if judge is not None else None,
         judged_admitted=admitted if judge is not None else None,
-        entry_admitted=entry_ok)
+        entry_admitted=entry_ok,
+        override_mps2=override_sum / ego_steps if ego_steps else 0.0)
     return EpisodeOutput(result, steps, decisions, timings)
 
 
@@ -1019,6 +1027,10 @@ class SumoReport:
                 "mean_traffic_time_loss_s": float(np.mean([e.traffic_time_loss_s
                                                            for e in eps])) if eps else None,
                 "shield_overrides": sum(e.shield_overrides for e in eps),
+                "override_pct": (100.0 * sum(e.shield_overrides for e in eps)
+                                 / max(1, sum(e.ego_steps for e in eps))),
+                "override_mps2_mean": float(np.mean([e.override_mps2 for e in eps]))
+                if eps else None,
                 "uncertified": sum(e.uncertified for e in eps),
                 "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
                 "junction_stood_s": float(sum(e.junction_stood_s for e in eps)),

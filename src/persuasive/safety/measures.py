@@ -21,6 +21,8 @@ point, after which the lane is shared).
   have none). Reported with the time its first window starts.
 - **waiting time** [s]: how long a vehicle stood (speed below ``WAIT_SPEED_MPS``, 0.1 m/s, as
   SUMO's ``waitingTime``) before it cleared the conflict (the whole run if it never did).
+- **override cost**: the share of the AV's steps the shield overrode and the mean change it
+  made to the proposal (:func:`override_cost`).
 - **collisions by fault**: a collision (a run of overlapping states) is a *rear-end by the
   human* when it starts with the lane shared, the AV past the merge point and ahead of the
   human; every other collision is *caused by the AV* (the shield's target is none of those).
@@ -67,6 +69,25 @@ def waiting_time(v: np.ndarray, cleared: np.ndarray, dt: float) -> float:
     done = np.flatnonzero(cleared)
     end = int(done[0]) if done.size else v.shape[0] - 1
     return float(np.count_nonzero(v[:end] < WAIT_SPEED_MPS) * dt)
+
+
+def override_cost(verdicts: np.ndarray | None, proposed: np.ndarray | None,
+                  applied: np.ndarray) -> dict[str, float]:
+    """What the shield's overrides cost a run (issue 25 item 6, after SHARP's comparison of a
+    shield-aware planner with a shield-agnostic one, Hu, Nakamura, Fisac, RA-L 2022):
+    ``override_share``, the share of the AV's steps the shield overrode (verdict other than
+    admitted), and ``override_mps2``, the mean over the AV's steps of ``|applied - proposed|``
+    [m/s^2] (0 where it admitted the proposal; a non-finite proposal, always overridden,
+    adds nothing). Both 0 without a shield (``verdicts`` None or empty, or every verdict
+    ``OFF``)."""
+    if verdicts is None or proposed is None or len(verdicts) == 0:
+        return {"override_share": 0.0, "override_mps2": 0.0}
+    verdicts = np.asarray(verdicts)
+    over = verdicts > 0
+    diff = np.abs(np.asarray(applied, float) - np.asarray(proposed, float))
+    diff = np.where(over & np.isfinite(diff), diff, 0.0)
+    return {"override_share": float(np.count_nonzero(over) / verdicts.size),
+            "override_mps2": float(diff.mean())}
 
 
 def crossing_times(s: np.ndarray, target: float, dt: float) -> float:
@@ -285,6 +306,7 @@ def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float
 
 
 __all__ = ["STANDOFF_PROGRESS_M", "STANDOFF_WINDOW_S", "WAIT_SPEED_MPS", "caused_by_av",
-           "footprint_gaps", "human_at_fault", "min_gap", "min_ttc", "pet", "rear_end_mask",
+           "footprint_gaps", "human_at_fault", "min_gap", "min_ttc", "override_cost", "pet",
+           "rear_end_mask",
            "standoff",
            "waiting_time"]

@@ -49,7 +49,8 @@ REFERENCE_AV = "persuasive"
 JSON_KEYS = ("av", "shield", "hv", "runs", "av_first_pct", "hv_first_pct", "neither_pct",
              "collisions", "collisions_caused_by_av", "rear_ends_by_human", "cc_fail_runs",
              "av_delay_s_mean", "hv_delay_s_mean", "min_distance_m_p05",
-             "shield_interventions_mean", "uncertified_steps", "guarantee_held_runs",
+             "shield_interventions_mean", "override_pct", "override_mps2_mean",
+             "uncertified_steps", "guarantee_held_runs",
              "both_cleared_pct", "av_first_through_pct", "deadlocks", "wait_s_p95",
              "wait_s_max", "av_clear_s_rmean",
              "min_gap_m_p05", "min_ttc_s_p05", "pet_s_p05",
@@ -329,6 +330,12 @@ def pair_row(frame, av: str, hv: str, timing: float | None,
         "hv_rms_jerk_mps3_mean": _mean(_column(frame, "hv_rms_jerk_mps3")),
         "shield_interventions_mean": _mean(_column(frame, "shield_interventions")),
         "shield_intervention_runs": int((frame["shield_interventions"] > 0).sum()),
+        # what the overrides cost (issue 25 item 6): the share of the AV's steps overridden
+        # [%] and the mean change to the proposal per step [m/s^2], over the runs
+        "override_pct": _mean(100.0 * _column(frame, "override_share"))
+        if "override_share" in frame else None,
+        "override_mps2_mean": _mean(_column(frame, "override_mps2"))
+        if "override_mps2" in frame else None,
         # the guarantee (docs/method.md §12.2): steps without a certified choice, and the runs
         # it covered whole (worst-case shield, every step certified, no noise)
         "uncertified_steps": int(frame["uncertified_steps"].sum())
@@ -535,7 +542,8 @@ def to_markdown(summary: dict[str, Any]) -> str:
               "before the run ended (\"runs cleared\"); n/a: it never did. Collisions: runs "
               "with a footprint overlap (in brackets, those caused by the AV: all but "
               "rear-ends by the human in a shared lane)."]
-    head = name + ["shield interventions / run (runs)", "rear-ends by human",
+    head = name + ["shield interventions / run (runs)", "overrides % of steps / mean change "
+                   "m/s^2", "rear-ends by human",
                    "min footprint gap p05 m", "min TTC p05 s", "PET p05 s",
                    "AV strongest braking m/s^2 mean (max)", "AV RMS jerk m/s^3"]
     lines += ["", "Safety and comfort (surrogate measures, docs/method.md §12.6; percentiles "
@@ -544,6 +552,7 @@ def to_markdown(summary: dict[str, Any]) -> str:
     for r in summary["rows"]:
         lines.append("| " + " | ".join(key(r) + [
             f"{_fmt(r['shield_interventions_mean'], 2)} ({r['shield_intervention_runs']})",
+            f"{_fmt(r.get('override_pct'), 1)} / {_fmt(r.get('override_mps2_mean'), 3)}",
             str(r["rear_ends_by_human"]), _fmt(r["min_gap_m_p05"], 2),
             _fmt(r["min_ttc_s_p05"], 2), _fmt(r["pet_s_p05"], 2),
             f"{_fmt(r['av_max_brake_mps2_mean'], 2)} ({_fmt(r['av_max_brake_mps2_max'], 2)})",

@@ -68,6 +68,11 @@ METRICS: dict[str, Metric] = {
                            lambda f: f["deadlock"].astype(bool)),
     "wait_s": Metric("longer wait of the two, mean [s]", "mean", ("av_wait_s", "hv_wait_s"),
                      lambda f: np.maximum(f["av_wait_s"], f["hv_wait_s"])),
+    # what the shield's overrides cost (issue 25 item 6)
+    "override_pct": Metric("steps the shield overrode, mean [% of steps]", "mean",
+                           ("override_share",), lambda f: 100.0 * f["override_share"]),
+    "override_mps2": Metric("change the shield made to the proposal, mean [m/s^2]", "mean",
+                            ("override_mps2",), lambda f: f["override_mps2"]),
 }
 
 
