@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from persuasive import Config
@@ -172,6 +172,48 @@ def test_a_line_keeps_the_guarantee(hv):
     for seed in range(1, 6):
         o = run(seed, LINE_M, hv, steps=150).outcome
         assert not o.collision_caused_by_av and o.uncertified_steps == 0 and o.guarantee_held
+
+
+# -- a bounded wait ---------------------------------------------------------------------------
+
+
+def wait_bound(s_H: float, v_p: float, tau: float, C, dt: float = 0.1) -> float:
+    """The longest the shield holds an AV standing at its line against a human at ``s_H``
+    that, after ``tau`` seconds of anything, proceeds: full throttle up to ``v_p`` if slower,
+    never below ``v_p`` after (docs/method.md §12.8, bounded wait): until such a human is past
+    its interval, plus the step in which the shield sees it."""
+    return tau + v_p / C[sh.C_H_UMAX] + max(0.0, C[sh.C_H_HI] - s_H) / v_p + dt
+
+
+@settings(max_examples=150, deadline=None)
+@given(line=st.sampled_from([3.75, 4.5, 6.0]), s_H=st.floats(-40.0, 3.0),
+       v_H=st.floats(0.0, 10.0), tau=st.floats(0.0, 3.0), v_p=st.floats(0.3, 5.0),
+       accels=st.lists(st.floats(-1.0, 1.0), min_size=30, max_size=30))
+def test_a_human_that_proceeds_releases_the_av_in_bounded_time(line, s_H, v_H, tau, v_p,
+                                                               accels):
+    """The AV stands at its line (at rest, 1 cm before it). The human does anything within
+    its limits for ``tau`` seconds, then proceeds. From ``wait_bound`` on, the shield admits
+    full throttle from the line at every step (GO is certified: the human is past its
+    interval), so it holds the AV no longer; a human that may still enter is never met."""
+    C = conflict(line)
+    dt = 0.1
+    s_R = C[sh.C_R_LINE] - sh.LINE_MARGIN_M
+    u_min, u_max = C[sh.C_H_UMIN], C[sh.C_H_UMAX]
+    bound = wait_bound(s_H, v_p, tau, C)
+    x, v = s_H, v_H
+    for k in range(int(math.ceil((bound + 1.0) / dt))):
+        t = k * dt
+        applied, code = sh.shield_step(s_R, 0.0, u_max, dt, x, v, C)
+        if t >= bound:
+            assert code == sh.ADMITTED and applied == u_max, (t, x, v)
+        if code == sh.ADMITTED and applied == u_max:  # admitted only once it is safe
+            assert x > C[sh.C_H_HI] or sh.certified(
+                s_R, 0.0, u_max, dt, u_max, x, v, C, *sh.human_window(x, v, C))
+        if t < tau:
+            a = min(max(accels[k % len(accels)], u_min), u_max)
+        else:
+            a = u_max if v < v_p else max(accels[k % len(accels)], 0.0)
+        x, v = saturated_step(x, v, a, dt, C[sh.C_H_VMIN], C[sh.C_H_VMAX])
 
 
 # -- the measures by hand --------------------------------------------------------------------
