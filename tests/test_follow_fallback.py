@@ -269,3 +269,24 @@ def test_follow_steps_lands_past_the_point_on_a_step_boundary():
             assert x < dist
     assert sh.follow_steps(0.0, -4.5, DT, 5.0, 0.0, 0.0, V_MAX) == -1
     assert math.isinf(sh.reach_time(0.0, 0.0, 0.0, 5.0, 0.0, V_MAX))
+
+
+def test_through_a_crossing_then_follow_a_leader():
+    """A crossing and a car ahead beyond it in the ego's lane (SUMO's or highway-env's
+    intersection): the ego at 8 m/s cannot stop before the crossing (BRAKE stands it inside,
+    where the crossing car arrives in about 2 s), and GO for ever reaches the car ahead. The
+    fallback goes until past the crossing's interval too, then brakes: certified, and the
+    filter admits full throttle with it."""
+    cross = X.Conflict("x", X.CROSSING, -8.0, -20.0, 10.0, (-3.0, 3.0), (-3.0, 3.0), OTHER)
+    lead = X.Conflict("l", X.FOLLOW, -8.0, 22.0, 10.0, (0.0, 0.0), (0.0, 0.0), OTHER)
+    s_R, s_H, v_H, C = X.conflict_arrays([cross, lead], CFG, EGO)
+    assert not old_family(8.0, 2.6, s_R, s_H, v_H, C)
+    assert filt(8.0, 2.6, s_R, s_H, v_H, C) == (2.6, sh.ADMITTED)
+    m = sh.follow_steps(8.0, 2.6, DT, C[0, sh.C_R_HI] - s_R[0], 2.6, 0.0, V_MAX)
+    assert any(all(sh.certified3(s_R[j], 8.0, 2.6, DT, 2.6, k * DT, -4.5, s_H[j], v_H[j], C[j],
+                                 *sh.human_window(s_H[j], v_H[j], C[j])) for j in range(2))
+               for k in (m, m + 1))
+    # without the crossing in the switch (braking as soon as the first step ends) the car
+    # crossing would meet the ego standing in its interval
+    w = sh.human_window(s_H[0], v_H[0], C[0])
+    assert not sh.certified3(s_R[0], 8.0, 2.6, DT, 2.6, 0.0, -4.5, s_H[0], v_H[0], C[0], *w)

@@ -72,8 +72,8 @@ certified answers, never adds one. A line at ``R_lo`` (the default) never binds.
 **Enter, then follow** (docs/method.md §12.11). A merge between two cars of the main road is
 certified by neither fallback (``GO`` for ever reaches the car ahead, ``BRAKE`` stops in the
 side zone where the car behind arrives), so a third family joins them: ``FOLLOW(m)``, ``u_max``
-for ``m`` whole steps after the step (until the AV is past every merge point in view,
-:func:`follow_steps`), then the in-lane braking for ever, certified exactly on the three-piece
+for ``m`` whole steps after the step (until the AV is past every merge point and crossing
+interval in view, :func:`follow_steps`), then the in-lane braking for ever, certified exactly on the three-piece
 motion (:func:`certified3`). Its switch falls on a step boundary, so a step that carries it out
 lands on its remainder, ``FOLLOW(m - 1)``: the invariant above holds for ``S`` the states from
 which ``BRAKE``, ``GO`` or some ``FOLLOW(m)`` is certified, which contains the old ``S``. It is
@@ -729,18 +729,22 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
             sf, vf = _fast(s_R[j] + lead[1], v_R, C[j, C_R_VMIN], C[j, C_R_VMAX], C[j])
             a_line = min(a_line, line_brake(sf, vf, dt, C[j, C_R_LINE],
                                             u_min + C[j, C_R_NOISE], u_max) - C[j, C_R_NOISE])
-    # the enter-then-follow fallbacks (docs/method.md §12.11): GO for whole steps until the
-    # AV is past every merge point in view, then the in-lane braking a_f; only with the
-    # exact kinematics (no noise, no lead), where the step lands where it was certified to
+    # the enter-then-follow fallbacks (docs/method.md §12.11), while a shared lane is in
+    # view: GO for whole steps until the AV is past every merge point and crossing in view,
+    # then the in-lane braking a_f; only with the exact kinematics (no noise, no lead), where
+    # the step lands where it was certified to
     follow, dist, a_f = False, 0.0, u_min
     for j in range(n):
         if C[j, C_SHARED] != 0.0:
             follow = True
-            dist = max(dist, C[j, C_R_HI] - s_R[j])
             a_f = max(a_f, C[j, C_R_ULANE])
-            if C[j, C_R_NOISE] != 0.0 or C[j, C_MEAS_S] != 0.0 or C[j, C_MEAS_V] != 0.0:
-                follow = False
-                break
+    for j in range(n):
+        if not follow:
+            break
+        # past every merge point and every crossing in view before it brakes
+        dist = max(dist, C[j, C_R_HI] - s_R[j])
+        if C[j, C_R_NOISE] != 0.0 or C[j, C_MEAS_S] != 0.0 or C[j, C_MEAS_V] != 0.0:
+            follow = False
     if follow and (lead[0] != 0.0 or lead[1] != 0.0 or lead[2] != 0.0):
         follow = False
     m_a = follow_steps(v_R, a, dt, dist, u_max, C[0, C_R_VMIN], C[0, C_R_VMAX]) \
