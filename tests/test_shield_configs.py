@@ -2,8 +2,9 @@
 §12.2).
 
 hypothesis draws a scenario (its crossing or merge angle, or the left turn's radius), both
-vehicles' size and the safety factor, both starts and their spread, the AV kind, a human that
-tests the shield, the yield line, the clearance and the acceleration noise. Either the
+vehicles' size, speed and acceleration limits and the safety factor, the step (``dt``, with the
+planner's sample step), both starts and their spread, the AV kind, a human that tests the
+shield, the yield line, the clearance and the acceleration noise. Either the
 configuration is refused with a one-line ``ConfigError`` (or no initial state can be drawn), or
 its run has no AV-caused collision, no uncertified step, and keeps the footprints at least the
 clearance apart; and a falsifier, a cross-entropy search over bounded piecewise-constant human
@@ -46,6 +47,12 @@ def configurations(draw) -> dict:
         "scenario.hv_v0_mps": draw(st.floats(0.0, 8.0)),
         "simulation.n_steps": 100,
     }
+    if draw(st.booleans()):  # the vehicles' limits and the step
+        over["vehicle.v_max_mps"] = draw(st.floats(5.0, 20.0))
+        over["vehicle.u_max_mps2"] = draw(st.floats(0.5, 3.0))
+        over["vehicle.u_min_mps2"] = draw(st.floats(-6.0, -1.5))
+        dt = draw(st.sampled_from([0.05, 0.1, 0.2]))
+        over["simulation.dt_s"] = over["library.sample_dt_s"] = dt
     if kind == "crossing":
         over["scenario.angle_deg"] = draw(st.floats(15.0, 165.0))
     elif kind == "merge":

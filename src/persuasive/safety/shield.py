@@ -521,8 +521,16 @@ def line_binds(s: float, v: float, C: np.ndarray) -> bool:
     stand before it by braking now: it has not committed (docs/method.md §12.8)."""
     line = C[C_R_LINE]
     sf, vf = _fast(s, v, C[C_R_VMIN], C[C_R_VMAX], C)  # every true state behind the measured
-    return line < C[C_R_LO] and sf < line and reach_time(
-        sf, vf, C[C_R_UMIN] + C[C_R_NOISE], line, C[C_R_VMIN], C[C_R_VMAX]) == _INF
+    if not (line < C[C_R_LO] and sf < line):
+        return False
+    # where :func:`brake_certified` then wants it to stand: before its stop target
+    # (LINE_MARGIN_M before the line), or, already past the target, before the line itself;
+    # an AV that could stand before the line but not before its target has committed (with
+    # acceleration noise a braking harder than the weakest can bring it back into reach of
+    # the line, and the line must not bind where it cannot be kept: docs/method.md §12.8)
+    target = line - LINE_MARGIN_M
+    return reach_time(sf, vf, C[C_R_UMIN] + C[C_R_NOISE], target if sf < target else line,
+                      C[C_R_VMIN], C[C_R_VMAX]) == _INF
 
 
 @njit(cache=True, _nrt=False)
@@ -542,6 +550,12 @@ def brake_certified(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H
         return certified(s_R, v_R, a, dt, u_min, s_H, v_H, C, t_in_H, t_out_H, past)
     line = C[C_R_LINE]
     target = line - LINE_MARGIN_M
+    if a == C[C_R_UMIN] and u_min == C[C_R_UMIN]:
+        # full braking from now: :func:`line_binds` (from the same position) found that its
+        # weakest realisation stands before the stop target (the line itself within the
+        # margin), so the interval moved back there is never entered; not computed again,
+        # because two roundings of the same stop must not disagree
+        return True
     if s_R + C[C_MEAS_S] >= target:
         if a > 0.0:
             return False
