@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from _cli import run_cli as run
 from persuasive.cli import main
 from persuasive.cli.simulate import json_summary
 from persuasive.simulation import simulate
@@ -21,14 +22,6 @@ REQUIRED = ("mode", "scenario", "av", "hv", "hv_role", "pa", "pa_hat", "seed", "
             "hv_role_changes", "safety_distance_m", "distance_measured")
 
 
-def run(capsys, *args):
-    """Exit code, stdout and stderr of one command; the one-line notice of the first
-    compilation (a fresh clone's first command) is not part of a command's output."""
-    code = main(list(args))
-    out, err = capsys.readouterr()
-    err = "".join(line for line in err.splitlines(keepends=True)
-                  if not line.startswith("compiling the numerical kernels once"))
-    return code, out, err
 
 
 @pytest.mark.parametrize("mode", ["paper", "corrected"])

@@ -12,19 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _cli import run_cli as run
 from persuasive import Config, simulate
-from persuasive.cli import main
 from persuasive.config import ConfigError
 from persuasive.fitting import load_fitted_run, load_logs
 
 
-def run(capsys, *args):
-    """Exit code, stdout and stderr of one command (without the first-compilation notice)."""
-    code = main(list(args))
-    out, err = capsys.readouterr()
-    err = "".join(line for line in err.splitlines(keepends=True)
-                  if not line.startswith("compiling the numerical kernels once"))
-    return code, out, err
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,9 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
+from _cli import run_cli as run
 from persuasive import Config, simulate
-from persuasive.cli import cli, main
+from persuasive.cli import cli
 from persuasive.fitting import load_logs
 from persuasive.record import load_record
 from persuasive.recordings.pairs import read_pairs
@@ -34,12 +35,6 @@ def runs(tmp_path_factory):
     return paths
 
 
-def run(capsys, *args):
-    code = main(list(args))
-    out, err = capsys.readouterr()
-    err = "".join(line for line in err.splitlines(keepends=True)
-                  if not line.startswith("compiling the numerical kernels once"))
-    return code, out, err
 
 
 def test_round_trip_simulate_export_pairs_logs_fit(capsys, runs, tmp_path):

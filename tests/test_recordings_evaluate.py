@@ -14,8 +14,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from _cli import run_cli as run
 from persuasive import Config, simulate
-from persuasive.cli import main
 from persuasive.recordings.baselines import arrival_ca, arrival_cv, right_of_way, sumo_rule
 from persuasive.recordings.evaluate import (DECIDED, ENDS, KEPT, NEVER_NEAR, EvalParams,
                                             PairData, Split, ViewBuilder, combine, evaluate,
@@ -64,12 +64,6 @@ def evaluation(pairs_file):
                     params=EvalParams(n_boot=200))
 
 
-def run(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    err = "".join(line for line in err.splitlines(keepends=True)
-                  if not line.startswith("compiling the numerical kernels once"))
-    return code, out, err
 
 
 # -- scores by hand (exact up to float rounding: 1e-12) ---------------------------------------

@@ -16,8 +16,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from _cli import run_cli
 from persuasive import Config, simulate
-from persuasive.cli import main
 from persuasive.recordings.export import export_runs
 from persuasive.recordings.formats import RecordingError, read_tracks
 from persuasive.recordings.pairs import find_pairs, pairs_frame, write_pairs
@@ -175,12 +175,6 @@ def test_a_seat_run_starts_at_the_recorded_states(simulated):
         ReplaySettings(extra_s=-1.0)
 
 
-def run_cli(capsys, *args):
-    code = main(list(args))
-    out, err = capsys.readouterr()
-    err = "".join(line for line in err.splitlines(keepends=True)
-                  if not line.startswith("compiling the numerical kernels once"))
-    return code, out, err
 
 
 def test_replay_command_prints_and_writes(capsys, simulated, tmp_path):

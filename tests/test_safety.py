@@ -299,14 +299,10 @@ def test_study_and_sweep_take_a_shield(tmp_path):
 def test_the_command_line_takes_a_shield(capsys):
     import json
 
-    from persuasive.cli import main
+    from _cli import run_cli
 
     def run(*args):
-        code = main(list(args))
-        out, err = capsys.readouterr()
-        err = "".join(line for line in err.splitlines(keepends=True)
-                      if not line.startswith("compiling the numerical kernels once"))
-        return code, out, err
+        return run_cli(capsys, *args)
 
     code, out, _ = run("simulate", "--mode", "corrected", "--hv", "adversary", "--seed", "3",
                        "--shield", "off", "--json")

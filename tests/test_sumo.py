@@ -519,13 +519,9 @@ def test_study_results_do_not_depend_on_workers():
 def _run_cli(args, capsys):
     """Exit code, stdout and stderr of ``persuasive sumo``; the one-line notice of the first
     compilation is not part of the command's output (as in tests/test_cli.py)."""
-    from persuasive.cli import main
+    from _cli import run_cli
 
-    rc = main(["sumo", *args])
-    cap = capsys.readouterr()
-    err = "".join(line for line in cap.err.splitlines(keepends=True)
-                  if not line.startswith("compiling the numerical kernels once"))
-    return rc, cap.out, err
+    return run_cli(capsys, "sumo", *args)
 
 
 @pytest.mark.parametrize("args, name", [

@@ -617,9 +617,10 @@ def admissible(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: flo
     The filter tries them in its own order, so a proposal admitted here on ``BRAKE`` alone
     may still be overridden by ``GO`` while the AV is committed before an interval
     (:func:`shield_filter`)."""
+    u_brake = braking(s_R, v_R, s_H, v_H, C)
     if (certified(s_R, v_R, a, dt, C[C_R_UMAX], s_H, v_H, C, t_in_H, t_out_H, past)
             or brake_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in_H, t_out_H, past,
-                               line_binds(s_R, v_R, C), braking(s_R, v_R, s_H, v_H, C))):
+                               line_binds(s_R, v_R, C), u_brake)):
         return True
     if C[C_SHARED] == 0.0 or C[C_R_NOISE] != 0.0 or C[C_MEAS_S] != 0.0 \
             or C[C_MEAS_V] != 0.0 or not math.isfinite(a):
@@ -628,7 +629,7 @@ def admissible(s_R: float, v_R: float, a: float, dt: float, s_H: float, v_H: flo
     m = follow_steps(v_R, a, dt, C[C_R_HI] - s_R, u_max, C[C_R_VMIN], C[C_R_VMAX])
     if m < 0:
         return False
-    a_f = max(braking(s_R, v_R, s_H, v_H, C), C[C_R_ULANE])
+    a_f = max(u_brake, C[C_R_ULANE])
     return (certified3(s_R, v_R, a, dt, u_max, m * dt, a_f, s_H, v_H, C, t_in_H, t_out_H, past)
             or certified3(s_R, v_R, a, dt, u_max, (m + 1) * dt, a_f, s_H, v_H, C, t_in_H,
                           t_out_H, past))

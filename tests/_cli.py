@@ -1,0 +1,19 @@
+"""Running one command of ``persuasive``'s command line in a test (shared by the CLI tests)."""
+
+from __future__ import annotations
+
+from persuasive.cli import main
+
+#: The one-line notice of the first compilation (a fresh clone's first command): not part of
+#: any command's output.
+COMPILE_NOTICE = "compiling the numerical kernels once"
+
+
+def run_cli(capsys, *args) -> tuple[int, str, str]:
+    """Exit code, stdout and stderr of ``persuasive ARGS`` (each argument as ``str``), stderr
+    without the first-compilation notice."""
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    err = "".join(line for line in err.splitlines(keepends=True)
+                  if not line.startswith(COMPILE_NOTICE))
+    return code, out, err
