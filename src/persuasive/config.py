@@ -407,6 +407,9 @@ class AVParams:
     #: occupancy interval [m] (docs/method.md §12.8); past the point where it can no longer
     #: stand there it commits and prefers driving through; unset: 0, at the interval
     yield_line_m: float | None = None
+    #: foresight: candidate yield lines [m], one picked per run by predicting the run with the
+    #: AV's own model of the human for each (docs/method.md §12.12); unset: off
+    yield_line_choices_m: tuple[float, ...] | None = None
     #: the shield's clearance between the two footprints [m]: kept in its occupancy test and
     #: the follower's gap, so that a position error up to it does not turn a certified state
     #: into contact (docs/method.md §12.2); unset: 0
@@ -426,6 +429,16 @@ class AVParams:
             _in_range("av.shield_margin_m", self.shield_margin_m, 0.0, 5.0)
         if self.yield_line_m is not None:
             _in_range("av.yield_line_m", self.yield_line_m, 0.0, 100.0)
+        if self.yield_line_choices_m is not None:
+            lines = self.yield_line_choices_m
+            if (not isinstance(lines, (tuple, list)) or not 1 <= len(lines) <= 8
+                    or any(isinstance(x, bool) or not isinstance(x, (int, float))
+                           or not 0.0 <= x <= 100.0 for x in lines)):
+                _fail("av.yield_line_choices_m", lines, "1 to 8 numbers in [0, 100]")
+            if self.yield_line_m is not None:
+                raise ConfigError("av.yield_line_choices_m and av.yield_line_m are exclusive: "
+                                  "set one line, or the lines to choose among")
+            object.__setattr__(self, "yield_line_choices_m", tuple(float(x) for x in lines))
 
 
 @dataclass(frozen=True)
@@ -683,6 +696,13 @@ class Config:
                     f"[{v.v_min_mps:g}, {v.v_max_mps:g}] with its half-width {hw:g} "
                     f"(the {who.upper()}'s speed limits)",
                 )
+        if self.av.yield_line_choices_m is not None:
+            if self.shield == "off":
+                raise ConfigError("av.yield_line_choices_m chooses the shield's yield line: it "
+                                  "needs av.shield = worst-case or responsive")
+            if self.p_a_online:
+                raise ConfigError('av.yield_line_choices_m predicts with a fixed p_a: it needs '
+                                  'a number for mpc.p_a_hat, not "online"')
         w = self.simulation.accel_noise_mps2
         if w > 0.0 and self.shield != "off":  # the shield's fallbacks must still brake and go
             av = self.vehicle_of("av")

@@ -142,6 +142,9 @@ class RunRecord:
     #: ``mpc.p_a_grid`` at the end of the run ``(G,)``, and the prior it started from
     p_a_posterior: np.ndarray | None = field(default=None, repr=False, compare=False)
     p_a_prior: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: foresight only (``av.yield_line_choices_m``): the yield line the AV picked for the run
+    #: [m] (``persuasive.safety.foresight``)
+    yield_line_m: float | None = None
 
     @property
     def mode(self) -> str:
@@ -179,6 +182,8 @@ class RunRecord:
             out["interaction"] = self.interaction
             hat = self.log.get("av_p_a_hat")
             out["pa_hat_final"] = float(hat[-1]) if hat is not None and len(hat) else None
+        if c.av.yield_line_choices_m is not None:  # only foresight runs carry this key
+            out["yield_line_m"] = self.yield_line_m
         out["quirks"] = dict(vars(c.effective_quirks))
         out["config_hash"] = c.digest()
         out["version"] = self.version
@@ -217,6 +222,8 @@ class RunRecord:
         meta = {"config_toml": self.config.to_toml(), "seed": self.seed,
                 "streams": self.streams, "final_state": [float(x) for x in self.states[-1]],
                 "version": self.version}
+        if self.yield_line_m is not None:
+            meta["yield_line_m"] = self.yield_line_m
         clash = sorted(set(extra or {}) & set(meta))
         if clash:
             raise ValueError(f"extra metadata may not replace the record's own: {clash}")
@@ -280,7 +287,8 @@ def record_from_frame(meta: dict, frame, default_version: str) -> RunRecord:
     return RunRecord(config, int(meta["seed"]), (float(states[0, 0]), float(states[0, 1])),
                      (float(states[0, 2]), float(states[0, 3])), states, log,
                      outcome(scenario, states, log), scenario, meta.get("streams", "legacy"),
-                     version=meta.get("version", default_version))
+                     version=meta.get("version", default_version),
+                     yield_line_m=meta.get("yield_line_m"))
 
 
 def check_seed(seed: Any) -> int:
@@ -302,6 +310,8 @@ class Setup:
     disc: np.ndarray
     streams: Any  #: :class:`persuasive.streams.Streams`
     x0: np.ndarray
+    #: the yield line foresight picked (``av.yield_line_choices_m``; ``P_av`` carries it)
+    yield_line_m: float | None = None
 
 
 @functools.lru_cache(maxsize=32)
@@ -332,14 +342,21 @@ def setup(config: Config, seed: int, k_av: int | None = None,
     k_hv = kind_of(config, kd.HV).draws if k_hv is None else k_hv
     streams = draw_streams(config, seed, scenario, k_av, k_hv, interaction)
     if x0 is not None:
-        return Setup(config, seed, scenario, P_av, P_hv, disc, streams,
-                     np.array(x0, dtype=np.float64).reshape(4))
-    x_hv = streams.x_hv
-    if config.hv.kind == "replay":
-        rec = load_replay(config)
-        x_hv = (rec.s0_m, rec.v0_mps)
-    x0 = np.array([*streams.x_av, *x_hv], dtype=np.float64)
-    return Setup(config, seed, scenario, P_av, P_hv, disc, streams, x0)
+        x0 = np.array(x0, dtype=np.float64).reshape(4)
+    else:
+        x_hv = streams.x_hv
+        if config.hv.kind == "replay":
+            rec = load_replay(config)
+            x_hv = (rec.s0_m, rec.v0_mps)
+        x0 = np.array([*streams.x_av, *x_hv], dtype=np.float64)
+    line = None
+    if config.av.yield_line_choices_m is not None:  # foresight picks the run's yield line
+        from .safety.foresight import choose_line, measured_start, with_line
+
+        line = choose_line(config, seed, measured_start(x0, streams.meas_noise[0], P_av, P_hv),
+                           interaction)
+        P_av = with_line(P_av, line)
+    return Setup(config, seed, scenario, P_av, P_hv, disc, streams, x0, line)
 
 
 def make_record(s: Setup, states: np.ndarray, world_log: np.ndarray, av_log: np.ndarray,
@@ -356,7 +373,8 @@ def make_record(s: Setup, states: np.ndarray, world_log: np.ndarray, av_log: np.
                                                                 float(states[0, 3]))
     return RunRecord(config, s.seed, x_av, x_hv, states, log, outcome(s.scenario, states, log),
                      s.scenario, s.streams.layout, av_decision_ms,
-                     None if work is None else dict(zip(WORK_NAMES, (int(w) for w in work))))
+                     None if work is None else dict(zip(WORK_NAMES, (int(w) for w in work))),
+                     yield_line_m=s.yield_line_m)
 
 
 def _columns(s: Setup, states, world_log, av_log, hv_log, av_columns, hv_columns):

@@ -44,7 +44,7 @@ from typing import Any, Hashable, Sequence
 
 import numpy as np
 
-from ..config import Config
+from ..config import Config, ConfigError
 from ..packing import SHIELD_KIND_IDS
 from ..safety import shield as sh
 from ..safety.filter import ShieldFilter
@@ -167,6 +167,10 @@ class ExternalPlanner:
     """
 
     def __init__(self, config: Config, seed: int = 0, plan_horizon_s: float | None = None):
+        if config.av.yield_line_choices_m is not None:
+            raise ConfigError("av.yield_line_choices_m (foresight) predicts a run of our own "
+                              "simulator; an outside simulator's traffic is not our model: "
+                              "set av.yield_line_m instead")
         self.config = config
         self.seed = seed
         self.plan_horizon_s = plan_horizon_s

@@ -1,0 +1,113 @@
+"""Foresight: the AV picks its yield line by predicting the run (docs/method.md §12.12).
+
+A yield line before the human's 7.5 m circle ends the standoffs of the shield (§12.8) and
+costs persuasion: the AV must decide earlier whether it stops there. Which of the two a run
+needs depends on the run: with perfect foresight of the paper's human, picking the line per run
+among a few keeps both (``benchmarks/oracle_ceiling.py``, results §15.15). This module gives
+the AV that foresight from its *own* model of the human, not from the human.
+
+With ``av.yield_line_choices_m = [y_1, ..., y_n]`` the AV, before the run, for each line
+``y_i`` and each model human ``h`` of :data:`MODELS`, simulates the whole run
+(``simulation.n_steps``) with
+
+- itself as configured (kind, planner, shield with the line ``y_i``, its own random stream),
+- ``h`` in the human's seat: the LFG player with ``roles.p_a = p_a_hat`` (the persuasive
+  planner's own model of the human, §6) starting as leader, and starting as follower (its
+  prior, ``roles.prior_leader`` in (0, 1), allows both), and the LFG player that keeps the
+  leader's role (``stubborn``, ``p_a = 0``): a human that goes when the way is free, which the
+  issue's liveness asks never to block, and which the adaptive model does not foresee (without
+  it 9 of 200 runs against ``stubborn`` end in a standoff at the paper's intersection);
+- from the initial state as it measures it (the step-0 measurement, clipped like the loop's),
+  with no noise (it cannot know the run's noise),
+
+and values each line by, in this order, (1) how many of the model humans' runs end with both
+vehicles through and no standoff (``both_cleared`` and not ``deadlock``), (2) in how many the
+AV passes the conflict point first, (3) the AV's time to clear in the slowest of them (the
+run's length where it never cleared), shorter better; it picks the line of the highest value,
+ties to the earlier line of the list. Liveness first and under every model: a line on which any
+model human ends in a standoff loses to one on which none does; then persuasion, counted over
+the models (a line that persuades the model human in either role beats one that persuades
+none, even where the stubborn one cannot be persuaded on any line). The run then drives with that line, exactly as a run configured with
+``av.yield_line_m = y`` does, and its summary carries ``yield_line_m``.
+
+The choice only sets where the shield's line stands: every step is still filtered by the
+shield, so every guarantee of §12 holds whichever line is picked. What foresight does not
+know is a human unlike its models: a human that waits for the AV to commit (a follower that
+never takes the lead) may still keep it waiting, as the issue allows. It costs ``3 n`` model
+runs once per run (about 6 ms each at the paper's intersection), before the first step, not in
+the per-step budget.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..config import Config
+from ..packing import SHIELD_LINE, SHIELD_OCC_LO, V_MAX, V_MIN
+
+#: The model humans of the prediction: (``hv.kind``, its initial ``hv.role``).
+MODELS = (("lfg", "leader"), ("lfg", "follower"), ("stubborn", "leader"))
+
+
+def model_config(config: Config, line: float, kind: str, role: str) -> Config:
+    """The configuration of the AV's prediction with ``line`` and the model human ``kind``
+    starting in ``role`` (module docstring): the run's, with ``roles.p_a = p_a_hat`` (so that
+    the AV's own estimate is unchanged), no noise."""
+    return config.with_overrides({
+        "av.yield_line_choices_m": None, "av.yield_line_m": line, "hv.kind": kind,
+        "hv.role": role, "roles.p_a": config.p_a_hat,
+        "simulation.measurement_noise": "none", "simulation.accel_noise_mps2": 0.0})
+
+
+def score(summary: dict, run_s: float) -> tuple[bool, bool, float]:
+    """A predicted run's score: (live, AV first through, -AV clear time)."""
+    live = bool(summary["both_cleared"]) and not bool(summary["deadlock"])
+    clear = summary["av_time_to_clear_s"]
+    clear = run_s if clear is None or not math.isfinite(clear) else min(clear, run_s)
+    return live, bool(summary["av_first_through"]), -clear
+
+
+def line_value(scores) -> tuple[int, int, float]:
+    """A line's value from the :func:`score` of each of its predicted runs, larger is
+    better: (runs live, runs with the AV first through, -the slowest AV clear time)."""
+    return (sum(s[0] for s in scores), sum(s[1] for s in scores), min(s[2] for s in scores))
+
+
+def measured_start(x0: np.ndarray, meas: np.ndarray, P_av: np.ndarray,
+                   P_hv: np.ndarray) -> np.ndarray:
+    """The initial state as the AV measures it at step 0 (the loop's measurement)."""
+    m = np.array(x0, dtype=np.float64) + meas
+    m[1] = min(max(m[1], P_av[V_MIN]), P_av[V_MAX])
+    m[3] = min(max(m[3], P_hv[V_MIN]), P_hv[V_MAX])
+    return m
+
+
+def choose_line(config: Config, seed: int, x0_measured: np.ndarray,
+                interaction: int = 0) -> float:
+    """The yield line the AV picks for the run (module docstring)."""
+    from ..simulation import simulate
+
+    run_s = config.simulation.n_steps * config.simulation.dt_s
+    best, pick = None, None
+    for line in config.av.yield_line_choices_m:
+        value = line_value([score(simulate(model_config(config, line, kind, role), seed,
+                                           interaction=interaction,
+                                           x0=x0_measured).summary(), run_s)
+                            for kind, role in MODELS])
+        if best is None or value > best:
+            best, pick = value, line
+    return pick
+
+
+def with_line(P_av: np.ndarray, line: float) -> np.ndarray:
+    """A copy of the AV's parameter vector with its yield line ``line`` before its interval
+    (as ``persuasive.packing`` places ``av.yield_line_m``)."""
+    P = P_av.copy()
+    P[SHIELD_LINE] = P[SHIELD_OCC_LO] - line if line else P[SHIELD_OCC_LO]
+    return P
+
+
+__all__ = ["MODELS", "choose_line", "line_value", "measured_start", "model_config", "score",
+           "with_line"]

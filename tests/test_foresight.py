@@ -1,0 +1,197 @@
+"""Foresight: the AV picks its yield line per run by predicting the run with its own model of
+the human (``persuasive.safety.foresight``, docs/method.md §12.12).
+
+Layers: the configuration's checks; the line placed exactly where ``av.yield_line_m`` places
+it; the pick by hand against the paper's human (a seed where the line at the interval ends in
+a standoff gets the far line, one where it persuades keeps it) and the run equal bit for bit to
+the run configured with the picked line, in both loops; the record carries the pick; outside
+simulators refuse it; closed loops against the humans that test the shield.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from persuasive import Config
+from persuasive.config import ConfigError
+from persuasive.record import load_record, static_setup
+from persuasive.safety import foresight
+from persuasive.simulation import simulate
+
+#: 20-s runs at the paper's intersection, the worst-case shield (corrected mode).
+BASE = Config(mode="corrected").with_overrides({"simulation.n_steps": 200})
+#: the line at the interval, and one 8 m before it (outside the human's 7.5 m circle)
+CHOICES = [0.0, 8.0]
+#: seeds whose run with the line at the interval ends in a standoff with the paper's human
+#: (``benchmarks/oracle_ceiling.py``), and seeds where the AV goes first through with it
+STANDOFF_SEEDS = (15, 22)
+PERSUADED_SEEDS = (1, 2)
+
+
+def with_choices(config: Config = BASE, choices=CHOICES) -> Config:
+    return config.with_overrides({"av.yield_line_choices_m": list(choices)})
+
+
+@pytest.mark.parametrize("value, words", [
+    ([], "1 to 8 numbers in [0, 100]"),
+    ([0, -1], "1 to 8 numbers in [0, 100]"),
+    ([0, 101], "1 to 8 numbers in [0, 100]"),
+    ([0, True], "1 to 8 numbers in [0, 100]"),
+    (list(range(9)), "1 to 8 numbers in [0, 100]"),
+    ("0,8", "1 to 8 numbers in [0, 100]"),
+])
+def test_bad_choices_are_named_with_their_range(value, words):
+    with pytest.raises(ConfigError, match=r"av\.yield_line_choices_m") as err:
+        BASE.with_overrides({"av.yield_line_choices_m": value})
+    assert words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_choices_need_a_shield_a_fixed_p_a_and_no_fixed_line():
+    with pytest.raises(ConfigError, match="exclusive"):
+        BASE.with_overrides({"av.yield_line_choices_m": [0, 8], "av.yield_line_m": 4.5})
+    with pytest.raises(ConfigError, match="av.shield"):
+        BASE.with_overrides({"av.yield_line_choices_m": [0, 8], "av.shield": "off"})
+    with pytest.raises(ConfigError, match="p_a_hat"):
+        BASE.with_overrides({"av.yield_line_choices_m": [0, 8], "mpc.p_a_hat": "online"})
+
+
+def test_unset_choices_leave_the_configuration_text_and_digest_alone():
+    assert "yield_line_choices_m" not in BASE.to_toml()
+    set_ = with_choices()
+    assert set_.av.yield_line_choices_m == (0.0, 8.0)
+    assert Config.from_dict(set_.to_dict()) == set_ and set_.digest() != BASE.digest()
+
+
+@pytest.mark.parametrize("line", [0.0, 2.5, 3.75, 8.0])
+def test_the_line_stands_where_a_configured_line_stands(line):
+    """``with_line`` places the line exactly as ``persuasive.packing`` places
+    ``av.yield_line_m``: the runs are then the same runs."""
+    _, P0, _, _ = static_setup(BASE)
+    _, P_line, _, _ = static_setup(BASE.with_overrides({"av.yield_line_m": line}))
+    got = foresight.with_line(P0, line)
+    assert np.array_equal(got, P_line)
+    assert got is not P0  # the shared static vector is not written into
+
+
+def test_the_models_are_the_planners_human_in_both_roles_and_a_stubborn_leader():
+    assert foresight.MODELS == (("lfg", "leader"), ("lfg", "follower"), ("stubborn", "leader"))
+    config = BASE.with_overrides({"roles.p_a": 0.6, "mpc.p_a_hat": 0.3, "hv.kind": "idm",
+                                  "simulation.accel_noise_mps2": 0.2})
+    model = foresight.model_config(with_choices(config), 8.0, "lfg", "follower")
+    assert (model.hv.kind, model.hv.role, model.roles.p_a) == ("lfg", "follower", 0.3)
+    assert model.p_a_hat == config.p_a_hat  # the AV's own estimate is unchanged
+    assert model.av.yield_line_m == 8.0 and model.av.yield_line_choices_m is None
+    assert model.simulation.accel_noise_mps2 == 0.0
+    assert model.simulation.measurement_noise == "none"
+
+
+@pytest.mark.parametrize("seed", STANDOFF_SEEDS)
+def test_a_predicted_standoff_picks_the_far_line_and_both_get_through(seed):
+    line0 = simulate(BASE, seed).summary()
+    assert line0["deadlock"] and not line0["both_cleared"]  # what foresight must avoid
+    run = simulate(with_choices(), seed)
+    s = run.summary()
+    assert s["yield_line_m"] == 8.0
+    assert s["both_cleared"] and not s["deadlock"]
+    fixed = simulate(BASE.with_overrides({"av.yield_line_m": 8.0}), seed)
+    assert np.array_equal(run.states, fixed.states)
+
+
+@pytest.mark.parametrize("seed", (19, 30))
+def test_a_human_that_keeps_the_lead_is_not_blocked(seed):
+    """The ``stubborn`` human is not the planner's model; foresight's stubborn leader makes
+    it pick the far line where the line at the interval ends in a standoff with it."""
+    config = BASE.with_overrides({"hv.kind": "stubborn"})
+    assert simulate(config, seed).summary()["deadlock"]
+    s = simulate(with_choices(config), seed).summary()
+    assert s["yield_line_m"] == 8.0 and s["both_cleared"] and not s["deadlock"]
+
+
+@pytest.mark.parametrize("seed", PERSUADED_SEEDS)
+def test_a_predicted_persuasion_keeps_the_line_at_the_interval(seed):
+    run = simulate(with_choices(), seed)
+    s = run.summary()
+    assert s["yield_line_m"] == 0.0 and s["av_first_through"]
+    assert np.array_equal(run.states, simulate(BASE, seed).states)
+
+
+def test_a_line_is_valued_by_liveness_then_persuasion_counted_over_the_models():
+    persuades, yields, stands = (True, True, -5.0), (True, False, -6.0), (False, False, -20.0)
+    # persuading the adaptive human in either role beats persuading nobody, though the
+    # stubborn model is persuaded on neither line
+    assert foresight.line_value([persuades, persuades, yields]) > \
+        foresight.line_value([yields, yields, yields])
+    # but a standoff with any model loses to none, whatever it would persuade
+    assert foresight.line_value([yields, yields, yields]) > \
+        foresight.line_value([persuades, persuades, stands])
+    # then the slowest clear time decides
+    assert foresight.line_value([yields, (True, False, -7.0)]) < \
+        foresight.line_value([yields, yields])
+
+
+def test_ties_go_to_the_earlier_line():
+    """With only far lines, every prediction is live and the human first: the AV's time to
+    clear decides, and two equal lines tie to the first."""
+    run = simulate(with_choices(choices=[8.0, 8.0]), 1)
+    assert run.summary()["yield_line_m"] == 8.0
+    s = foresight.score({"both_cleared": True, "deadlock": False, "av_first_through": False,
+                         "av_time_to_clear_s": None}, 20.0)
+    assert s == (True, False, -20.0)
+    assert foresight.score({"both_cleared": True, "deadlock": False, "av_first_through": True,
+                            "av_time_to_clear_s": 30.0}, 20.0) > s
+
+
+def test_the_pick_is_saved_with_the_run_and_read_back(tmp_path):
+    run = simulate(with_choices(), STANDOFF_SEEDS[0])
+    run.save(tmp_path / "run.parquet")
+    back = load_record(tmp_path / "run.parquet")
+    assert back.yield_line_m == 8.0 and back.summary()["yield_line_m"] == 8.0
+    assert "yield_line_m" not in simulate(BASE, 1).summary()  # only foresight runs carry it
+
+
+def test_both_loops_pick_alike_and_drive_alike():
+    from persuasive.world import run_python
+
+    config = with_choices()
+    seed = STANDOFF_SEEDS[1]
+    compiled, python = simulate(config, seed), run_python(config, seed)
+    assert compiled.yield_line_m == python.yield_line_m == 8.0
+    assert np.array_equal(compiled.states, python.states)
+
+
+def test_the_prediction_starts_from_the_measured_state():
+    config = with_choices(BASE.with_overrides({"simulation.measurement_noise": "uniform",
+                                               "simulation.noise_s_m": 0.3}))
+    _, P_av, P_hv, _ = static_setup(config)
+    x0 = np.array([-20.0, 5.0, -22.0, 5.0])
+    meas = np.array([0.1, 9.0, -0.2, -9.0])
+    m = foresight.measured_start(x0, meas, P_av, P_hv)
+    assert m[0] == -19.9 and m[2] == -22.2
+    assert m[1] == config.vehicle_of("av").v_max_mps and m[3] == config.vehicle_of("hv").v_min_mps
+    run = simulate(config, 3)  # a noisy run picks a line and drives with it
+    assert run.summary()["yield_line_m"] in CHOICES
+
+
+def test_outside_simulators_refuse_foresight():
+    from persuasive.envs.external import ExternalPlanner
+
+    with pytest.raises(ConfigError, match="yield_line_choices_m"):
+        ExternalPlanner(with_choices())
+
+
+@settings(max_examples=6, deadline=None)
+@given(human=st.sampled_from(["adversary", "deceptive", "random", "aggressive"]),
+       seed=st.integers(1, 10_000),
+       choices=st.lists(st.sampled_from([0.0, 3.0, 4.5, 8.0]), min_size=1, max_size=3),
+       scenario=st.sampled_from(["intersection", "left-turn", "merge"]))
+def test_any_pick_keeps_the_shields_guarantee(human, seed, choices, scenario):
+    """Foresight only places the line: against the humans that test the shield, whatever it
+    picks, no collision is the AV's and every step is certified."""
+    config = with_choices(BASE.with_overrides({"hv.kind": human, "scenario.kind": scenario,
+                                               "simulation.n_steps": 120}), choices)
+    s = simulate(config, seed).summary()
+    assert s["yield_line_m"] in choices
+    assert not s["collision_caused_by_av"] and s["uncertified_steps"] == 0
