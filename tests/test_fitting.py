@@ -29,8 +29,9 @@ from persuasive.fitting.idm import fit_idm
 from persuasive.fitting.evidence import Evidence, run_log_of
 from persuasive.fitting.filter import (filter_loglik, filter_posterior, filter_start,
                                        filter_step, role_transition, smooth_roles)
-from persuasive.fitting.models import (EMIT_LFG, EMIT_NOISY, best_initial_role, hmm_loglik,
-                                       hmm_loglik_serial, step_log_emissions)
+from persuasive.fitting.models import (EMIT_LFG, EMIT_NOISY, best_initial_role,
+                                       first_of_equal, hmm_loglik, hmm_loglik_serial,
+                                       step_log_emissions)
 from persuasive.fitting.optimize import maximise_rows
 from persuasive.game import full_prediction
 from persuasive.roles import gaussian_density, transition_matrix
@@ -152,6 +153,30 @@ def _pieces(ev, pieces):
     return Evidence([ev.runs[0]] * n, starts, ev.accel[rows], ev.a_role[rows], ev.pl[rows],
                     ev.belief[rows], ev.q[rows], ev.a_first[rows], ev.states[rows],
                     ev.P_hv[:1].repeat(n, 0), ev.P_av[:1].repeat(n, 0), ev.dt[:1].repeat(n))
+
+
+@pytest.mark.parametrize("kind", [EMIT_NOISY, EMIT_LFG])
+def test_rows_sharing_sigma_and_beta_get_each_rows_own_likelihood(kind):
+    """The noisy likelihood computes its Gaussian terms, choice weights and emissions once per
+    distinct ``sigma``, ``beta`` and pair of them (a Newton stencil repeats them): every row
+    of a stencil equals that row evaluated alone, bit for bit."""
+    _, ev = dataset(p_a=0.5, runs=3, first_seed=2)
+    p_a = np.array([0.5, 0.5, 0.5, 0.6, 0.4, 0.5, 0.5, 0.6, 0.45, 0.5])
+    sigma = np.array([0.3, 0.33, 0.27, 0.3, 0.3, 0.3, 0.3, 0.33, 0.3, 0.27])
+    beta = np.array([0.1, 0.1, 0.1, 0.1, 0.1, 0.15, 0.05, 0.15, 0.1, 0.05])
+    out = np.empty((ev.n_runs, p_a.size, 2))
+    hmm_loglik(kind, ev.starts, ev.accel, ev.a_role, ev.pl, ev.q, ev.a_first, p_a, sigma,
+               beta, out)
+    for g in range(p_a.size):
+        alone = np.empty((ev.n_runs, 1, 2))
+        hmm_loglik_serial(kind, ev.starts, ev.accel, ev.a_role, ev.pl, ev.q, ev.a_first,
+                          p_a[g:g + 1], sigma[g:g + 1], beta[g:g + 1], alone)
+        np.testing.assert_array_equal(out[:, g], alone[:, 0])
+    if kind == EMIT_NOISY:  # the rows differ: a mix-up of rows would be seen
+        assert len(set(out[0, :, 0])) == p_a.size
+    idx = np.empty(5, np.int64)
+    assert first_of_equal(np.array([0.3, 0.2, 0.3, np.nan, 0.2]), idx) == 3
+    assert idx.tolist() == [0, 1, 0, 2, 1]
 
 
 @pytest.mark.parametrize("kind,sigma,beta", [(EMIT_LFG, 0.4, math.inf),

@@ -139,11 +139,33 @@ def _gauss_terms(x: float, a_first: np.ndarray, inv_s: float, phi: np.ndarray) -
 
 
 @njit(cache=True)
+def first_of_equal(values: np.ndarray, idx: np.ndarray) -> int:
+    """Number the distinct values of ``values`` ``(G,)`` in order of first appearance: writes
+    each row's number into ``idx`` ``(G,)``, returns how many there are."""
+    n = 0
+    for g in range(values.shape[0]):
+        idx[g] = -1
+        for h in range(g):
+            if values[h] == values[g]:
+                idx[g] = idx[h]
+                break
+        if idx[g] < 0:
+            idx[g] = n
+            n += 1
+    return n
+
+
+@njit(cache=True)
 def hmm_loglik_run(kind: int, a: int, b: int, accel: np.ndarray, a_role: np.ndarray,
                    pl: np.ndarray, q: np.ndarray, a_first: np.ndarray, p_a: np.ndarray,
                    sigma: np.ndarray, beta: np.ndarray, inv_s: np.ndarray, log_c: np.ndarray,
                    out: np.ndarray) -> None:
-    """:func:`hmm_loglik` of the run in rows ``a:b`` into ``out`` ``(G, 2)``."""
+    """:func:`hmm_loglik` of the run in rows ``a:b`` into ``out`` ``(G, 2)``.
+
+    ``noisy``: the Gaussian terms depend on the step and ``sigma`` only, the choice weights on
+    the step and ``beta`` only, so each is computed once per step for each distinct value
+    among the rows (a Newton stencil has three or so of each), not once per row, and the
+    emission once per distinct pair (rows that differ in ``p_a`` only share it)."""
     G = p_a.shape[0]
     alpha = np.empty((2, G, 2))
     logscale = np.zeros((2, G))
@@ -151,9 +173,26 @@ def hmm_loglik_run(kind: int, a: int, b: int, accel: np.ndarray, a_role: np.ndar
     lik = np.empty((G, 2))
     log_ref = np.empty(G)
     T = np.empty((2, 2))
-    phi = np.empty(a_first.shape[1])
-    w = np.empty((2, a_first.shape[1]))
-    den = np.empty(2)
+    s_idx = np.empty(G, np.int64)
+    b_idx = np.empty(G, np.int64)
+    n_s = first_of_equal(sigma, s_idx)
+    n_b = first_of_equal(beta, b_idx)
+    s_row = np.empty(n_s, np.int64)  # a row of each distinct sigma, and of each beta
+    b_row = np.empty(n_b, np.int64)
+    for g in range(G - 1, -1, -1):
+        s_row[s_idx[g]] = g
+        b_row[b_idx[g]] = g
+    # the first row of each (sigma, beta): rows that differ in p_a only share the emission
+    pair_row = np.empty(G, np.int64)
+    for g in range(G):
+        pair_row[g] = g
+        for h in range(g):
+            if s_idx[h] == s_idx[g] and b_idx[h] == b_idx[g]:
+                pair_row[g] = h
+                break
+    phi = np.empty((n_s, a_first.shape[1]))
+    w = np.empty((n_b, 2, a_first.shape[1]))
+    den = np.empty((n_b, 2))
     q_max = np.empty(2)
     first = np.empty(2, np.int64)
     for k in range(a, b):
@@ -164,25 +203,27 @@ def hmm_loglik_run(kind: int, a: int, b: int, accel: np.ndarray, a_role: np.ndar
                 for c in range(1, q.shape[2]):
                     if q[k, r, c] > q_max[r]:
                         q_max[r], first[r] = q[k, r, c], c
+            for u in range(n_s):
+                _gauss_terms(x, a_first[k], inv_s[s_row[u]], phi[u])
+            for u in range(n_b):
+                _boltzmann_weights(q[k], q_max, first, beta[b_row[u]], w[u], den[u])
         for g in range(G):
             if kind == EMIT_LFG:
                 z0 = (x - a_role[k, 0]) * inv_s[g]
                 z1 = (x - a_role[k, 1]) * inv_s[g]
                 ll[g, 0] = -0.5 * z0 * z0 - log_c[g]
                 ll[g, 1] = -0.5 * z1 * z1 - log_c[g]
+            elif pair_row[g] < g:  # a row with this sigma and beta is done: same emission
+                ll[g, 0], ll[g, 1] = ll[pair_row[g], 0], ll[pair_row[g], 1]
             else:
-                # rows of a Newton stencil share sigma or beta with the row before: reuse
-                if g == 0 or sigma[g] != sigma[g - 1]:
-                    _gauss_terms(x, a_first[k], inv_s[g], phi)
-                if g == 0 or beta[g] != beta[g - 1]:
-                    _boltzmann_weights(q[k], q_max, first, beta[g], w, den)
+                ph, wb, db = phi[s_idx[g]], w[b_idx[g]], den[b_idx[g]]
                 for r in range(2):
                     num = 0.0
-                    for c in range(phi.shape[0]):
-                        if phi[c] > 0.0:
-                            num += w[r, c] * phi[c]
+                    for c in range(ph.shape[0]):
+                        if ph[c] > 0.0:
+                            num += wb[r, c] * ph[c]
                     if num > 0.0:
-                        ll[g, r] = math.log(num / den[r]) - log_c[g]
+                        ll[g, r] = math.log(num / db[r]) - log_c[g]
                     else:  # every term underflowed: the plain log-sum-exp
                         ll[g, r] = boltzmann_log_emission(x, q[k, r], a_first[k], beta[g],
                                                           sigma[g])
@@ -357,7 +398,7 @@ def idm_sse_serial(starts: np.ndarray, states: np.ndarray, accel: np.ndarray,
                     out[i])
 
 
-__all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "best_initial_role",
+__all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "best_initial_role", "first_of_equal",
            "boltzmann_log_emission", "hmm_loglik", "hmm_loglik_run", "hmm_loglik_serial",
            "idm_sse", "idm_sse_serial",
            "smooth_runs", "step_log_emissions"]

@@ -1,0 +1,110 @@
+"""How fast every human model is fitted to recorded pairs (issue 26's target: 2,500 pairs in
+under 60 s; docs/guide/recordings.md, "Speed").
+
+    python benchmarks/fit_pairs_speed.py [--pairs 2500] [--files 2] [--tracks 600] [--repeat 3]
+                                         [--intervals] [--per-model]
+
+Writes the synthetic INTERACTION folder of ``benchmarks/recordings_speed.py`` (``--files``
+recordings of ``--tracks`` tracks each, a busy four-arm junction, 5 cm of position noise),
+reads, smooths and pairs it, keeps the first ``--pairs`` pairs (in order of recording and
+time), and times what ``persuasive fit`` does with them before it scores anything: both views
+of every pair as runs (``persuasive.recordings.evaluate.ViewBuilder``, the vehicle limits from
+the pairs' 1 %/99 % acceleration quantiles), their evidence (``persuasive.fitting
+.evidence_of``: every view's games solved in its own scenario) and the fit of every model
+(``persuasive.fitting.fit_models``: ``lfg``, ``stubborn``, ``noisy``, ``idm``; point estimates,
+or with ``--intervals`` the profile intervals too). Prints the median of ``--repeat`` runs in
+one process, after one untimed run that compiles and caches the kernels, and the steps fitted.
+``--per-model``: also each model fitted alone, once (the ``noisy`` human's time includes the
+``lfg`` fit it starts from).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+
+def synthetic_folder():
+    """``write_folder`` of ``benchmarks/recordings_speed.py`` (one writer of the folder)."""
+    path = Path(__file__).with_name("recordings_speed.py")
+    spec = importlib.util.spec_from_file_location("recordings_speed", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.write_folder
+
+
+def fit_once(pairs, intervals: bool) -> tuple[float, float, int, dict]:
+    """Views + evidence, then the fits: ``(seconds to evidence, seconds to fit, steps, BIC)``."""
+    from persuasive.fitting import evidence_of, fit_models
+    from persuasive.fitting.comparison import MODELS
+    from persuasive.recordings.evaluate import ViewBuilder, speed_cap, vehicle_limits
+
+    t0 = time.perf_counter()
+    builder = ViewBuilder("corrected", vehicle_limits(pairs, 0.01), speed_cap(pairs, 10.0))
+    ev = evidence_of([builder.view(p, h) for p in pairs for h in (1, 2)])
+    t1 = time.perf_counter()
+    report = fit_models(ev, list(MODELS), intervals=intervals)
+    t2 = time.perf_counter()
+    return t1 - t0, t2 - t1, int(ev.accel.shape[0]), {m: f.bic for m, f in report.fits.items()}
+
+
+def per_model(pairs, intervals: bool) -> dict[str, float]:
+    """Seconds to fit each model alone to the pairs' evidence."""
+    from persuasive.fitting import evidence_of, fit_models
+    from persuasive.fitting.comparison import MODELS
+    from persuasive.recordings.evaluate import ViewBuilder, speed_cap, vehicle_limits
+
+    builder = ViewBuilder("corrected", vehicle_limits(pairs, 0.01), speed_cap(pairs, 10.0))
+    ev = evidence_of([builder.view(p, h) for p in pairs for h in (1, 2)])
+    out = {}
+    for m in MODELS:
+        t0 = time.perf_counter()
+        fit_models(ev, [m], intervals=intervals)
+        out[m] = time.perf_counter() - t0
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pairs", type=int, default=2500)
+    parser.add_argument("--files", type=int, default=2)
+    parser.add_argument("--tracks", type=int, default=600, help="tracks per file")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--intervals", action="store_true")
+    parser.add_argument("--per-model", action="store_true")
+    args = parser.parse_args()
+    from persuasive.recordings.evaluate import pairs_of
+    from persuasive.recordings.formats import read_tracks
+    from persuasive.recordings.pairs import find_pairs, pairs_frame
+    from persuasive.recordings.tracks import smooth_tracks
+
+    with tempfile.TemporaryDirectory() as tmp:
+        synthetic_folder()(Path(tmp), args.files, args.tracks)
+        result = find_pairs(smooth_tracks(read_tracks([Path(tmp)])))
+    frame = pairs_frame(result.pairs)
+    pairs = pairs_of(frame, "synthetic", False)[:args.pairs]
+    if len(pairs) < args.pairs:
+        raise SystemExit(f"only {len(pairs)} pairs in {args.files} x {args.tracks} tracks: "
+                         "raise --tracks or --files")
+    fit_once(pairs[:20], args.intervals)  # compile and cache, untimed
+    runs = [fit_once(pairs, args.intervals) for _ in range(args.repeat)]
+    total = [a + b for a, b, _, _ in runs]
+    print(f"{len(pairs)} pairs ({2 * len(pairs)} views, {runs[0][2]} steps), every model "
+          f"{'with' if args.intervals else 'without'} intervals: median "
+          f"{statistics.median(total):.1f} s of {args.repeat} "
+          f"({', '.join(f'{t:.1f}' for t in total)}); evidence "
+          f"{statistics.median(a for a, *_ in runs):.1f} s, fits "
+          f"{statistics.median(b for _, b, *_ in runs):.1f} s; {os.cpu_count()} cores")
+    print("BIC: " + ", ".join(f"{m} {b:.0f}" for m, b in runs[0][3].items()))
+    if args.per_model:
+        print("each model alone: " + ", ".join(f"{m} {t:.1f} s" for m, t in
+                                               per_model(pairs, args.intervals).items()))
+
+
+if __name__ == "__main__":
+    main()
