@@ -26,16 +26,14 @@ well as the oracle does can choose as well; it is not a ceiling over every traje
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 
 import numpy as np
 import pandas as pd
+from yield_frontier import humans_and_lines, study_args  # this folder's (same options)
 
 from persuasive.config import Config
-from persuasive.studies.compare import parse_kinds, run_comparison
-
-HUMANS = ("lfg", "noisy", "idm", "stubborn", "aggressive")
+from persuasive.studies.compare import run_comparison
 
 
 def line_runs(base: Config, lines: list[float], humans, seeds: int, workers) -> pd.DataFrame:
@@ -77,16 +75,8 @@ def row(label: str, human: str, runs: pd.DataFrame, run_s: float, picks: str = "
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--lines", default="0,3.75,4.5,6")
-    parser.add_argument("--seeds", type=int, default=200)
-    parser.add_argument("--steps", type=int, default=200)
-    parser.add_argument("--scenario", default="intersection")
-    parser.add_argument("--hv", default=",".join(HUMANS))
-    parser.add_argument("--workers", type=int, default=None)
-    args = parser.parse_args()
-    humans = parse_kinds(args.hv, HUMANS + ("adversary", "deceptive", "random"), "--hv", HUMANS)
-    lines = [float(x) for x in args.lines.split(",")]
+    args = study_args(__doc__, "0,3.75,4.5,6").parse_args()
+    humans, lines = humans_and_lines(args)
     base = Config(mode="corrected").with_overrides({
         "scenario.kind": args.scenario, "simulation.n_steps": args.steps})
     run_s = args.steps * base.simulation.dt_s

@@ -27,18 +27,31 @@ from persuasive.studies.compare import parse_kinds, run_comparison
 HUMANS = ("lfg", "noisy", "idm", "stubborn", "aggressive")
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--lines", default="0,3.75,5")
-    parser.add_argument("--margins", default="0")
+def study_args(doc: str, lines: str) -> argparse.ArgumentParser:
+    """The options of a study over yield lines and humans (this script's and
+    ``oracle_ceiling.py``'s): ``--lines`` (default ``lines``), ``--seeds``, ``--steps``,
+    ``--scenario``, ``--hv``, ``--workers``."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--lines", default=lines)
     parser.add_argument("--seeds", type=int, default=200)
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--scenario", default="intersection")
     parser.add_argument("--hv", default=",".join(HUMANS))
     parser.add_argument("--workers", type=int, default=None)
-    args = parser.parse_args()
+    return parser
+
+
+def humans_and_lines(args) -> tuple[list[str], list[float]]:
+    """The humans of ``--hv`` (checked) and the lines of ``--lines``."""
     humans = parse_kinds(args.hv, HUMANS + ("adversary", "deceptive", "random"), "--hv", HUMANS)
-    lines = [float(x) for x in args.lines.split(",")]
+    return humans, [float(x) for x in args.lines.split(",")]
+
+
+def main() -> None:
+    parser = study_args(__doc__, "0,3.75,5")
+    parser.add_argument("--margins", default="0")
+    args = parser.parse_args()
+    humans, lines = humans_and_lines(args)
     print(f"{args.scenario}, corrected mode, worst-case shield, persuasive AV, seeds "
           f"1..{args.seeds}, {args.steps} steps")
     margins = [float(x) for x in args.margins.split(",")]
