@@ -15,8 +15,9 @@ With ``av.yield_line_choices_m = [y_1, ..., y_n]`` the AV, before the run, for e
   planner's own model of the human, §6) starting as leader, and starting as follower (its
   prior, ``roles.prior_leader`` in (0, 1), allows both), and the LFG player that keeps the
   leader's role (``stubborn``, ``p_a = 0``): a human that goes when the way is free, which the
-  issue's liveness asks never to block, and which the adaptive model does not foresee (without
-  it 9 of 200 runs against ``stubborn`` end in a standoff at the paper's intersection);
+  issue's liveness asks never to block, and which the adaptive model does not foresee (with
+  the adaptive model alone, runs against ``stubborn`` at the paper's intersection still ended
+  in standoffs where the line at the interval was picked);
 - from the initial state as it measures it (the step-0 measurement, clipped like the loop's),
   with no noise (it cannot know the run's noise),
 
