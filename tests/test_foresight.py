@@ -175,6 +175,14 @@ def test_the_prediction_starts_from_the_measured_state():
     assert run.summary()["yield_line_m"] in CHOICES
 
 
+def test_a_setup_without_a_way_to_predict_refuses_foresight():
+    from persuasive.record import setup
+
+    with pytest.raises(ConfigError, match="yield_line_choices_m"):
+        setup(with_choices(), 1)
+    assert setup(BASE, 1).yield_line_m is None
+
+
 def test_outside_simulators_refuse_foresight():
     from persuasive.envs.external import ExternalPlanner
 

@@ -328,13 +328,16 @@ def static_setup(config: Config) -> tuple[Scenario, np.ndarray, np.ndarray, np.n
 
 def setup(config: Config, seed: int, k_av: int | None = None,
           k_hv: int | None = None, interaction: int = 0,
-          x0: np.ndarray | None = None) -> Setup:
+          x0: np.ndarray | None = None, predict=None) -> Setup:
     """The scenario, parameter vectors, random streams and initial state of a run.
 
     ``k_av``, ``k_hv``: uniforms per step of each policy (default: the configured kinds').
     A ``replay`` human starts from its recorded initial state. ``interaction``: the repeated
     interaction with the seed's human (``persuasive.streams.interaction_seed``). ``x0``
     ``(4,)``: the initial state in place of both (the streams are drawn as ever).
+    ``predict(config, seed, interaction, x0) -> summary``: how a loop predicts a run, for
+    foresight (``av.yield_line_choices_m``: the line is picked here, before the first step,
+    and set in ``P_av``; ``persuasive.world.predicted_summary`` in both loops).
     """
     seed = check_seed(seed)
     scenario, P_av, P_hv, disc = static_setup(config)
@@ -353,8 +356,12 @@ def setup(config: Config, seed: int, k_av: int | None = None,
     if config.av.yield_line_choices_m is not None:  # foresight picks the run's yield line
         from .safety.foresight import choose_line, measured_start, with_line
 
+        if predict is None:
+            raise ConfigError("av.yield_line_choices_m (foresight) predicts runs before the "
+                              "first step: run it with persuasive.simulation.simulate or the "
+                              "Python loop")
         line = choose_line(config, seed, measured_start(x0, streams.meas_noise[0], P_av, P_hv),
-                           interaction)
+                           predict, interaction)
         P_av = with_line(P_av, line)
     return Setup(config, seed, scenario, P_av, P_hv, disc, streams, x0, line)
 

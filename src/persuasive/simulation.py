@@ -22,11 +22,9 @@ import numpy as np
 
 from .config import Config, ConfigError
 from .online import posterior_of, prior_view
-from .packing import N_WORK
 from .policies import kinds as kd
-from .policies import kind_of, policy_params, state_size
-from .record import (ARRIVAL_LABELS, WORLD_LOG, RunOutcome, RunRecord, check_seed, load_record,
-                     make_record, setup)
+from .policies import policy_params
+from .record import ARRIVAL_LABELS, RunOutcome, RunRecord, check_seed, load_record, setup
 
 
 def simulate(config: Config, seed: int, timed: bool = False, interaction: int = 0,
@@ -45,30 +43,13 @@ def simulate(config: Config, seed: int, timed: bool = False, interaction: int = 
     vector in place of the configuration's (a replay given in memory).
     """
     from .policies.planners import ONLINE_STATE, PRM_ONLINE
-    from .world import run_loop
+    from .world import predicted_summary, run_compiled
 
     check_interaction(interaction)
-    s = setup(config, seed, interaction=interaction, x0=x0)
-    n = config.simulation.n_steps
-    av, hv = kind_of(config, kd.AV), kind_of(config, kd.HV)
-    states = np.empty((n + 1, 4))
-    world_log = np.full((n, len(WORLD_LOG)), np.nan)
-    av_log, hv_log = np.full((n, kd.LOG_SIZE), np.nan), np.full((n, kd.LOG_SIZE), np.nan)
-    av_ns = np.zeros(n, np.int64)
-    work = np.zeros(N_WORK, np.int64)
-    needs = np.array([av.needs_game or hv.needs_game,
-                      av.needs_av_library or hv.needs_av_library,
-                      av.needs_game or av.needs_av_library])
-    st = s.streams
+    s = setup(config, seed, interaction=interaction, x0=x0, predict=predicted_summary)
     av_prm = policy_params(config, kd.AV, p_a_prior)
-    av_st = np.zeros(state_size(av_prm, av.kind))
-    run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind, av_prm,
-             hv.kind, policy_params(config, kd.HV) if hv_prm is None
-             else np.asarray(hv_prm, dtype=np.float64), st.draws_av, st.draws_hv, needs, st.noisy,
-             st.meas_noise, st.accel_noise, timed, states, world_log, av_log, hv_log, av_ns,
-             work, av_st)
-    record = make_record(s, states, world_log, av_log, hv_log,
-                         av_ns / 1e6 if timed else None, work=work)
+    record, av_st = run_compiled(s, av_prm, policy_params(config, kd.HV) if hv_prm is None
+                                 else np.asarray(hv_prm, dtype=np.float64), timed)
     if av_st.shape[0] > kd.STATE_SIZE:  # an online posterior over p_a
         record = replace(record, interaction=interaction,
                          p_a_prior=prior_view(av_prm, PRM_ONLINE).copy(),

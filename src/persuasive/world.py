@@ -265,7 +265,7 @@ class PythonWorld:
         self.hv = hv if hv is not None else make_policy(config, kd.HV)
         self.timed = timed
         k_av, k_hv = (_draws_per_step(p) for p in (self.av, self.hv))
-        self.setup = s = setup(config, seed, k_av, k_hv)
+        self.setup = s = setup(config, seed, k_av, k_hv, predict=predicted_summary)
         self.scenario = s.scenario
         self.n_steps = n = config.simulation.n_steps
         self.dt = config.simulation.dt_s
@@ -338,6 +338,45 @@ class PythonWorld:
                            self.hv_log[:k], self.av_ms[:k] if self.timed else None,
                            tuple(self.av.log_columns), tuple(self.hv.log_columns),
                            self.games.work)
+
+
+def run_compiled(s, av_prm: np.ndarray, hv_prm: np.ndarray, timed: bool = False):
+    """The compiled loop (:func:`run_loop`) over the setup ``s``
+    (:class:`persuasive.record.Setup`) with the two policies' parameter vectors: the run's
+    :class:`~persuasive.simulation.RunRecord` and the AV's final state vector (which holds an
+    online posterior over ``p_a``)."""
+    from .packing import N_WORK
+    from .policies import kind_of, state_size
+
+    config = s.config
+    n = config.simulation.n_steps
+    av, hv = kind_of(config, kd.AV), kind_of(config, kd.HV)
+    states = np.empty((n + 1, 4))
+    world_log = np.full((n, len(WORLD_LOG)), np.nan)
+    av_log, hv_log = np.full((n, kd.LOG_SIZE), np.nan), np.full((n, kd.LOG_SIZE), np.nan)
+    av_ns = np.zeros(n, np.int64)
+    work = np.zeros(N_WORK, np.int64)
+    needs = np.array([av.needs_game or hv.needs_game,
+                      av.needs_av_library or hv.needs_av_library,
+                      av.needs_game or av.needs_av_library])
+    st = s.streams
+    av_st = np.zeros(state_size(av_prm, av.kind))
+    run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind, av_prm, hv.kind,
+             hv_prm, st.draws_av, st.draws_hv, needs, st.noisy, st.meas_noise, st.accel_noise,
+             timed, states, world_log, av_log, hv_log, av_ns, work, av_st)
+    record = make_record(s, states, world_log, av_log, hv_log,
+                         av_ns / 1e6 if timed else None, work=work)
+    return record, av_st
+
+
+def predicted_summary(config: Config, seed: int, interaction: int, x0: np.ndarray) -> dict:
+    """The summary of the compiled run of ``config`` from ``x0``: a prediction of foresight
+    (``persuasive.safety.foresight``), which both loops hand to ``persuasive.record.setup``."""
+    from .policies import policy_params
+
+    s = setup(config, seed, interaction=interaction, x0=x0)
+    return run_compiled(s, policy_params(config, kd.AV), policy_params(config, kd.HV))[0] \
+        .summary()
 
 
 def run_python(config: Config, seed: int, av=None, hv=None, timed: bool = False):

@@ -85,17 +85,16 @@ def measured_start(x0: np.ndarray, meas: np.ndarray, P_av: np.ndarray,
     return m
 
 
-def choose_line(config: Config, seed: int, x0_measured: np.ndarray,
+def choose_line(config: Config, seed: int, x0_measured: np.ndarray, predict,
                 interaction: int = 0) -> float:
-    """The yield line the AV picks for the run (module docstring)."""
-    from ..simulation import simulate
-
+    """The yield line the AV picks for the run (module docstring). ``predict(config, seed,
+    interaction, x0) -> summary``: a predicted run's summary (the loops hand in
+    ``persuasive.world.predicted_summary``, the compiled loop's)."""
     run_s = config.simulation.n_steps * config.simulation.dt_s
     best, pick = None, None
     for line in config.av.yield_line_choices_m:
-        value = line_value([score(simulate(model_config(config, line, kind, role), seed,
-                                           interaction=interaction,
-                                           x0=x0_measured).summary(), run_s)
+        value = line_value([score(predict(model_config(config, line, kind, role), seed,
+                                          interaction, x0_measured), run_s)
                             for kind, role in MODELS])
         if best is None or value > best:
             best, pick = value, line
