@@ -175,6 +175,32 @@ def test_the_prediction_starts_from_the_measured_state():
     assert run.summary()["yield_line_m"] in CHOICES
 
 
+def test_the_predictions_do_not_draw_the_runs_human_random_numbers():
+    """The model human's role draws come from a stream of the predictions' own, not the run's:
+    the AV cannot know its human's random numbers."""
+    seen = []
+
+    def predict(config, seed, interaction, x0):
+        seen.append((config.av.yield_line_m, config.hv.kind, config.hv.role, seed, interaction))
+        return {"both_cleared": True, "deadlock": False, "av_first_through": False,
+                "av_time_to_clear_s": 5.0}
+
+    x0 = np.array([-20.0, 4.0, -21.0, 4.0])
+    assert foresight.choose_line(with_choices(), 7, x0, predict, 2) == 0.0  # a tie: the first
+    assert len(seen) == len(CHOICES) * len(foresight.MODELS)
+    assert {s[3] for s in seen} == {foresight.prediction_seed(7)} != {7}
+    assert {s[4] for s in seen} == {2}
+    assert {(s[1], s[2]) for s in seen} == set(foresight.MODELS)
+    streams = [setup_streams(seed) for seed in (7, foresight.prediction_seed(7))]
+    assert not np.array_equal(streams[0], streams[1])
+
+
+def setup_streams(seed: int) -> np.ndarray:
+    from persuasive.record import setup
+
+    return setup(BASE, seed).streams.draws_hv
+
+
 def test_a_setup_without_a_way_to_predict_refuses_foresight():
     from persuasive.record import setup
 

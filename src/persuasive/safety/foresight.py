@@ -19,7 +19,10 @@ With ``av.yield_line_choices_m = [y_1, ..., y_n]`` the AV, before the run, for e
   the adaptive model alone, runs against ``stubborn`` at the paper's intersection still ended
   in standoffs where the line at the interval was picked);
 - from the initial state as it measures it (the step-0 measurement, clipped like the loop's),
-  with no noise (it cannot know the run's noise),
+  with no noise (it cannot know the run's noise), and with random numbers of its own: the
+  predictions run with the seed :func:`prediction_seed` (the run's seed XOR a constant), so
+  the model human's role draws are not the run's human's (an AV that draws, the ``lfg`` AV,
+  draws differently in its predictions too),
 
 and values each line by, in this order, (1) how many of the model humans' runs end with both
 vehicles through and no standoff (``both_cleared`` and not ``deadlock``), (2) in how many the
@@ -85,6 +88,17 @@ def measured_start(x0: np.ndarray, meas: np.ndarray, P_av: np.ndarray,
     return m
 
 
+#: What the predictions' seed differs from the run's by (XOR): any constant would do, one
+#: that changes many bits.
+PREDICTION_SEED_XOR = 0x5DEECE6
+
+
+def prediction_seed(seed: int) -> int:
+    """The seed of the predictions of the run of ``seed``: a random stream the run's human
+    never draws from (the run's streams come from ``seed`` itself)."""
+    return int(seed) ^ PREDICTION_SEED_XOR
+
+
 def choose_line(config: Config, seed: int, x0_measured: np.ndarray, predict,
                 interaction: int = 0) -> float:
     """The yield line the AV picks for the run (module docstring). ``predict(config, seed,
@@ -93,8 +107,9 @@ def choose_line(config: Config, seed: int, x0_measured: np.ndarray, predict,
     run_s = config.simulation.n_steps * config.simulation.dt_s
     best, pick = None, None
     for line in config.av.yield_line_choices_m:
-        value = line_value([score(predict(model_config(config, line, kind, role), seed,
-                                          interaction, x0_measured), run_s)
+        value = line_value([score(predict(model_config(config, line, kind, role),
+                                          prediction_seed(seed), interaction, x0_measured),
+                                  run_s)
                             for kind, role in MODELS])
         if best is None or value > best:
             best, pick = value, line
@@ -109,5 +124,5 @@ def with_line(P_av: np.ndarray, line: float) -> np.ndarray:
     return P
 
 
-__all__ = ["MODELS", "choose_line", "line_value", "measured_start", "model_config", "score",
-           "with_line"]
+__all__ = ["MODELS", "PREDICTION_SEED_XOR", "choose_line", "line_value", "measured_start",
+           "model_config", "prediction_seed", "score", "with_line"]
