@@ -64,10 +64,20 @@ def test_first_use_announces_the_compilation_in_one_line(capsys, monkeypatch):
 
 
 def test_kernels_cached_follows_the_cache_index(monkeypatch, tmp_path):
-    from persuasive import Config, simulate
+    """Against an index file of the test's own: the package's real cache is shared with the
+    other worker, which (in a fresh clone, under load) may clear it between two lines here."""
+    import os
+
     from persuasive.world import run_loop
 
-    simulate(Config(), 1)  # compiled (and cached) by now
-    assert comp.kernels_cached()
-    monkeypatch.setattr(run_loop._cache._cache_file, "_index_path", str(tmp_path / "none.nbi"))
-    assert not comp.kernels_cached()
+    cache_file = run_loop._cache._cache_file
+    source = os.path.getmtime(run_loop.py_func.__code__.co_filename)
+    index = tmp_path / "run_loop.nbi"
+    index.write_bytes(b"")
+    monkeypatch.setattr(cache_file, "_index_path", str(index))
+    os.utime(index, (source + 10.0, source + 10.0))
+    assert comp.kernels_cached()  # an index newer than the source
+    os.utime(index, (source - 10.0, source - 10.0))
+    assert not comp.kernels_cached()  # older: the source changed since
+    monkeypatch.setattr(cache_file, "_index_path", str(tmp_path / "none.nbi"))
+    assert not comp.kernels_cached()  # none
