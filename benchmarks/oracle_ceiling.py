@@ -9,7 +9,8 @@ The *foresight oracle* is the persuasive planner behind the worst-case shield th
 run starts, knows the human's policy exactly, its random stream included, and picks for the run
 the yield line ``av.yield_line_m`` from ``--lines`` that ends best: it simulates the whole run
 with each line (the simulator is deterministic in the configuration and the seed, so each
-simulation *is* the run it would drive) and keeps, in this order of preference,
+simulation *is* the run it would drive) and keeps, in this order of preference
+(``persuasive.safety.foresight.score``),
 
 1. a run with both vehicles through and no standoff (``both_cleared`` and not ``deadlock``),
 2. the AV first through the conflict point (``av_first_through``),
@@ -49,15 +50,15 @@ def line_runs(base: Config, lines: list[float], humans, seeds: int, workers) -> 
 
 
 def choose(runs: pd.DataFrame, lines: list[float], run_s: float) -> pd.DataFrame:
-    """The oracle's pick per (human, seed): the preferred run of the module docstring."""
+    """The oracle's pick per (human, seed): the run of the best
+    ``persuasive.safety.foresight.score`` (foresight's own order of preference), ties to the
+    earlier line."""
+    from persuasive.safety.foresight import score
+
     order = {line: i for i, line in enumerate(lines)}
-    ranked = runs.assign(
-        _live=(runs["both_cleared"].astype(bool) & ~runs["deadlock"].astype(bool)),
-        _first=runs["av_first_through"].astype(bool),
-        _clear=runs["av_time_to_clear_s"].fillna(run_s).clip(upper=run_s),
-        _order=runs["line"].map(order))
-    ranked = ranked.sort_values(["hv.kind", "seed", "_live", "_first", "_clear", "_order"],
-                                ascending=[True, True, False, False, True, True])
+    keys = [(*score(r, run_s), -order[r["line"]]) for r in runs.to_dict("records")]
+    ranked = runs.assign(_key=keys).sort_values(["hv.kind", "seed", "_key"],
+                                                ascending=[True, True, False])
     return ranked.groupby(["hv.kind", "seed"], sort=False).head(1)
 
 

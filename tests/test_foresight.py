@@ -31,6 +31,11 @@ STANDOFF_SEEDS = (15, 22)
 PERSUADED_SEEDS = (1, 2)
 
 
+#: a predicted run's summary, live, the human first
+LIVE = {"both_cleared": True, "deadlock": False, "av_first_through": False,
+        "av_time_to_clear_s": 5.0}
+
+
 def with_choices(config: Config = BASE, choices=CHOICES) -> Config:
     return config.with_overrides({"av.yield_line_choices_m": list(choices)})
 
@@ -67,13 +72,17 @@ def test_unset_choices_leave_the_configuration_text_and_digest_alone():
 
 @pytest.mark.parametrize("line", [0.0, 2.5, 3.75, 8.0])
 def test_the_line_stands_where_a_configured_line_stands(line):
-    """``with_line`` places the line exactly as ``persuasive.packing`` places
-    ``av.yield_line_m``: the runs are then the same runs."""
+    """Foresight's pick is placed in the run's ``P_av`` as ``av.yield_line_m`` is (one
+    placement, ``packing.place_yield_line``), on a copy of the shared static vector: the
+    runs are then the same runs."""
+    from persuasive.record import setup
+
     _, P0, _, _ = static_setup(BASE)
+    before = P0.copy()
     _, P_line, _, _ = static_setup(BASE.with_overrides({"av.yield_line_m": line}))
-    got = foresight.with_line(P0, line)
-    assert np.array_equal(got, P_line)
-    assert got is not P0  # the shared static vector is not written into
+    s = setup(with_choices(choices=[line]), 1, predict=lambda *a: LIVE)
+    assert s.yield_line_m == line and np.array_equal(s.P_av, P_line)
+    assert np.array_equal(P0, before)  # the shared static vector is not written into
 
 
 def test_the_models_are_the_planners_human_in_both_roles_and_a_stubborn_leader():
@@ -132,16 +141,12 @@ def test_a_line_is_valued_by_liveness_then_persuasion_counted_over_the_models():
         foresight.line_value([yields, yields])
 
 
-def test_ties_go_to_the_earlier_line():
-    """With only far lines, every prediction is live and the human first: the AV's time to
-    clear decides, and two equal lines tie to the first."""
-    run = simulate(with_choices(choices=[8.0, 8.0]), 1)
-    assert run.summary()["yield_line_m"] == 8.0
-    s = foresight.score({"both_cleared": True, "deadlock": False, "av_first_through": False,
-                         "av_time_to_clear_s": None}, 20.0)
+def test_a_runs_score_counts_a_run_that_never_cleared_as_the_whole_run():
+    s = foresight.score({**LIVE, "av_time_to_clear_s": None}, 20.0)
     assert s == (True, False, -20.0)
-    assert foresight.score({"both_cleared": True, "deadlock": False, "av_first_through": True,
-                            "av_time_to_clear_s": 30.0}, 20.0) > s
+    assert foresight.score({**LIVE, "av_time_to_clear_s": float("nan")}, 20.0) == s
+    assert foresight.score({**LIVE, "av_first_through": True, "av_time_to_clear_s": 30.0},
+                           20.0) > s
 
 
 def test_the_pick_is_saved_with_the_run_and_read_back(tmp_path):
@@ -163,14 +168,20 @@ def test_both_loops_pick_alike_and_drive_alike():
 
 
 def test_the_prediction_starts_from_the_measured_state():
+    """The predictions start where the AV measures the run's start: the loop's own step-0
+    measurement (noise added, speeds clipped), not the true state."""
+    from persuasive.record import setup
+    from persuasive.streams import measure_states
+
     config = with_choices(BASE.with_overrides({"simulation.measurement_noise": "uniform",
-                                               "simulation.noise_s_m": 0.3}))
-    _, P_av, P_hv, _ = static_setup(config)
-    x0 = np.array([-20.0, 5.0, -22.0, 5.0])
-    meas = np.array([0.1, 9.0, -0.2, -9.0])
-    m = foresight.measured_start(x0, meas, P_av, P_hv)
-    assert m[0] == -19.9 and m[2] == -22.2
-    assert m[1] == config.vehicle_of("av").v_max_mps and m[3] == config.vehicle_of("hv").v_min_mps
+                                               "simulation.noise_s_m": 0.3,
+                                               "simulation.noise_v_mps": 0.3}))
+    starts = []
+    s = setup(config, 3, predict=lambda c, seed, k, x0: starts.append(x0) or LIVE)
+    want = measure_states(s.x0, 0, True, s.streams.meas_noise, s.P_av, s.P_hv)
+    assert len(starts) == len(CHOICES) * len(foresight.MODELS)
+    for x0 in starts:
+        assert tuple(x0) == want and not np.array_equal(x0, s.x0)
     run = simulate(config, 3)  # a noisy run picks a line and drives with it
     assert run.summary()["yield_line_m"] in CHOICES
 
@@ -182,8 +193,7 @@ def test_the_predictions_do_not_draw_the_runs_human_random_numbers():
 
     def predict(config, seed, interaction, x0):
         seen.append((config.av.yield_line_m, config.hv.kind, config.hv.role, seed, interaction))
-        return {"both_cleared": True, "deadlock": False, "av_first_through": False,
-                "av_time_to_clear_s": 5.0}
+        return LIVE
 
     x0 = np.array([-20.0, 4.0, -21.0, 4.0])
     assert foresight.choose_line(with_choices(), 7, x0, predict, 2) == 0.0  # a tie: the first

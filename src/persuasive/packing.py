@@ -201,10 +201,15 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
         P[SHIELD_OCC_LO], P[SHIELD_OCC_HI] = widened(*path.shield_interval)
         P[SHIELD_LINE] = P[SHIELD_OCC_LO]
         out.append(P)
-    line = config.av.yield_line_m
-    if line:  # at or before the interval: a line only ever adds caution
-        out[0][SHIELD_LINE] = out[0][SHIELD_OCC_LO] - line
+    place_yield_line(out[0], config.av.yield_line_m or 0.0)
     return out[0], out[1]
+
+
+def place_yield_line(P_av: np.ndarray, line_m: float) -> None:
+    """Set the AV's yield line ``line_m`` >= 0 before the start of its shield interval, in
+    place (``av.yield_line_m``; foresight's pick): at or before the interval, a line only
+    ever adds caution."""
+    P_av[SHIELD_LINE] = P_av[SHIELD_OCC_LO] - line_m
 
 
 def discounts(config) -> np.ndarray:

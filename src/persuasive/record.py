@@ -33,7 +33,7 @@ from .policies import kind_of, load_replay
 from .roles import LEADER
 from .safety import measures
 from .scenarios import Scenario, build_scenario, first_arrival
-from .streams import draw_streams
+from .streams import draw_streams, measure_states
 
 #: Labels of ``first_at_line`` / ``first_at_conflict_point``.
 ARRIVAL_LABELS = {0: "neither", 1: "AV", 2: "HV", 3: "same step"}
@@ -354,15 +354,17 @@ def setup(config: Config, seed: int, k_av: int | None = None,
         x0 = np.array([*streams.x_av, *x_hv], dtype=np.float64)
     line = None
     if config.av.yield_line_choices_m is not None:  # foresight picks the run's yield line
-        from .safety.foresight import choose_line, measured_start, with_line
+        from .packing import place_yield_line
+        from .safety.foresight import choose_line
 
         if predict is None:
             raise ConfigError("av.yield_line_choices_m (foresight) predicts runs before the "
                               "first step: run it with persuasive.simulation.simulate or the "
                               "Python loop")
-        line = choose_line(config, seed, measured_start(x0, streams.meas_noise[0], P_av, P_hv),
-                           predict, interaction)
-        P_av = with_line(P_av, line)
+        measured = np.array(measure_states(x0, 0, streams.noisy, streams.meas_noise, P_av, P_hv))
+        line = choose_line(config, seed, measured, predict, interaction)
+        P_av = P_av.copy()  # the static vector is shared by every run of the configuration
+        place_yield_line(P_av, line)
     return Setup(config, seed, scenario, P_av, P_hv, disc, streams, x0, line)
 
 

@@ -15,7 +15,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 
+from . import packing as slot
 from .config import Config
 
 
@@ -105,4 +107,17 @@ def draw_streams(config: Config, seed: int, scenario, k_av: int, k_hv: int,
     return Streams(layout, x_av, x_hv, draws_av, draws_hv, meas, accel, noisy, av, hv)
 
 
-__all__ = ["INTERACTION_KEY", "Streams", "draw_streams", "interaction_seed"]
+@njit(cache=True, _nrt=False)
+def measure_states(x: np.ndarray, k: int, noisy: bool, meas_noise: np.ndarray,
+                   P_av: np.ndarray, P_hv: np.ndarray) -> tuple[float, float, float, float]:
+    """The measured ``(s_av, v_av, s_hv, v_hv)`` of the true state ``x`` at step ``k``."""
+    ms_av, mv_av, ms_hv, mv_hv = x[0], x[1], x[2], x[3]
+    if noisy:
+        ms_av += meas_noise[k, 0]
+        mv_av = min(max(mv_av + meas_noise[k, 1], P_av[slot.V_MIN]), P_av[slot.V_MAX])
+        ms_hv += meas_noise[k, 2]
+        mv_hv = min(max(mv_hv + meas_noise[k, 3], P_hv[slot.V_MIN]), P_hv[slot.V_MAX])
+    return ms_av, mv_av, ms_hv, mv_hv
+
+
+__all__ = ["INTERACTION_KEY", "Streams", "draw_streams", "interaction_seed", "measure_states"]

@@ -41,22 +41,10 @@ from .record import (W_AV_A, W_AV_PROPOSED, W_AV_S, W_AV_V, W_HV_A, W_HV_S, W_HV
                      WORLD_LOG, make_record, setup)
 from .safety.filter import ShieldFilter
 from .safety.shield import N_CONFLICT, ONE_BUFFER, conflict_vector, shield_filter_one
+from .streams import measure_states  # noqa: F401  (the loops' measurement; envs use it here)
 
 
 # -- measuring and advancing (shared by both loops) --------------------------------------------
-
-
-@njit(cache=True, _nrt=False)
-def measure_states(x: np.ndarray, k: int, noisy: bool, meas_noise: np.ndarray,
-                   P_av: np.ndarray, P_hv: np.ndarray) -> tuple[float, float, float, float]:
-    """The measured ``(s_av, v_av, s_hv, v_hv)`` of the true state ``x`` at step ``k``."""
-    ms_av, mv_av, ms_hv, mv_hv = x[0], x[1], x[2], x[3]
-    if noisy:
-        ms_av += meas_noise[k, 0]
-        mv_av = min(max(mv_av + meas_noise[k, 1], P_av[slot.V_MIN]), P_av[slot.V_MAX])
-        ms_hv += meas_noise[k, 2]
-        mv_hv = min(max(mv_hv + meas_noise[k, 3], P_hv[slot.V_MIN]), P_hv[slot.V_MAX])
-    return ms_av, mv_av, ms_hv, mv_hv
 
 
 @njit(cache=True, _nrt=False)

@@ -156,10 +156,34 @@ def first_of_equal(values: np.ndarray, idx: np.ndarray) -> int:
 
 
 @njit(cache=True)
+def row_sharing(sigma: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """What the rows of a parameter batch share, for :func:`hmm_loglik_run`: ``(5, G)`` rows
+    ``s_idx``, ``b_idx`` (each row's distinct ``sigma`` and ``beta``, numbered by
+    :func:`first_of_equal`), ``s_row``, ``b_row`` (the first row of each distinct value, in
+    the first ``n_s`` and ``n_b`` places) and ``pair_row`` (the first row of each row's
+    (``sigma``, ``beta``)); computed once per batch, not once per run."""
+    G = sigma.shape[0]
+    out = np.zeros((5, G), np.int64)
+    s_idx, b_idx, s_row, b_row, pair_row = out[0], out[1], out[2], out[3], out[4]
+    first_of_equal(sigma, s_idx)
+    first_of_equal(beta, b_idx)
+    for g in range(G - 1, -1, -1):
+        s_row[s_idx[g]] = g
+        b_row[b_idx[g]] = g
+    for g in range(G):
+        pair_row[g] = g
+        for h in range(g):
+            if s_idx[h] == s_idx[g] and b_idx[h] == b_idx[g]:
+                pair_row[g] = h
+                break
+    return out
+
+
+@njit(cache=True)
 def hmm_loglik_run(kind: int, a: int, b: int, accel: np.ndarray, a_role: np.ndarray,
                    pl: np.ndarray, q: np.ndarray, a_first: np.ndarray, p_a: np.ndarray,
                    sigma: np.ndarray, beta: np.ndarray, inv_s: np.ndarray, log_c: np.ndarray,
-                   out: np.ndarray) -> None:
+                   share: np.ndarray, out: np.ndarray) -> None:
     """:func:`hmm_loglik` of the run in rows ``a:b`` into ``out`` ``(G, 2)``.
 
     ``noisy``: the Gaussian terms depend on the step and ``sigma`` only, the choice weights on
@@ -173,23 +197,8 @@ def hmm_loglik_run(kind: int, a: int, b: int, accel: np.ndarray, a_role: np.ndar
     lik = np.empty((G, 2))
     log_ref = np.empty(G)
     T = np.empty((2, 2))
-    s_idx = np.empty(G, np.int64)
-    b_idx = np.empty(G, np.int64)
-    n_s = first_of_equal(sigma, s_idx)
-    n_b = first_of_equal(beta, b_idx)
-    s_row = np.empty(n_s, np.int64)  # a row of each distinct sigma, and of each beta
-    b_row = np.empty(n_b, np.int64)
-    for g in range(G - 1, -1, -1):
-        s_row[s_idx[g]] = g
-        b_row[b_idx[g]] = g
-    # the first row of each (sigma, beta): rows that differ in p_a only share the emission
-    pair_row = np.empty(G, np.int64)
-    for g in range(G):
-        pair_row[g] = g
-        for h in range(g):
-            if s_idx[h] == s_idx[g] and b_idx[h] == b_idx[g]:
-                pair_row[g] = h
-                break
+    s_idx, b_idx, s_row, b_row, pair_row = share[0], share[1], share[2], share[3], share[4]
+    n_s, n_b = s_idx.max() + 1, b_idx.max() + 1
     phi = np.empty((n_s, a_first.shape[1]))
     w = np.empty((n_b, 2, a_first.shape[1]))
     den = np.empty((n_b, 2))
@@ -254,9 +263,10 @@ def hmm_loglik(kind: int, starts: np.ndarray, accel: np.ndarray, a_role: np.ndar
     """
     inv_s = 1.0 / sigma
     log_c = np.log(sigma) + _LOG_SQRT_2PI
+    share = row_sharing(sigma, beta)
     for i in prange(starts.shape[0] - 1):
         hmm_loglik_run(kind, starts[i], starts[i + 1], accel, a_role, pl, q, a_first, p_a,
-                       sigma, beta, inv_s, log_c, out[i])
+                       sigma, beta, inv_s, log_c, share, out[i])
 
 
 @njit(cache=True)
@@ -267,9 +277,10 @@ def hmm_loglik_serial(kind: int, starts: np.ndarray, accel: np.ndarray, a_role: 
     than it saves)."""
     inv_s = 1.0 / sigma
     log_c = np.log(sigma) + _LOG_SQRT_2PI
+    share = row_sharing(sigma, beta)
     for i in range(starts.shape[0] - 1):
         hmm_loglik_run(kind, starts[i], starts[i + 1], accel, a_role, pl, q, a_first, p_a,
-                       sigma, beta, inv_s, log_c, out[i])
+                       sigma, beta, inv_s, log_c, share, out[i])
 
 
 @njit(cache=True)
@@ -398,7 +409,7 @@ def idm_sse_serial(starts: np.ndarray, states: np.ndarray, accel: np.ndarray,
                     out[i])
 
 
-__all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "best_initial_role", "first_of_equal",
+__all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "best_initial_role", "first_of_equal", "row_sharing",
            "boltzmann_log_emission", "hmm_loglik", "hmm_loglik_run", "hmm_loglik_serial",
            "idm_sse", "idm_sse_serial",
            "smooth_runs", "step_log_emissions"]

@@ -18,7 +18,8 @@ With ``av.yield_line_choices_m = [y_1, ..., y_n]`` the AV, before the run, for e
   issue's liveness asks never to block, and which the adaptive model does not foresee (with
   the adaptive model alone, runs against ``stubborn`` at the paper's intersection still ended
   in standoffs where the line at the interval was picked);
-- from the initial state as it measures it (the step-0 measurement, clipped like the loop's),
+- from the initial state as it measures it (the loop's own step-0 measurement,
+  ``persuasive.streams.measure_states``),
   with no noise (it cannot know the run's noise), and with random numbers of its own: the
   predictions run with the seed :func:`prediction_seed` (the run's seed XOR a constant), so
   the model human's role draws are not the run's human's (an AV that draws, the ``lfg`` AV,
@@ -49,7 +50,6 @@ import math
 import numpy as np
 
 from ..config import Config
-from ..packing import SHIELD_LINE, SHIELD_OCC_LO, V_MAX, V_MIN
 
 #: The model humans of the prediction: (``hv.kind``, its initial ``hv.role``).
 MODELS = (("lfg", "leader"), ("lfg", "follower"), ("stubborn", "leader"))
@@ -77,15 +77,6 @@ def line_value(scores) -> tuple[int, int, float]:
     """A line's value from the :func:`score` of each of its predicted runs, larger is
     better: (runs live, runs with the AV first through, -the slowest AV clear time)."""
     return (sum(s[0] for s in scores), sum(s[1] for s in scores), min(s[2] for s in scores))
-
-
-def measured_start(x0: np.ndarray, meas: np.ndarray, P_av: np.ndarray,
-                   P_hv: np.ndarray) -> np.ndarray:
-    """The initial state as the AV measures it at step 0 (the loop's measurement)."""
-    m = np.array(x0, dtype=np.float64) + meas
-    m[1] = min(max(m[1], P_av[V_MIN]), P_av[V_MAX])
-    m[3] = min(max(m[3], P_hv[V_MIN]), P_hv[V_MAX])
-    return m
 
 
 #: What the predictions' seed differs from the run's by (XOR): any constant would do, one
@@ -116,13 +107,5 @@ def choose_line(config: Config, seed: int, x0_measured: np.ndarray, predict,
     return pick
 
 
-def with_line(P_av: np.ndarray, line: float) -> np.ndarray:
-    """A copy of the AV's parameter vector with its yield line ``line`` before its interval
-    (as ``persuasive.packing`` places ``av.yield_line_m``)."""
-    P = P_av.copy()
-    P[SHIELD_LINE] = P[SHIELD_OCC_LO] - line if line else P[SHIELD_OCC_LO]
-    return P
-
-
-__all__ = ["MODELS", "PREDICTION_SEED_XOR", "choose_line", "line_value", "measured_start",
-           "model_config", "prediction_seed", "score", "with_line"]
+__all__ = ["MODELS", "PREDICTION_SEED_XOR", "choose_line", "line_value", "model_config",
+           "prediction_seed", "score"]
