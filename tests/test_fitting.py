@@ -29,11 +29,13 @@ from persuasive.fitting.idm import fit_idm
 from persuasive.fitting.evidence import Evidence, run_log_of
 from persuasive.fitting.filter import (filter_loglik, filter_posterior, filter_start,
                                        filter_step, role_transition, smooth_roles)
-from persuasive.fitting.models import (EMIT_LFG, EMIT_NOISY, best_initial_role,
+from persuasive.fitting.models import (EMIT_LFG, EMIT_NOISY, IDM_NAMES, best_initial_role,
                                        first_of_equal, hmm_loglik, hmm_loglik_serial,
+                                       idm_groups, idm_sse, idm_sse_serial,
                                        step_log_emissions)
 from persuasive.fitting.optimize import maximise_rows
 from persuasive.game import full_prediction
+from persuasive.policies.idm import idm_step
 from persuasive.roles import gaussian_density, transition_matrix
 from persuasive.record import static_setup
 
@@ -310,6 +312,66 @@ def test_the_lockstep_newton_finds_bounded_maxima():
     # a coordinate left out stays where it is
     x, _ = maximise_rows(f, starts, [1], np.array([-1.0, -2.0]), np.array([1.0, 2.0]), h, scale)
     np.testing.assert_array_equal(x[:, 0], starts[:, 0])
+
+
+def test_the_lazy_newton_takes_the_same_steps_and_scores_fewer_rows():
+    """``lazy``: a rejected step's stencil is never scored; the iterates are the eager ones,
+    bit for bit (the function scores a row the same in any batch)."""
+    scored = []
+
+    def f(X):  # a ridge with a kink: many steps are rejected near the maximum
+        scored.append(len(X))
+        d = X - np.array([0.3, -1.0])
+        return -4.0 * d[:, 0] ** 2 - np.abs(d[:, 1]) - 0.5 * d[:, 0] * d[:, 1]
+
+    lo, hi = np.array([-1.0, -2.0]), np.array([1.0, 2.0])
+    h, scale = np.array([1e-4, 1e-4]), np.array([0.5, 0.5])
+    starts = np.array([[0.0, 0.0], [0.9, 1.9], [-0.9, -1.9], [0.3, -1.0]])
+    x, fx = maximise_rows(f, starts, [0, 1], lo, hi, h, scale)
+    eager = sum(scored)
+    scored.clear()
+    x_l, fx_l = maximise_rows(f, starts, [0, 1], lo, hi, h, scale, lazy=True)
+    np.testing.assert_array_equal(x_l, x)
+    np.testing.assert_array_equal(fx_l, fx)
+    assert sum(scored) < 0.85 * eager  # 348 of 439 rows
+
+
+def test_the_idm_fit_scores_every_row_as_the_simulators_step_does():
+    """``idm_sse`` evaluates the car following once per group of rows that differ only in
+    the gap parameters (a scan): every row's sum equals the step-by-step replay with
+    ``idm_step``, bit for bit, in the parallel and the serial kernel."""
+    ev = _fast_idm_human()
+    p = ev.runs[0].config.hv.idm
+    base = np.array([getattr(p, n) for n in IDM_NAMES], float)
+    rng = np.random.default_rng(3)
+    gap, imp = IDM_NAMES.index("critical_gap_s"), IDM_NAMES.index("impatience_per_s")
+    rows = [base]
+    for v0, b in ((30.0, 1.0), (8.0, 3.0)):  # two groups, their gap parameters scanned
+        for _ in range(4):
+            r = base.copy()
+            r[0], r[3] = v0, b
+            r[gap], r[imp] = rng.uniform(0.0, 6.0), rng.choice([0.0, 0.3, 2.0])
+            rows.append(r)
+    prm = np.array(rows)
+    lead = idm_groups(prm)
+    assert lead.tolist() == [0, 1, 1, 1, 1, 5, 5, 5, 5]
+    out = np.empty((ev.n_runs, len(prm)))
+    serial = np.empty_like(out)
+    idm_sse(ev.starts, ev.states, ev.accel, ev.P_hv, ev.P_av, ev.dt, prm, lead, out)
+    idm_sse_serial(ev.starts, ev.states, ev.accel, ev.P_hv, ev.P_av, ev.dt, prm, lead, serial)
+    np.testing.assert_array_equal(out, serial)
+    log = np.zeros(16)
+    for i in range(ev.n_runs):
+        a, b = ev.starts[i], ev.starts[i + 1]
+        for g in range(len(prm)):
+            st, total = np.zeros(8), 0.0
+            for k in range(a, b):
+                s_o, v_o, s, v = ev.states[k]
+                r = ev.accel[k] - idm_step(st, prm[g], s, v, s_o, v_o, ev.dt[i], ev.P_hv[i],
+                                           ev.P_av[i], log)
+                total += r * r
+            assert out[i, g] == total, (i, g)
+    assert len(set(out[0])) > 3  # the gap parameters change the decisions
 
 
 # -- fits of simulated data ---------------------------------------------------------------------

@@ -111,7 +111,8 @@ def _warm_up() -> None:
     prm = np.array([[10.0, 1.5, 1.0, 1.5, 4.0, 2.0, 1.0, 0.0]])
     states = np.array([[-20.0, 4.0, -20.0, 4.0]])
     for kernel in (idm_sse, idm_sse_serial):
-        kernel(starts, states, np.zeros(1), P, P, np.full(1, 0.1), prm, np.empty((1, 1)))
+        kernel(starts, states, np.zeros(1), P, P, np.full(1, 0.1), prm, np.zeros(1, np.int64),
+               np.empty((1, 1)))
 
 
 def _notice_compile() -> None:

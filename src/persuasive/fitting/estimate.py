@@ -246,9 +246,9 @@ class RoleObjective:
     def maximise(self, rows: np.ndarray, free: list[int], iters: int = 40,
                  tol: float = 1e-7):
         """Maximise every row over ``free`` (:func:`persuasive.fitting.optimize
-        .maximise_rows`)."""
+        .maximise_rows`, lazily: a row's value does not depend on its batch)."""
         return maximise_rows(self, rows, free, self.lo, self.hi, _H, _SCALE, iters=iters,
-                             tol=tol)
+                             tol=tol, lazy=True)
 
     def run_loglik(self, x: np.ndarray) -> np.ndarray:
         """Each run's log-likelihood at the parameter vector ``x`` (its ``pi0`` given)."""

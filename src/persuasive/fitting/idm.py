@@ -12,7 +12,10 @@ comfortable deceleration ``b`` (on log scales) and the gap acceptance: the criti
 distance ``s0`` stay at the log's configuration (they shape the approach to a standstill, which
 the logs rarely show). The gap parameters enter through a threshold (go or yield), so the
 likelihood is piecewise constant in them: the maximisation alternates Nelder-Mead over all six
-with fine scans of the two gap parameters.
+with fine scans of the two gap parameters. A scan is cheap: along the measured states the
+driver's waiting time, its commitment and the accelerations of its two decisions do not depend
+on the gap parameters, so :func:`persuasive.fitting.models.idm_sse` computes them once per scan
+and each of its 201 rows only decides, step by step.
 
 After Nelder-Mead and the scans, a lockstep trust-region Newton over the four smooth parameters
 (:func:`persuasive.fitting.optimize.maximise_rows`, its steps projected onto the bounds) polishes
@@ -48,7 +51,7 @@ from .estimate import (DROP_ONE_SIDED, DROP_TWO_SIDED, PARALLEL_WORK, PROFILE_TO
                        Estimate, ModelFit, bound_side, check_sigma_min, from_log,
                        interval_method, profile_interval)
 from .evidence import Evidence
-from .models import IDM_NAMES, idm_sse, idm_sse_serial
+from .models import IDM_NAMES, idm_groups, idm_sse, idm_sse_serial
 from .optimize import maximise_rows
 
 #: The fitted IDM parameters: (name, lower bound, upper bound, log scale).
@@ -114,7 +117,7 @@ class IDMObjective:
         out = np.empty((ev.n_runs, len(prm)))
         work = ev.n_steps * len(prm)
         kernel = idm_sse if work >= PARALLEL_WORK and ev.n_runs > 1 else idm_sse_serial
-        kernel(ev.starts, ev.states, ev.accel, ev.P_hv, ev.P_av, ev.dt, prm, out)
+        kernel(ev.starts, ev.states, ev.accel, ev.P_hv, ev.P_av, ev.dt, prm, idm_groups(prm), out)
         self.evaluations += len(prm)
         return out
 

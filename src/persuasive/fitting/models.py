@@ -31,7 +31,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..policies.idm import idm_step
+from .. import packing as slot
+from ..policies.idm import (_SLOW_MPS, PRM_B, PRM_GAP, PRM_IMPATIENCE, idm_branches,
+                            idm_commits, idm_times)
 from .filter import (emission_lik, filter_loglik, filter_predict, filter_update_lik,
                      smooth_roles)
 
@@ -366,50 +368,94 @@ IDM_NAMES = ("desired_speed_mps", "time_gap_s", "max_accel_mps2", "comfort_decel
              "delta", "jam_gap_m", "critical_gap_s", "impatience_per_s")
 
 
+def idm_groups(prm: np.ndarray) -> np.ndarray:
+    """For each IDM parameter row of ``prm`` ``(G, 8)``, the first row with the same
+    parameters apart from the two gap parameters (:func:`idm_sse` evaluates the car following
+    once per such group)."""
+    key = np.array(prm, float, copy=True)
+    key[:, [PRM_GAP, PRM_IMPATIENCE]] = 0.0
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return first[inverse.ravel()].astype(np.int64)
+
+
 @njit(cache=True)
 def idm_sse_run(a: int, b: int, states: np.ndarray, accel: np.ndarray, P_hv: np.ndarray,
-                P_av: np.ndarray, dt: float, prm: np.ndarray, out: np.ndarray) -> None:
-    """:func:`idm_sse` of the run in rows ``a:b`` into ``out`` ``(G,)``."""
-    st = np.zeros(8)
-    log = np.zeros(16)
+                P_av: np.ndarray, dt: float, prm: np.ndarray, lead: np.ndarray,
+                out: np.ndarray) -> None:
+    """:func:`idm_sse` of the run in rows ``a:b`` into ``out`` ``(G,)``.
+
+    Along measured states the driver's waiting time and commitment do not depend on its gap
+    parameters, and neither do the accelerations of its two decisions: they are computed
+    once per group of rows equal apart from those (``lead``, :func:`idm_groups`), and each row
+    only decides, step by step, exactly as ``idm_step`` does (the same operations in the same
+    order, so the sums are the ones ``idm_step`` gives to the last bit).
+    """
+    n = b - a
+    fixed = np.empty(n, np.bool_)   # committed, or the other has cleared: go whatever the gap
+    margin = np.empty(n)            # t_other - t_own
+    waited = np.empty(n)            # the waiting time the step's gap shrinks with
+    r_go = np.empty(n)
+    r_yield = np.empty(n)
+    line = P_hv[slot.YIELD_S]
     for g in range(prm.shape[0]):
-        st[:] = 0.0
-        total = 0.0
+        if lead[g] != g:
+            continue
+        committed = False
+        waiting = 0.0
         for k in range(a, b):
-            acc = idm_step(st, prm[g], states[k, 2], states[k, 3], states[k, 0], states[k, 1],
-                           dt, P_hv, P_av, log)
-            r = accel[k] - acc
-            total += r * r
-        out[g] = total
+            s_o, v_o, s, v = states[k, 0], states[k, 1], states[k, 2], states[k, 3]
+            t_own, t_other, other_clear = idm_times(s, v, s_o, v_o, P_av)
+            committed = committed or idm_commits(s, v, prm[g, PRM_B], line)
+            a_go, a_yield = idm_branches(prm[g], s, v, s_o, v_o, P_hv, P_av)
+            j = k - a
+            fixed[j] = committed or other_clear
+            margin[j] = t_other - t_own
+            waited[j] = waiting
+            r_go[j] = accel[k] - a_go
+            r_yield[j] = accel[k] - a_yield
+            if v < _SLOW_MPS:
+                waiting += dt
+        for h in range(g, prm.shape[0]):
+            if lead[h] != g:
+                continue
+            crit, imp = prm[h, PRM_GAP], prm[h, PRM_IMPATIENCE]
+            total = 0.0
+            for j in range(n):
+                gap = crit * max(0.0, 1.0 - imp * waited[j])
+                r = r_go[j] if fixed[j] or margin[j] > gap else r_yield[j]
+                total += r * r
+            out[h] = total
 
 
 @njit(cache=True, parallel=True)
 def idm_sse(starts: np.ndarray, states: np.ndarray, accel: np.ndarray, P_hv: np.ndarray,
-            P_av: np.ndarray, dt: np.ndarray, prm: np.ndarray, out: np.ndarray) -> None:
+            P_av: np.ndarray, dt: np.ndarray, prm: np.ndarray, lead: np.ndarray,
+            out: np.ndarray) -> None:
     """Each run's sum of squared residuals ``sum_k (x_k - a_idm,k)^2`` for ``G`` IDM parameter
     vectors ``prm`` ``(G, 8)`` (:data:`IDM_NAMES`) into ``out`` ``(n_runs, G)``; the runs in
-    parallel (:func:`idm_sse_serial`: one after the other).
+    parallel (:func:`idm_sse_serial`: one after the other). ``lead`` ``(G,)``:
+    :func:`idm_groups` of ``prm``.
 
     The driver's state (waiting time, commitment) starts fresh and follows the measured
-    states ``states`` ``(n, 4)``; the step is ``persuasive.policies.idm.idm_step`` with the HV as
-    itself.
+    states ``states`` ``(n, 4)``; the step is ``persuasive.policies.idm.idm_step``'s with the HV
+    as itself (:func:`idm_sse_run`).
     """
     for i in prange(starts.shape[0] - 1):
         idm_sse_run(starts[i], starts[i + 1], states, accel, P_hv[i], P_av[i], dt[i], prm,
-                    out[i])
+                    lead, out[i])
 
 
 @njit(cache=True)
 def idm_sse_serial(starts: np.ndarray, states: np.ndarray, accel: np.ndarray,
                    P_hv: np.ndarray, P_av: np.ndarray, dt: np.ndarray, prm: np.ndarray,
-                   out: np.ndarray) -> None:
+                   lead: np.ndarray, out: np.ndarray) -> None:
     """:func:`idm_sse` on one thread."""
     for i in range(starts.shape[0] - 1):
         idm_sse_run(starts[i], starts[i + 1], states, accel, P_hv[i], P_av[i], dt[i], prm,
-                    out[i])
+                    lead, out[i])
 
 
 __all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "best_initial_role", "first_of_equal", "row_sharing",
            "boltzmann_log_emission", "hmm_loglik", "hmm_loglik_run", "hmm_loglik_serial",
-           "idm_sse", "idm_sse_serial",
+           "idm_groups", "idm_sse", "idm_sse_serial",
            "smooth_runs", "step_log_emissions"]
