@@ -621,6 +621,38 @@ def test_every_vehicle_stays_inside_the_bound_the_shield_assumed():
 
 
 @pytest.mark.slow
+def test_highway_envs_own_ego_is_judged_by_the_shield_it_does_not_use():
+    """Seed 3: highway-env's own ego enters the junction on a step the worst-case certificate
+    does not admit (a crossing car could still reach it under the worst case) and the
+    responsive one does; seed 8's entry both admit. The planner's episodes carry no verdict."""
+    from persuasive.envs.highway import HighwayReport, planner_config, run_episode
+
+    worst = [run_episode(s, "default", planner_config("persuasive", "worst-case"))
+             for s in (3, 8)]
+    assert [e.entry_admitted for e in worst] == [False, True]
+    for e in worst:
+        assert 0 < e.judged_admitted <= e.judged_steps <= e.steps
+    assert worst[0].judged_admitted < worst[0].judged_steps  # seed 8: every step admitted
+    responsive = run_episode(3, "default", planner_config("persuasive", "responsive"))
+    assert responsive.entry_admitted is True
+    assert responsive.judged_admitted > worst[0].judged_admitted
+    planned = run_episode(3, "persuasive")
+    assert planned.judged_steps is None and planned.entry_admitted is None
+    s = HighwayReport("x", "persuasive", (3, 8), (planned, *worst), "worst-case").summary()
+    assert (s["default"]["entries_judged"], s["default"]["entries_admitted"]) == (2, 1)
+    assert "entries_judged" not in s["persuasive"]
+    # issue 25 item 6: the planner never crossed in seed 3; the restricted mean counts it at
+    # the episode's length (the mean over crossing episodes has nothing to count), and what
+    # the shield's overrides cost is reported
+    assert not planned.crossed and s["persuasive"]["mean_time_to_cross_s"] is None
+    assert s["persuasive"]["restricted_mean_time_to_cross_s"] == planned.horizon_s == 13.0
+    assert planned.shield_interventions > 0 and planned.override_mps2 > 0
+    assert all(e.crossed for e in worst) and all(e.override_mps2 == 0 for e in worst)
+    assert s["default"]["restricted_mean_time_to_cross_s"] == pytest.approx(
+        np.mean([e.time_to_cross_s for e in worst]))
+
+
+@pytest.mark.slow
 def test_a_crash_between_two_other_vehicles_is_counted_apart_and_voids_the_guarantee():
     """Seed 15 with the shielded planner: two other vehicles collide, and highway-env sets
     both to the slower one's speed at once, 3 vehicle-steps of speed loss beyond the IDM's

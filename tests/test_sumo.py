@@ -425,6 +425,23 @@ def test_sumos_own_driver_is_judged_by_the_shield_it_does_not_use(nets):
     assert planner.judged_steps is None and planner.entry_admitted is None
 
 
+def test_the_restricted_mean_counts_an_episode_that_never_crossed_at_the_window(nets):
+    """Issue 25 item 6: the mean time to cross over the crossing episodes alone rewards failing
+    the hard ones; the restricted mean counts an episode that never crossed at
+    ``EPISODE_S``."""
+    import dataclasses
+
+    crossed = S.run_episode("merge", 10, S.SUMO_DRIVER, 900.0, 0.0, nets["merge"]).result
+    assert crossed.crossed and crossed.time_to_cross_s < S.EPISODE_S
+    stuck = dataclasses.replace(crossed, seed=11, crossed=False, time_to_cross_s=None)
+    report = S.SumoReport("merge", 900.0, 0.0, (10, 11), (S.SUMO_DRIVER,), (crossed, stuck),
+                          {}, 0.0, 1)
+    s = report.summary()[S.SUMO_DRIVER]
+    assert s["mean_time_to_cross_s"] == crossed.time_to_cross_s
+    assert s["restricted_mean_time_to_cross_s"] == pytest.approx(
+        (crossed.time_to_cross_s + S.EPISODE_S) / 2)
+
+
 @pytest.mark.parametrize("seed", [2, 71])
 def test_the_ego_merges_between_cars_and_keeps_its_commitment(nets, seed):
     """Merge, 900 veh/h: without the enter-then-follow fallback the shielded ego merged in

@@ -112,5 +112,18 @@ def highway(episodes, planner, seed, shield, as_json, video) -> None:
                       if kinds else "")
                    + f"; {s['crash_stops']} vehicle-steps of crash stops between other "
                      f"vehicles in {s['crash_stop_episodes']} episodes (outside the guarantee)")
+    for driver, s in report.summary().items():
+        cost = "" if driver == DEFAULT_DRIVER else (
+            f"; the shield's overrides cost {_num(s['override_mps2_mean'], 3)} m/s^2 per step "
+            f"(mean |applied - proposed|)")
+        click.echo(f"time to cross ({driver}): restricted mean "
+                   f"{_num(s['restricted_mean_time_to_cross_s'], 2)} s over all episodes (one "
+                   f"that never crossed counts the episode's length){cost}")
+    for driver, s in report.summary().items():  # the ceiling: the shield judging the default
+        if "entries_judged" in s:
+            click.echo(f"ceiling ({driver}, judged by the {report.shield} shield it does not "
+                       f"use): the shield would admit {s['entries_admitted']} of the "
+                       f"{s['entries_judged']} steps that took its ego into the junction, and "
+                       f"{s['steps_admitted_pct']:.1f} % of all its steps")
     if video:
         click.echo(f"video of seed {first} ({report.planner}) written to {video}")

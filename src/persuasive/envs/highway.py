@@ -704,6 +704,8 @@ class PlannerDriver:
         self.last_targets = 0  #: vehicles planned against at the last step
         self.interventions = 0  #: steps where the shield overrode the planner
         self.uncertified = 0  #: of which no fallback was certified
+        self.steps = 0  #: steps driven
+        self.override_sum = 0.0  #: sum of |applied - proposed| over the overridden steps
         self.stand_ins: list | None = None  #: made at the first step
 
     def act(self, env, projector: Projector) -> float:
@@ -720,12 +722,66 @@ class PlannerDriver:
 
         decision = self.planner.act(v, conflicts, dt, shield_lead_m=lead)
         self.last_targets = decision.targets
+        self.steps += 1
         if decision.verdict not in (None, "admitted"):
             self.interventions += 1
+            if math.isfinite(decision.proposed_mps2):
+                self.override_sum += abs(decision.accel_mps2 - decision.proposed_mps2)
         self.uncertified += decision.verdict == "uncertified"
         a = min(max(decision.accel_mps2, av.u_min_mps2, (av.v_min_mps - float(ego.speed)) / dt),
                 av.u_max_mps2, (av.v_max_mps - float(ego.speed)) / dt)
         return float(a)
+
+
+class DefaultJudge:
+    """highway-env's own ego judged by the planner's shield, which it does not use (the SUMO
+    judge's counterpart, ``persuasive.envs.sumo``): before each step the conflicts it faces
+    (the stand-ins included) and its speed; after it, the acceleration it drove
+    (``(v' - v) / dt``, highway-env's Euler speed update) put to the shield as a proposal,
+    with the Euler lead of :class:`PlannerDriver`. The shield's fallbacks are the planner's
+    (its limits, ``u_max`` 1 m/s^2); highway-env's driver accelerates at up to 3 m/s^2."""
+
+    def __init__(self, config: Config, seed: int, env):
+        from .external import ExternalPlanner
+
+        self.config = config
+        self.planner = ExternalPlanner(config, seed)
+        self.stand_ins = self.make_stand_ins(env)
+        self.steps = 0  #: steps judged
+        self.admitted = 0  #: of which the shield admitted the acceleration driven
+        self.entry_admitted: bool | None = None  #: the verdict on the step into the junction
+        self._before: tuple[float, float, list] | None = None
+
+    def make_stand_ins(self, env) -> list:
+        """The vehicles not spawned yet (:func:`spawn_stand_ins`)."""
+        return spawn_stand_ins(env)
+
+    def lead(self, v: float, first: float) -> float:
+        """The Euler lead after a first step at ``first`` from speed ``v`` (as the planner's,
+        :func:`euler_shift`)."""
+        av = self.config.vehicle_of("av")
+        return euler_shift(v, first, abs(av.u_min_mps2), 1.0 / FREQUENCY_HZ, av.v_max_mps)
+
+    def before(self, env, projector: Projector) -> None:
+        ego = env.unwrapped.vehicle
+        u = projector.ego.coordinates(ego.position)[0]
+        conflicts = projector.conflicts(ego, env.unwrapped.road.vehicles, self.stand_ins)
+        self._before = (float(ego.speed), u, conflicts)
+
+    def after(self, env, projector: Projector) -> None:
+        v, u, conflicts = self._before
+        ego = env.unwrapped.vehicle
+        if ego.crashed:  # a crash's stop is no driver's acceleration
+            return
+        dt = 1.0 / FREQUENCY_HZ
+        a = (float(ego.speed) - v) / dt
+        _, verdict = self.planner.shield(v, a, conflicts, dt, lambda first: self.lead(v, first))
+        self.steps += 1
+        self.admitted += verdict == "admitted"
+        entry = projector.ego.entry_u_m
+        if self.entry_admitted is None and entry is not None and u < entry <= \
+                projector.ego.coordinates(ego.position)[0]:
+            self.entry_admitted = verdict == "admitted"
 
 
 def euler_lead(v_mps: float, brake_mps2: float, dt_s: float) -> float:
@@ -839,6 +895,21 @@ class EpisodeResult:
     #: vehicle-steps in which another vehicle, crashing into a third, lost more speed than
     #: its ``u_min`` allows (not a driver's braking: outside the envelope's assumption)
     crash_stops: int = 0
+    #: highway-env's own ego only (None for the planner), judged by the planner's shield it
+    #: does not use: its steps, how many of them the shield would have admitted as they were
+    #: driven (the acceleration of each step against the conflicts at its start, the
+    #: stand-ins included), and whether it admits the step that took the ego into the
+    #: intersection, past its entry line (None: it never entered); a ceiling on what that
+    #: shield lets any planner do (issue 25 item 4)
+    judged_steps: int | None = None
+    judged_admitted: int | None = None
+    entry_admitted: bool | None = None
+    #: the episode's length as highway-env sets it (``duration``) [s]: a non-crossing
+    #: episode's time to cross in the restricted mean (:meth:`HighwayReport.summary`)
+    horizon_s: float = 13.0
+    #: what the shield's overrides cost (issue 25 item 6, as in SUMO): the mean over the
+    #: planner's steps of |applied - proposed| [m/s^2] (0 where admitted; 0 for the default)
+    override_mps2: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -852,13 +923,15 @@ class _Contest:
 
 
 def run_episode(seed: int, driver: str = "persuasive", config: Config | None = None,
-                frames: list | None = None) -> EpisodeResult:
+                frames: list | None = None, judge_class: type | None = None) -> EpisodeResult:
     """One episode of highway-env's intersection with ``seed``.
 
     ``driver``: an AV kind (the planner drives the ego, :class:`PlannerDriver`) or
     ``"default"`` (highway-env's IDM ego, :func:`install_default_ego`). ``config``: the
     planner's (default :func:`planner_config` of ``driver``). ``frames``: a list that receives
-    the ``rgb_array`` frames (after the reset and after each step).
+    the ``rgb_array`` frames (after the reset and after each step). ``judge_class``: what
+    judges highway-env's own ego (default :class:`DefaultJudge`; a subclass may judge it on
+    other assumptions, ``benchmarks/highway_ceiling.py``).
     """
     if driver != DEFAULT_DRIVER:
         config = config if config is not None else planner_config(driver)
@@ -876,9 +949,12 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
         veh = u.vehicle
         projector = Projector(network, ego_lanes, (float(veh.LENGTH), float(veh.WIDTH)),
                               euler_margin(config))
+        judge = None
         if driver == DEFAULT_DRIVER:
             install_default_ego(env)
             planner = None
+            if config.shield != "off":
+                judge = (judge_class or DefaultJudge)(config, seed, env)
         else:
             planner = PlannerDriver(config, seed)
         if frames is not None:
@@ -918,7 +994,11 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
         k, terminated, truncated = 0, False, False
         while not (terminated or truncated):
             accel = 0.0 if planner is None else planner.act(env, projector)
+            if judge is not None:
+                judge.before(env, projector)
             _, _, terminated, truncated, _ = env.step(_action(config, accel))
+            if judge is not None:
+                judge.after(env, projector)
             k += 1
             if frames is not None:
                 frames.append(env.render())
@@ -958,7 +1038,13 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             guarantee_held=bool(planner is not None and config.shield == "worst-case"
                                 and planner.uncertified == 0 and envelope.excesses == 0
                                 and envelope.crash_stops == 0),
-            crash_stops=envelope.crash_stops)
+            crash_stops=envelope.crash_stops,
+            judged_steps=None if judge is None else judge.steps,
+            judged_admitted=None if judge is None else judge.admitted,
+            entry_admitted=None if judge is None else judge.entry_admitted,
+            horizon_s=float(u.config["duration"]),
+            override_mps2=0.0 if planner is None or not planner.steps
+            else planner.override_sum / planner.steps)
     finally:
         env.close()
 
@@ -991,6 +1077,13 @@ class HighwayReport:
                 "ego_first": sum(e.ego_first for e in eps),
                 "other_first": sum(e.other_first for e in eps),
                 "mean_time_to_cross_s": float(np.mean(times)) if times else None,
+                # over every episode, one that never crossed counted at the episode's length:
+                # a mean over the crossing ones alone rewards failing the hard ones
+                "restricted_mean_time_to_cross_s": float(np.mean([
+                    min(e.time_to_cross_s, e.horizon_s) if e.time_to_cross_s is not None
+                    else e.horizon_s for e in eps])) if eps else None,
+                "override_mps2_mean": float(np.mean([e.override_mps2 for e in eps]))
+                if eps else None,
                 "min_distance_m": float(np.min(dists)) if dists else None,
                 "median_min_distance_m": float(np.median(dists)) if dists else None,
                 "min_conflict_distance_m": float(np.min(conflict)) if conflict else None,
@@ -1007,6 +1100,14 @@ class HighwayReport:
                 "uncertified_steps": sum(e.uncertified_steps for e in eps),
                 "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
             }
+            judged = [e for e in eps if e.judged_steps is not None]
+            if judged:  # highway-env's own ego, judged by the planner's shield
+                steps = sum(e.judged_steps for e in judged)
+                out[driver].update({
+                    "entries_judged": sum(e.entry_admitted is not None for e in judged),
+                    "entries_admitted": sum(bool(e.entry_admitted) for e in judged),
+                    "steps_admitted_pct": 100.0 * sum(e.judged_admitted for e in judged)
+                    / max(1, steps)})
         return out
 
     def to_dict(self) -> dict[str, Any]:

@@ -1019,6 +1019,11 @@ class SumoReport:
                 "junction_collisions": sum(e.junction_collisions for e in eps),
                 "crossed": len(crossed),
                 "mean_time_to_cross_s": float(np.mean(crossed)) if crossed else None,
+                # over every episode, one that never crossed counted at EPISODE_S: a mean over
+                # the crossing ones alone rewards failing the hard ones (issue 25 item 6)
+                "restricted_mean_time_to_cross_s": float(np.mean([
+                    min(e.time_to_cross_s, EPISODE_S) if e.time_to_cross_s is not None
+                    else EPISODE_S for e in eps])) if eps else None,
                 "min_ttc_s": float(np.min(ttc)) if ttc else None,
                 "ttc_episodes": len(ttc),
                 "min_pet_s": float(np.min(pet)) if pet else None,

@@ -1,0 +1,94 @@
+"""How much of highway-env's own driving a shield admits, and what holds the worst case back
+(issue 25 item 4: "measure the ceilings before you tune"; docs/results.md §15.16).
+
+    python benchmarks/highway_ceiling.py [--episodes 20] [--seed 1]
+                                         [--variants as-is,exact,no-stand-ins,u-max-3,responsive]
+
+Drives highway-env's own ego (``persuasive highway``'s ``default`` driver) on seeds
+``SEED .. SEED + EPISODES - 1`` and judges every step it drove by a shield it does not use
+(``persuasive.envs.highway.DefaultJudge``): the step that took it into the junction admitted
+or not, and the share of all its steps admitted. A planner behind that shield cannot enter
+where the shield refuses, so the admitted entries bound how often it can cross in the same
+traffic. The variants change one assumption each:
+
+- ``as-is``: the worst-case shield as ``persuasive highway`` applies it (the planner's limits,
+  highway-env's Euler lead, the stand-ins for the vehicles not spawned yet);
+- ``exact``: no Euler lead, as if the ego moved by the exact kinematics (the
+  enter-then-follow fallback then joins where a lane is shared; not what highway-env does:
+  a what-if of the fallback family);
+- ``no-stand-ins``: without the stand-ins (not safe once a vehicle spawns: a what-if of their
+  cost);
+- ``u-max-3``: the ego's ``u_max`` 3 m/s^2 instead of the paper's 1 (highway-env's own cars'
+  ``COMFORT_ACC_MAX``);
+- ``responsive``: the ``responsive`` shield (any other driver brakes after a fixed time).
+
+Prints, per variant, entries admitted of entries judged and the steps admitted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+VARIANTS = ("as-is", "exact", "no-stand-ins", "u-max-3", "responsive")
+
+
+def judge_of(variant: str):
+    """The judge class of ``variant`` (module docstring)."""
+    from persuasive.envs.highway import DefaultJudge
+
+    if variant == "exact":
+        class Exact(DefaultJudge):
+            def lead(self, v, first):
+                return 0.0
+        return Exact
+    if variant == "no-stand-ins":
+        class NoStandIns(DefaultJudge):
+            def make_stand_ins(self, env):
+                return []
+        return NoStandIns
+    return DefaultJudge
+
+
+def config_of(variant: str):
+    from persuasive.envs.highway import planner_config
+
+    if variant == "responsive":
+        return planner_config("persuasive", "responsive")
+    config = planner_config("persuasive", "worst-case")
+    if variant == "u-max-3":
+        config = config.with_overrides({"av.vehicle.u_max_mps2": 3.0})
+    return config
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--episodes", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    args = ap.parse_args()
+    variants = args.variants.split(",")
+    for v in variants:
+        if v not in VARIANTS:
+            raise SystemExit(f"--variants: {v!r} is not one of {', '.join(VARIANTS)}")
+    from persuasive.envs.highway import DEFAULT_DRIVER, run_episode
+
+    seeds = range(args.seed, args.seed + args.episodes)
+    print(f"highway-env's own ego, seeds {seeds.start}..{seeds.stop - 1}, judged by a shield "
+          "it does not use")
+    print("| variant | crossed | entries admitted | steps admitted % | wall s |")
+    print("|---|---|---|---|---|")
+    for variant in variants:
+        t0 = time.perf_counter()
+        config, judge = config_of(variant), judge_of(variant)
+        eps = [run_episode(s, DEFAULT_DRIVER, config, judge_class=judge) for s in seeds]
+        entries = [e for e in eps if e.entry_admitted is not None]
+        steps = sum(e.judged_steps for e in eps)
+        print(f"| {variant} | {sum(e.crossed for e in eps)} of {len(eps)} | "
+              f"{sum(e.entry_admitted for e in entries)} of {len(entries)} | "
+              f"{100.0 * sum(e.judged_admitted for e in eps) / max(1, steps):.1f} | "
+              f"{time.perf_counter() - t0:.0f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
