@@ -14,8 +14,8 @@ traffic. The variants change one assumption each:
 - ``as-is``: the worst-case shield as ``persuasive highway`` applies it (the planner's limits,
   highway-env's Euler lead, the stand-ins for the vehicles not spawned yet);
 - ``exact``: no Euler lead, as if the ego moved by the exact kinematics (the
-  enter-then-follow fallback then joins where a lane is shared; not what highway-env does:
-  a what-if of the fallback family);
+  enter-then-follow fallback then joins where a lane is shared; the ego's occupancy keeps its
+  widening for the Euler lag; not what highway-env does: a what-if of the fallback family);
 - ``no-stand-ins``: without the stand-ins (not safe once a vehicle spawns: a what-if of their
   cost);
 - ``u-max-3``: the ego's ``u_max`` 3 m/s^2 instead of the paper's 1 (highway-env's own cars'

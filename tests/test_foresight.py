@@ -85,8 +85,9 @@ def test_the_line_stands_where_a_configured_line_stands(line):
     assert np.array_equal(P0, before)  # the shared static vector is not written into
 
 
-def test_the_models_are_the_planners_human_in_both_roles_and_a_stubborn_leader():
-    assert foresight.MODELS == (("lfg", "leader"), ("lfg", "follower"), ("stubborn", "leader"))
+def test_the_models_are_the_planners_human_in_both_roles_a_stubborn_leader_and_a_noisy_one():
+    assert foresight.MODELS == (("lfg", "leader"), ("lfg", "follower"), ("stubborn", "leader"),
+                                ("noisy", "leader"), ("noisy", "follower"))
     config = BASE.with_overrides({"roles.p_a": 0.6, "mpc.p_a_hat": 0.3, "hv.kind": "idm",
                                   "simulation.accel_noise_mps2": 0.2})
     model = foresight.model_config(with_choices(config), 8.0, "lfg", "follower")
@@ -117,6 +118,17 @@ def test_a_human_that_keeps_the_lead_is_not_blocked(seed):
     assert simulate(config, seed).summary()["deadlock"]
     s = simulate(with_choices(config), seed).summary()
     assert s["yield_line_m"] == 8.0 and s["both_cleared"] and not s["deadlock"]
+
+
+def test_a_boltzmann_human_that_would_stand_off_at_the_interval_is_not_blocked():
+    """Seed 304 against the ``noisy`` human: the line at the interval ends in a standoff (the
+    one of 1000 runs where foresight with the first three models did, results §15.15); the
+    sampled noisy models show it, and the run takes a line before the circle, both through."""
+    config = BASE.with_overrides({"hv.kind": "noisy"})
+    line0 = simulate(config, 304).summary()
+    assert line0["deadlock"] and not line0["both_cleared"]
+    s = simulate(with_choices(config, [0.0, 3.75, 8.0]), 304).summary()
+    assert s["yield_line_m"] != 0.0 and s["both_cleared"] and not s["deadlock"]
 
 
 @pytest.mark.parametrize("seed", PERSUADED_SEEDS)

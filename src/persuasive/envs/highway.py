@@ -55,7 +55,10 @@ The comparison driver (``default``) is highway-env's own: the ego becomes one of
 ``IDMVehicle`` (its parameters as the env sets them for traffic, lane changes off, routed to
 ``o2``), which highway-env's ``RegulatedRoad`` makes yield to traffic of higher priority, the
 behaviour highway-env gives every vehicle it drives itself. Both drivers run the same seeds
-(``env.reset(seed=...)``), so every episode starts from the same traffic.
+(``env.reset(seed=...)``), so every episode starts from the same traffic. The default ego is
+judged, step by step, by the planner's shield, which it does not use (:class:`DefaultJudge`):
+how many of its steps, and whether the step that took it into the junction, the shield would
+have admitted as it drove them (a ceiling on what any planner behind that shield can do).
 
 Per episode (:class:`EpisodeResult`): collision, whether the ego crossed the intersection
 (left its inner lane) and arrived (highway-env's ``has_arrived``), who crossed first (against

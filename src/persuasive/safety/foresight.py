@@ -17,7 +17,12 @@ With ``av.yield_line_choices_m = [y_1, ..., y_n]`` the AV, before the run, for e
   leader's role (``stubborn``, ``p_a = 0``): a human that goes when the way is free, which the
   issue's liveness asks never to block, and which the adaptive model does not foresee (with
   the adaptive model alone, runs against ``stubborn`` at the paper's intersection still ended
-  in standoffs where the line at the interval was picked);
+  in standoffs where the line at the interval was picked); and the Boltzmann-rational LFG
+  (``noisy``, with the configuration's ``hv.noisy.beta`` and ``p_a = p_a_hat``) starting as
+  leader and as follower: a human that now and then takes a worse option, whose one sampled
+  run (from the predictions' own random stream) shows a line on which such a choice ends in
+  a standoff (with the first three models alone, seed 304 against the ``noisy`` human at the
+  paper's intersection did, results §15.15);
 - from the initial state as it measures it (the loop's own step-0 measurement,
   ``persuasive.streams.measure_states``),
   with no noise (it cannot know the run's noise), and with random numbers of its own: the
@@ -38,7 +43,7 @@ none, even where the stubborn one cannot be persuaded on any line). The run then
 The choice only sets where the shield's line stands: every step is still filtered by the
 shield, so every guarantee of §12 holds whichever line is picked. What foresight does not
 know is a human unlike its models: a human that waits for the AV to commit (a follower that
-never takes the lead) may still keep it waiting, as the issue allows. It costs ``3 n`` model
+never takes the lead) may still keep it waiting, as the issue allows. It costs ``5 n`` model
 runs once per run (about 6 ms each at the paper's intersection), before the first step, not in
 the per-step budget.
 """
@@ -52,7 +57,8 @@ import numpy as np
 from ..config import Config
 
 #: The model humans of the prediction: (``hv.kind``, its initial ``hv.role``).
-MODELS = (("lfg", "leader"), ("lfg", "follower"), ("stubborn", "leader"))
+MODELS = (("lfg", "leader"), ("lfg", "follower"), ("stubborn", "leader"), ("noisy", "leader"),
+          ("noisy", "follower"))
 
 
 def model_config(config: Config, line: float, kind: str, role: str) -> Config:
