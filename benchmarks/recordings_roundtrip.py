@@ -22,6 +22,13 @@ Each fixture then goes the whole way a recording goes:
 4. ``persuasive.fitting.fit_models`` with all four models (``lfg``, ``stubborn``, ``noisy``,
    ``idm``), the ``lfg``'s 95 % profile interval for ``p_a``.
 
+``--model-smoothing``: before the fit, the models' accelerations (each role's, and each
+candidate trajectory's first one) pass through the pipeline's own smoothing as the recorded
+ones did: the centred Savitzky-Golay position filter, then its second derivative, as one
+kernel over the steps around each (its impulse response; the role and the candidate held over
+the window, the view's ends repeated). A test of whether smoothing explains the fitted noise,
+not part of ``persuasive fit``.
+
 Per fixture: whether the interval covers the true ``p_a``, whether the smallest BIC selects
 ``lfg`` (the generating kind), the estimate, and the pairs found (a run whose two vehicles
 make no pair drops out). The summary: coverage and selection shares over the fixtures
@@ -52,7 +59,45 @@ def configs(p_a: float, role: str):
             for av in ("persuasive", "passive")]
 
 
-def fixture(d: int, runs: int, p_a: float, role: str, noise_m: float, window: int = 11) -> dict:
+def smoothing_kernel(window: int) -> dict[int, float]:
+    """``{d: w_d}``: the smoothed acceleration at step ``k`` is ``sum_d w_d a_{k+d}`` for the
+    true accelerations ``a`` (exact kinematics, 0.1 s steps), away from a track's ends: the
+    pipeline's centred Savitzky-Golay filter of the positions, then its second derivative
+    (``persuasive.recordings.tracks``), applied to a unit impulse."""
+    from persuasive.recordings.tracks import STEP_S, SmoothingParams, savgol
+
+    order = SmoothingParams(window=window).order
+    h = window // 2
+    n, j0, dt = 8 * window + 1, 4 * window, STEP_S
+
+    def observed(a):
+        v = 10.0 + np.concatenate([[0.0], np.cumsum(a[:-1]) * dt])
+        s = np.concatenate([[0.0], np.cumsum(v[:-1] * dt + 0.5 * a[:-1] * dt * dt)])
+        starts = np.array([0, n], np.int64)
+        return savgol(savgol(s, starts, window, order), starts, window, order, 2)
+
+    impulse = np.zeros(n)
+    impulse[j0] = 1.0
+    r = observed(impulse) - observed(np.zeros(n))
+    return {j0 - k: float(r[k]) for k in range(j0 - 2 * h, j0 + 2 * h + 1)}
+
+
+def smooth_models(ev, kernel: dict[int, float]) -> None:
+    """The evidence's model accelerations ``a_role`` and ``a_first`` through ``kernel``, run by
+    run, in place (the view's first and last steps repeated beyond its ends)."""
+    for i in range(ev.n_runs):
+        a, b = ev.starts[i], ev.starts[i + 1]
+        idx = np.arange(b - a)
+        for arr in (ev.a_role, ev.a_first):
+            seg = arr[a:b].copy()
+            out = np.zeros_like(seg)
+            for d, w in kernel.items():
+                out += w * seg[np.clip(idx + d, 0, b - a - 1)]
+            arr[a:b] = out
+
+
+def fixture(d: int, runs: int, p_a: float, role: str, noise_m: float, window: int = 11,
+            model_smoothing: bool = False) -> dict:
     """One fixture's round trip (module docstring)."""
     from persuasive import Config, simulate
     from persuasive.fitting import evidence_of, fit_models
@@ -85,9 +130,13 @@ def fixture(d: int, runs: int, p_a: float, role: str, noise_m: float, window: in
                       "hv_meas_v_mps"]].to_numpy(float)
         logs.append(RunLog(f"pair {int(pair_id)}", config, int(pair_id), None, states,
                            log["hv_accel_mps2"].to_numpy(float), meta))
-    report = fit_models(evidence_of(logs), intervals=["lfg"])
+    ev = evidence_of(logs)
+    if model_smoothing:
+        smooth_models(ev, smoothing_kernel(window))
+    report = fit_models(ev, intervals=["lfg"])
     e = report.fits["lfg"].params["p_a"]
     return {"fixture": d, "p_a": p_a, "role": role, "noise_m": noise_m, "window": window,
+            "model_smoothing": model_smoothing,
             "runs": runs,
             "pairs": len(result.pairs), "p_hat": e.value, "low": e.low, "high": e.high,
             "covered": bool(e.low - 1e-9 <= p_a <= e.high + 1e-9),
@@ -104,14 +153,17 @@ def main() -> None:
     ap.add_argument("--noise-m", type=float, default=0.05)
     ap.add_argument("--window", type=int, default=11,
                     help="the Savitzky-Golay window [samples] (the pipeline's default: 11)")
+    ap.add_argument("--model-smoothing", action="store_true",
+                    help="the models' accelerations through the pipeline's smoothing too")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default=None, help="append one JSON line per fixture")
     args = ap.parse_args()
     grid = [(float(p), r) for p in args.p_a.split(",") for r in args.roles.split(",")]
-    tasks = [(d, args.runs, *grid[d % len(grid)], args.noise_m, args.window)
-             for d in range(args.fixtures)]
+    tasks = [(d, args.runs, *grid[d % len(grid)], args.noise_m, args.window,
+              args.model_smoothing) for d in range(args.fixtures)]
     print(f"{args.fixtures} fixtures of {args.runs} runs, noise U(-{args.noise_m:g}, "
-          f"{args.noise_m:g}) m, smoothing window {args.window}, settings (p_a, role) {grid}, "
+          f"{args.noise_m:g}) m, smoothing window {args.window}"
+          f"{' (the models too)' if args.model_smoothing else ''}, settings (p_a, role) {grid}, "
           f"{args.workers} workers",
           flush=True)
     t0 = time.perf_counter()
