@@ -38,6 +38,29 @@ def test_an_edit_anywhere_clears_the_cached_kernels(tmp_path, monkeypatch):
     assert not any(c.exists() for c in caches) and keep.exists()
 
 
+def test_a_second_process_waits_for_the_first_and_keeps_what_it_compiled(tmp_path, monkeypatch):
+    """While one process holds the stamp's lock (it is clearing the stale kernels), another
+    waits; it then finds the stamp fresh and leaves the kernels the first compiled in the
+    meantime (without the lock it would clear them: it had found no stamp)."""
+    import fcntl
+    import threading
+
+    monkeypatch.setattr(comp, "_PACKAGE", tmp_path)
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    caches, _ = _fake_package(tmp_path)
+    stamp = comp._stamp_path()
+    result = []
+    with open(stamp.with_name(f".{stamp.name}.lock"), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # the first process, clearing
+        other = threading.Thread(target=lambda: result.append(comp.ensure_fresh_cache()))
+        other.start()
+        other.join(0.5)
+        assert other.is_alive()  # the second waits for the lock
+        stamp.write_text(comp.sources_digest() + "\n", encoding="ascii")  # the first's stamp
+    other.join(10)
+    assert result == [False] and all(c.exists() for c in caches)
+
+
 def test_the_stamp_follows_numba_cache_dir(tmp_path, monkeypatch):
     pkg, cache = tmp_path / "pkg", tmp_path / "cache"
     pkg.mkdir()

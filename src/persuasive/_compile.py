@@ -15,6 +15,7 @@ once when they are not cached) in this process, e.g. before worker processes sta
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 from pathlib import Path
@@ -61,14 +62,42 @@ def _stamp_path() -> Path:
     return Path(custom) / _STAMP if custom else _PACKAGE / "__pycache__" / _STAMP
 
 
+@contextlib.contextmanager
+def _stamp_lock(stamp: Path):
+    """An exclusive lock on a file beside the stamp while it is checked, the cache cleared
+    and the stamp written (POSIX ``flock``; none where the folder cannot be written or there
+    is no ``fcntl``): of processes importing the package at once in a fresh checkout (a test
+    run's workers), one clears the stale kernels and writes the stamp, the others wait and then
+    find the stamp fresh. Without it a second process that had read "no stamp" could clear
+    kernels the first one had already compiled again (a recompile, not a wrong result)."""
+    try:
+        import fcntl
+
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(stamp.with_name(f".{stamp.name}.lock"), "a")
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        yield
+    finally:
+        fh.close()  # releases the lock
+
+
 def ensure_fresh_cache() -> bool:
     """Clear the package's cached kernels if any source changed since they were cached.
 
-    Returns True when it cleared them. Errors (a read-only install, a race with another
-    process doing the same) leave the cache as it is: Numba's own checks still apply.
+    Returns True when it cleared them. One process at a time (:func:`_stamp_lock`). Errors (a
+    read-only install) leave the cache as it is: Numba's own checks still apply.
     """
     digest = sources_digest()
     stamp = _stamp_path()
+    with _stamp_lock(stamp):
+        return _clear_if_stale(stamp, digest)
+
+
+def _clear_if_stale(stamp: Path, digest: str) -> bool:
     try:
         if stamp.read_text(encoding="ascii").strip() == digest:
             return False
