@@ -284,6 +284,16 @@ def test_waiting_time_counts_standing_before_clearing():
 # -- SUMO's junction entry -------------------------------------------------------------------
 
 
+def test_the_restricted_mean_counts_a_run_that_never_cleared_at_its_horizon():
+    """One definition for compare, replay, SUMO and highway-env: a time missing (None, NaN,
+    an infinity) counts its run's horizon, a longer time is cut to it."""
+    rm = measures.restricted_mean
+    assert rm([2.0, None, math.nan, math.inf, 30.0], 20.0) == (2.0 + 20 * 4) / 5
+    assert rm([1.0, None], [4.0, 13.0]) == 7.0  # one horizon per run
+    assert rm([], 20.0) is None
+    assert rm(np.array([3.0, 5.0]), 20.0) == 4.0  # a mean over the runs that cleared
+
+
 def test_sumo_yield_line_is_the_junction_entry():
     from persuasive.envs.external import Polyline
     from persuasive.envs.sumo import Route, junction_entry

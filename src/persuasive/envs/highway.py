@@ -84,6 +84,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from ..config import AV_KIND_ALIASES, AV_KINDS, Config, ConfigError
+from ..safety.measures import restricted_mean
 
 #: highway-env ids tried in order (the issue names ``intersection-v2``).
 HIGHWAY_ENV_IDS = ("intersection-v2", "intersection-v1")
@@ -1082,9 +1083,8 @@ class HighwayReport:
                 "mean_time_to_cross_s": float(np.mean(times)) if times else None,
                 # over every episode, one that never crossed counted at the episode's length:
                 # a mean over the crossing ones alone rewards failing the hard ones
-                "restricted_mean_time_to_cross_s": float(np.mean([
-                    min(e.time_to_cross_s, e.horizon_s) if e.time_to_cross_s is not None
-                    else e.horizon_s for e in eps])) if eps else None,
+                "restricted_mean_time_to_cross_s": restricted_mean(
+                    [e.time_to_cross_s for e in eps], [e.horizon_s for e in eps]),
                 "override_mps2_mean": float(np.mean([e.override_mps2 for e in eps]))
                 if eps else None,
                 "min_distance_m": float(np.min(dists)) if dists else None,

@@ -82,7 +82,7 @@ import numpy as np
 
 from .._processes import scratch_dir
 from ..config import AV_KIND_ALIASES, AV_KINDS, SHIELD_KINDS, Config, ConfigError
-from ..safety.measures import WAIT_SPEED_MPS
+from ..safety.measures import WAIT_SPEED_MPS, restricted_mean
 from .external import (CROSSING, FOLLOW, MERGE, ExternalPlanner, Limits, Polyline,
                        RouteConflict, route_conflict)
 
@@ -1021,9 +1021,8 @@ class SumoReport:
                 "mean_time_to_cross_s": float(np.mean(crossed)) if crossed else None,
                 # over every episode, one that never crossed counted at EPISODE_S: a mean over
                 # the crossing ones alone rewards failing the hard ones (issue 25 item 6)
-                "restricted_mean_time_to_cross_s": float(np.mean([
-                    min(e.time_to_cross_s, EPISODE_S) if e.time_to_cross_s is not None
-                    else EPISODE_S for e in eps])) if eps else None,
+                "restricted_mean_time_to_cross_s": restricted_mean(
+                    [e.time_to_cross_s for e in eps], EPISODE_S),
                 "min_ttc_s": float(np.min(ttc)) if ttc else None,
                 "ttc_episodes": len(ttc),
                 "min_pet_s": float(np.min(pet)) if pet else None,

@@ -63,6 +63,7 @@ from typing import Sequence
 import numpy as np
 
 from ..config import AV_KINDS, SHIELD_KINDS, Config
+from ..safety.measures import restricted_mean
 from .formats import STEP_S, RecordingError
 from .logs import ANGLE_STEP_DEG, view_log
 
@@ -176,14 +177,6 @@ def _share(k: int, n: int) -> float | None:
     return k / n if n else None
 
 
-def _rmean(x: Sequence[float], horizon: Sequence[float]) -> float | None:
-    """The restricted mean of times ``x``: a NaN counts as its run's horizon."""
-    if not len(x):
-        return None
-    x, h = np.asarray(x, float), np.asarray(horizon, float)
-    return float(np.mean(np.where(np.isnan(x), h, np.minimum(x, h))))
-
-
 def summarise(runs: Sequence[SeatRun], settings: ReplaySettings) -> dict:
     """Counts over the runs: collisions (AV-caused or not, split by the envelope and the
     start), the shield's uncertified steps, the envelope's excesses, the invalid runs, who
@@ -230,8 +223,8 @@ def summarise(runs: Sequence[SeatRun], settings: ReplaySettings) -> dict:
                      "accel_max_mps2": max((r.accel_max_mps2 for r in runs), default=None)},
         "invalid": reasons, "valid": len(valid),
         "first_replay": firsts, "first_recorded": rec_firsts,
-        "av_clear_s_rmean": _rmean([r.av_clear_s for r in valid], horizon),
-        "recorded_clear_s_rmean": _rmean([r.recorded_clear_s for r in valid], horizon),
+        "av_clear_s_rmean": restricted_mean([r.av_clear_s for r in valid], horizon),
+        "recorded_clear_s_rmean": restricted_mean([r.recorded_clear_s for r in valid], horizon),
         "both_cleared": len(both),
         "clear_s_paired_diff_mean": float(np.mean([r.av_clear_s - r.recorded_clear_s
                                                    for r in both])) if both else None,

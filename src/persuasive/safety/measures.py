@@ -71,6 +71,18 @@ def waiting_time(v: np.ndarray, cleared: np.ndarray, dt: float) -> float:
     return float(np.count_nonzero(v[:end] < WAIT_SPEED_MPS) * dt)
 
 
+def restricted_mean(times, horizon) -> float | None:
+    """The restricted mean of times to clear (or cross) ``times``: the mean of
+    ``min(t, horizon)`` over all runs, a run that never did it (``None``, NaN or an infinity)
+    counted at its ``horizon`` (a number, or one per run), so that failing the hard runs is not
+    rewarded, as a mean over the runs that did it would; None without runs (issue 25 item 6)."""
+    t = np.array([np.nan if x is None else x for x in times], float)
+    if t.size == 0:
+        return None
+    h = np.broadcast_to(np.asarray(horizon, float), t.shape)
+    return float(np.mean(np.where(np.isfinite(t), np.minimum(t, h), h)))
+
+
 def override_cost(verdicts: np.ndarray | None, proposed: np.ndarray | None,
                   applied: np.ndarray) -> dict[str, float]:
     """What the shield's overrides cost a run (issue 25 item 6, after SHARP's comparison of a
@@ -308,5 +320,5 @@ def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float
 __all__ = ["STANDOFF_PROGRESS_M", "STANDOFF_WINDOW_S", "WAIT_SPEED_MPS", "caused_by_av",
            "footprint_gaps", "human_at_fault", "min_gap", "min_ttc", "override_cost", "pet",
            "rear_end_mask",
-           "standoff",
+           "restricted_mean", "standoff",
            "waiting_time"]

@@ -40,6 +40,7 @@ import numpy as np
 from .._version import __version__
 from .._files import atomic_write
 from ..config import AV_KINDS, SIMULATED_HV_KINDS, Config, ConfigError
+from ..safety.measures import restricted_mean
 
 #: Human kinds compared by default: all but ``replay``, which needs a recording.
 DEFAULT_HV_KINDS = tuple(k for k in SIMULATED_HV_KINDS if k != "replay")
@@ -274,8 +275,7 @@ def _liveness(frame, horizon_s: float | None) -> dict[str, Any]:
     def rmean(name: str) -> float | None:
         if horizon_s is None:
             return None
-        t = _column(frame, name)
-        return float(np.mean(np.where(np.isfinite(t), np.minimum(t, horizon_s), horizon_s)))
+        return restricted_mean(_column(frame, name), horizon_s)
 
     return {
         "both_cleared_pct": _pct(frame["both_cleared"].to_numpy(float)),
