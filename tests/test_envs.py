@@ -384,6 +384,19 @@ def _arc_entry(lane, x_line):
     return point, r * swept(point)
 
 
+def test_right_of_way_comes_from_highway_envs_lane_priorities(crossing):
+    """highway-env's ``RegulatedRoad`` makes the lane of lower priority yield: the ego's
+    vertical road (1) yields to the horizontal one (3), and has the right of way over a
+    left turn from the opposite arm (0), as the responsibility shield reads it."""
+    u, projector = crossing
+    west = _vehicle(u, ("o1", "ir1", 0), 50.0, "o3")
+    left = _vehicle(u, ("o2", "ir2", 0), 60.0, "o3")
+    assert projector.ego.priority == 1
+    rows = {c.key: c.right_of_way for c in projector.conflicts(u.vehicle, [west, left])}
+    assert rows[id(projector.known_track(west))] == -1.0
+    assert rows[id(projector.known_track(left))] == 1.0
+
+
 def test_projection_of_turning_vehicles_matches_the_arc_geometry(crossing):
     """A left turn from the east crosses the band around the ego's line (x = x_o + 2.5,
     coming from the east) on its arc; a right turn from the east, which merges into the

@@ -55,15 +55,17 @@ def test_the_shield_is_applied_in_one_place_only():
     assert {"world.py", "planner.py", "envs/external.py"} <= calls_filter
 
 
-@pytest.mark.parametrize("av_kind, hv_kind, seed", [("persuasive", "random", 17),
-                                                    ("passive", "random", 17),
-                                                    ("cv", "adversary", 19)])
-def test_every_world_gives_the_same_verdicts(av_kind, hv_kind, seed):
+@pytest.mark.parametrize("av_kind, hv_kind, seed, shield", [
+    ("persuasive", "random", 17, "worst-case"), ("passive", "random", 17, "worst-case"),
+    ("cv", "adversary", 19, "worst-case"), ("cv", "adversary", 19, "responsibility")])
+def test_every_world_gives_the_same_verdicts(av_kind, hv_kind, seed, shield):
     """The compiled loop, the Python loop and the Planner API filter alike: the same
     proposals get the same applied accelerations and verdicts, step by step (runs in which
-    the shield, unanticipated by the planner, overrides it)."""
+    the shield, unanticipated by the planner, overrides it); the responsibility shield keeps
+    its state (what is left of the human's response) from step to step in each."""
     config = Config(mode="corrected").with_overrides(
-        {"av.kind": av_kind, "hv.kind": hv_kind, "mpc.shield_aware": False})
+        {"av.kind": av_kind, "hv.kind": hv_kind, "mpc.shield_aware": False,
+         "av.shield": shield})
     compiled, python = simulate(config, seed), run_python(config, seed)
     np.testing.assert_array_equal(compiled.states, python.states)
     for name in ("av_proposed_accel_mps2", "shield_verdict", "av_accel_mps2"):

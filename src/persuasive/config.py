@@ -25,7 +25,7 @@ Mode = Literal["paper", "corrected"]
 AVKind = Literal["persuasive", "passive", "cv", "lfg", "yield"]
 HVKind = Literal["lfg", "stubborn", "noisy", "idm", "aggressive", "replay", "adversary",
                  "deceptive", "random", "person"]
-ShieldKind = Literal["off", "worst-case", "responsive"]
+ShieldKind = Literal["off", "worst-case", "responsive", "responsibility"]
 ScenarioKind = Literal["intersection", "crossing", "left-turn", "merge"]
 NoiseKind = Literal["none", "uniform", "gaussian"]
 StreamLayout = Literal["legacy", "per-agent"]
@@ -399,7 +399,8 @@ class AVParams:
     kind: AVKind = "persuasive"  #: persuasive | passive | cv | lfg | yield
     role: Role | None = None  #: initial role of an LFG AV; unset: the other of hv.role
     #: the safety shield around the planner (docs/method.md §12): off | worst-case |
-    #: responsive; unset: off in paper mode, worst-case in corrected mode
+    #: responsive | responsibility (§12.13, the ``[responsibility]`` rule); unset: off in
+    #: paper mode, worst-case in corrected mode
     shield: ShieldKind | None = None
     #: responsive shield: the human may do anything for this long, then brakes [s]
     shield_response_s: float = 1.0
@@ -585,6 +586,11 @@ class ResponsibilityParams:
     #: the AV's hardest braking in the lane ahead of a follower [m/s^2], positive (its in-lane
     #: fallback); unset: the follower's braking as taken; never harder than the AV's own
     front_brake_mps2: float | None = None
+    #: who has the right of way at the conflict of our own scenarios under the
+    #: ``responsibility`` shield (docs/method.md §12.13): "av" or "hv"; unset: neither (the
+    #: paper's unsignalled intersection), so that each must respond. Outside simulators read
+    #: it from their own road (highway-env's lane priorities)
+    right_of_way: Literal["av", "hv"] | None = None
 
     def __post_init__(self) -> None:
         p = "responsibility."
@@ -595,6 +601,9 @@ class ResponsibilityParams:
         for name in ("follower_brake_mps2", "front_brake_mps2"):
             if getattr(self, name) is not None:
                 _in_range(p + name, getattr(self, name), 0.0, 20.0, lo_open=True)
+        if self.right_of_way not in (None, "av", "hv"):
+            raise ConfigError(f"{p}right_of_way = {self.right_of_way!r} is not allowed; "
+                              f"allowed: av, hv (unset: neither)")
 
     def resolved(self, follower: VehicleParams, front: VehicleParams
                  ) -> tuple[float, float, float, float]:
@@ -699,7 +708,7 @@ class Config:
         if self.av.yield_line_choices_m is not None:
             if self.shield == "off":
                 raise ConfigError("av.yield_line_choices_m chooses the shield's yield line: it "
-                                  "needs av.shield = worst-case or responsive")
+                                  "needs av.shield = worst-case, responsive or responsibility")
             if self.p_a_online:
                 raise ConfigError('av.yield_line_choices_m predicts with a fixed p_a: it needs '
                                   'a number for mpc.p_a_hat, not "online"')

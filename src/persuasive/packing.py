@@ -57,6 +57,9 @@ ACCEL_NOISE, SHIELD_MARGIN = _slots("ACCEL_NOISE", "SHIELD_MARGIN")
 # braking positive], and the AV's hardest braking in the lane ahead of it [m/s^2, positive]
 RESP_RHO, RESP_ACCEL, RESP_BRAKE, RESP_FRONT_BRAKE = _slots(
     "RESP_RHO", "RESP_ACCEL", "RESP_BRAKE", "RESP_FRONT_BRAKE")
+# Who has the right of way at the conflict under the responsibility rule
+# (``responsibility.right_of_way``, docs/method.md §12.13): 1 the AV, -1 the other, 0 neither
+RIGHT_OF_WAY = _slots("RIGHT_OF_WAY")[0]
 # The half-widths of a uniform error on every measured position [m] and speed [m/s], which the
 # shield certifies against (``simulation.measurement_noise = "uniform"``; 0 otherwise)
 MEAS_S, MEAS_V = _slots("MEAS_S", "MEAS_V")
@@ -113,9 +116,13 @@ CONFLICT_ALONG_PATHS, CONFLICT_EUCLIDEAN = 0, 1
 
 
 #: Shield kinds (``[av] shield``), by name: the kernels' ids.
-SHIELD_OFF, SHIELD_WORST_CASE, SHIELD_RESPONSIVE = 0, 1, 2
+SHIELD_OFF, SHIELD_WORST_CASE, SHIELD_RESPONSIVE, SHIELD_RESPONSIBILITY = 0, 1, 2, 3
 SHIELD_KIND_IDS = {"off": SHIELD_OFF, "worst-case": SHIELD_WORST_CASE,
-                   "responsive": SHIELD_RESPONSIVE}
+                   "responsive": SHIELD_RESPONSIVE, "responsibility": SHIELD_RESPONSIBILITY}
+
+#: ``responsibility.right_of_way`` by name: the AV's right of way over the other vehicle
+#: (:data:`RIGHT_OF_WAY` and the conflict vector's ``C_PRIORITY``).
+RIGHT_OF_WAY_IDS = {None: 0.0, "av": 1.0, "hv": -1.0}
 
 #: Relative widening of each zone for the kernels' windows (a window may be a superset).
 ZONE_MARGIN = 1e-9
@@ -179,6 +186,7 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     shared[SHIELD_MARGIN] = config.av.shield_margin_m or 0.0
     shared[RESP_RHO], shared[RESP_ACCEL], shared[RESP_BRAKE], shared[RESP_FRONT_BRAKE] = (
         config.responsibility_rule)
+    shared[RIGHT_OF_WAY] = RIGHT_OF_WAY_IDS[config.responsibility.right_of_way]
     sim = config.simulation
     if sim.measurement_noise == "uniform":
         # a draw -w + 2 w u may round a hair past w: the box is widened by far more than that

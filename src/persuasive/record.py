@@ -91,8 +91,8 @@ class RunOutcome:
     #: the worst-case guarantee covered the whole run (docs/method.md §12.2): the worst-case
     #: shield was on, every step certified (so the run started in the invariant set) and no
     #: noise ran outside what the shield knows (measurement noise; it certifies against the
-    #: acceleration noise); False with the shield off or ``responsive`` (its guarantee rests
-    #: on the human responding)
+    #: acceleration noise); False with the shield off, ``responsive`` or ``responsibility``
+    #: (their guarantees rest on the human responding)
     guarantee_held: bool = False
     # liveness (docs/method.md §12.8): both vehicles cleared the conflict within the run; the AV
     # passed the conflict point first and both cleared (persuasion that counts); a standoff

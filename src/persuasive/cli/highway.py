@@ -125,5 +125,11 @@ def highway(episodes, planner, seed, shield, as_json, video) -> None:
                        f"use): the shield would admit {s['entries_admitted']} of the "
                        f"{s['entries_judged']} steps that took its ego into the junction, and "
                        f"{s['steps_admitted_pct']:.1f} % of all its steps")
+    for driver, s in report.summary().items():  # the rule's fault (docs/method.md §12.13)
+        if "collisions_ego_at_fault" in s:
+            click.echo(f"responsibility rule ({driver}): {s['collisions_ego_at_fault']} "
+                       f"collisions at the ego's fault, {s['collisions_other_at_fault']} at "
+                       f"the other's; {s['duty_breaches']} vehicle-steps in which another "
+                       f"vehicle broke its duty (the guarantee assumes none)")
     if video:
         click.echo(f"video of seed {first} ({report.planner}) written to {video}")

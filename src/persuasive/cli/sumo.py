@@ -15,9 +15,10 @@ from pathlib import Path
 import click
 
 from .._files import check_replaceable_folder
-from ..config import AV_KIND_ALIASES, AV_KINDS
+from ..config import AV_KIND_ALIASES, AV_KINDS, SHIELD_KINDS
 from ..envs.sumo import MAX_EPISODES, SCENARIOS
-from ._common import Count, check_workers, compile_notice, progress_bar, workers_type
+from ._common import (Count, check_workers, compile_notice, kinds_text, progress_bar,
+                      workers_type)
 
 
 def _num(value, digits: int = 2) -> str:
@@ -56,7 +57,7 @@ def summary_lines(report) -> list[str]:
               default="persuasive", show_default=True, help="The AV planner (corrected mode).")
 @click.option("--shield", "shields", default="worst-case", show_default=True,
               help="Shields around the planner, comma-separated (each one is a driver): "
-                   "off, worst-case, responsive.")
+                   f"{kinds_text(SHIELD_KINDS)}.")
 @click.option("--flow", type=float, default=300.0, show_default=True,
               help="SUMO traffic on each conflicting route [vehicles per hour], in (0, 3600].")
 @click.option("--ignore-foes", type=float, default=0.0, show_default=True,

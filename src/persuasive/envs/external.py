@@ -45,9 +45,10 @@ from typing import Any, Hashable, Sequence
 import numpy as np
 
 from ..config import Config, ConfigError
-from ..packing import SHIELD_KIND_IDS
+from ..packing import RIGHT_OF_WAY_IDS, SHIELD_KIND_IDS
 from ..safety import shield as sh
 from ..safety.filter import ShieldFilter
+from ..safety.responsibility import DutyWatch
 
 #: Kinds of conflict: the paths cross once; the other joins the ego's lane (a merge); the
 #: other is ahead in the ego's lane (follow).
@@ -87,13 +88,20 @@ class Conflict:
     other_occupancy: tuple[float, float] = (-math.inf, math.inf)
     other: Limits | None = None  #: its limits (default: the configuration's human vehicle)
     #: the adapter's own data; ``"stand_in": True`` marks a vehicle not in the simulator yet
-    #: (highway-env's spawns), which the shield checks and the planner does not plan against
+    #: (highway-env's spawns), which the shield checks and the planner does not plan against;
+    #: ``"placeholder": True`` one that stands for vehicles still to be inserted (SUMO's
+    #: entries), planned against but, like a stand-in, no driver with duties under the
+    #: responsibility rule (``persuasive.safety.responsibility``)
     extra: dict = field(default_factory=dict, compare=False)
     #: the ego's yield line relative to the conflict point [m]: where the shield makes it
     #: stand when it yields (docs/method.md §12.8; e.g. before a junction's polygon); None:
     #: ``ego_occupancy[0]`` less the configuration's ``av.yield_line_m``; never after
     #: ``ego_occupancy[0]``
     ego_line_m: float | None = None
+    #: who has the right of way here under the responsibility rule (docs/method.md §12.13):
+    #: 1 the ego, -1 the other, 0 neither (the simulator's own road, e.g. highway-env's lane
+    #: priorities); None: the configuration's ``responsibility.right_of_way``
+    right_of_way: float | None = None
 
 
 def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
@@ -138,6 +146,9 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
         row[sh.C_RESP_RHO], row[sh.C_RESP_ACCEL], row[sh.C_RESP_BRAKE], row[sh.C_RESP_FRONT] = rule
         row[sh.C_R_ULANE] = (sh.lane_braking(ego.u_min_mps2, rule[3], 0.0) if c.kind == MERGE
                              else ego.u_min_mps2)
+        row[sh.C_PRIORITY] = (RIGHT_OF_WAY_IDS[config.responsibility.right_of_way]
+                              if c.right_of_way is None else float(c.right_of_way))
+        row[sh.C_RESP_OWED] = 1.0  # until the filter's state says otherwise
         rows.append(row)
     C = np.array(rows, float).reshape(len(rows), sh.N_CONFLICT)
     return (np.array(s_R, float), np.array(s_H, float), np.array(v_H, float), C)
@@ -182,6 +193,9 @@ class ExternalPlanner:
         # features that anticipate the shield included); they only propose (Planner.accel):
         # the one shield filters once, over all vehicles
         self._shield = ShieldFilter(SHIELD_KIND_IDS[config.shield], 0.0, self.ego.u_min_mps2)
+        #: the responsibility rule's duties and response clocks per vehicle
+        #: (docs/method.md §12.13; None for the other shield kinds)
+        self.duties: DutyWatch | None = None
         from ..record import static_setup
 
         self._clear_m = float(static_setup(config)[0].hv.clear_s)
@@ -244,23 +258,39 @@ class ExternalPlanner:
         return Decision(float(a), float(proposed), verdict, len(accels), len(conflicts))
 
     def shield(self, ego_v_mps: float, proposed_mps2: float, conflicts: Sequence[Conflict],
-               dt_s: float, shield_lead_m: float | Callable[[float], float] = 0.0
-               ) -> tuple[float, str | None]:
+               dt_s: float, shield_lead_m: float | Callable[[float], float] = 0.0,
+               driven: bool = False) -> tuple[float, str | None]:
         """The shield alone (no planning): ``(acceleration to apply [m/s^2], verdict)`` for
         the proposal ``proposed_mps2`` at speed ``ego_v_mps`` among ``conflicts``, as
         :meth:`act` applies it (``shield_lead_m``: as there; verdict None: no shield,
-        ``config.shield = "off"``)."""
+        ``config.shield = "off"``). With the ``responsibility`` kind each vehicle's response
+        clock is kept from one call to the next and the duties are watched
+        (:attr:`duties`); ``driven``: the proposal is what a driver the shield only judges
+        drove (its step is certified only if admitted as it was)."""
         a = float(proposed_mps2)
         if not self._shield.on:
             return ShieldFilter.unfiltered(a)[0], None  # refuses a NaN
         ego = self.ego
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
         s_R, s_H, v_H, C = conflict_arrays(conflicts, self.config, ego)
+        watch = None
+        if self._shield.kind == SHIELD_KIND_IDS["responsibility"]:
+            if self.duties is None:
+                self.duties = DutyWatch(dt_s)
+            watch = self.duties
+            keys = [c.key for c in conflicts]
+            watch.restore(keys, C)
         lead = shield_lead_m if callable(shield_lead_m) else (lambda _: float(shield_lead_m))
         self._shield.dt_s = float(dt_s)
         a, code = self._shield.among(a, v, s_R, s_H, v_H, C,
                                      (lead(a), lead(ego.u_min_mps2), lead(ego.u_max_mps2)))
-        return a, ShieldFilter.name(code)
+        verdict = ShieldFilter.name(code)
+        if watch is not None:
+            watch.step(keys, s_H, v_H, C, verdict == "admitted" if driven
+                       else verdict != "uncertified",
+                       [not (c.extra.get("stand_in") or c.extra.get("placeholder"))
+                        for c in conflicts])
+        return a, verdict
 
 
 def idm_follow(config: Config, v: float, leader: tuple[float, float]) -> float:

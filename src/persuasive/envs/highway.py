@@ -74,6 +74,7 @@ headless too, but highway-env's viewer then draws nothing and every frame is bla
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import math
 import os
@@ -243,6 +244,9 @@ class EgoPath:
     length_m: float
     exit_u_m: float
     entry_u_m: float | None = None
+    #: highway-env's priority of the ego's lane through the intersection (``RegulatedRoad``
+    #: makes the lower yield; the horizontal road's lanes have 3, the ego's vertical one 1)
+    priority: int = 0
 
     @classmethod
     def from_lanes(cls, network, lanes: list[tuple]) -> EgoPath:
@@ -262,7 +266,9 @@ class EgoPath:
         length = float(sum(lane.length for lane in objs))
         exit_u = float(sum(lane.length for lane in objs[:-1]))
         entry_u = float(objs[0].length) if len(objs) >= 3 else None
-        return cls(origin, direction, length, exit_u, entry_u)
+        inner = objs[1] if len(objs) >= 3 else objs[0]
+        return cls(origin, direction, length, exit_u, entry_u,
+                   int(getattr(inner, "priority", 0)))
 
     def coordinates(self, point) -> tuple[float, float]:
         """``(u, lateral)`` [m] of ``point``: along the path from its origin, and to its left."""
@@ -424,6 +430,10 @@ class Projector:
         self._tracks[id(vehicle)] = track
         return track
 
+    def known_track(self, vehicle) -> Track | None:
+        """The vehicle's :class:`Track` if it has one (none made)."""
+        return self._tracks.get(id(vehicle))
+
     def _occupancy(self, track: Track, vehicle) -> None:
         """The shield's view of a track (module docstring): the first stretch of its lanes,
         not yet behind the vehicle, where its footprint can touch the ego's."""
@@ -546,7 +556,18 @@ class Projector:
         line = None if entry is None else entry - 0.5 * self.ego_size[0] - track.origin_u_m
         return Conflict(id(track), CROSSING if track.kind == "crossing" else MERGE, s_ego,
                         s_other, float(v.speed), track.ego_occupancy, track.other_occupancy,
-                        limits, ego_line_m=line)
+                        limits, ego_line_m=line, right_of_way=self.right_of_way(track))
+
+    def right_of_way(self, track: Track) -> float:
+        """Who has the right of way at a track's conflict, by highway-env's own rule
+        (``RegulatedRoad.respect_priorities``: the lane of lower priority yields): 1 the ego,
+        -1 the other, 0 equal (highway-env then makes the one behind yield, which no fixed
+        rule says in advance: neither)."""
+        i = track.conflict_lane
+        if i is None:  # a footprint conflict only: the lane where its occupancy starts
+            i = max(0, bisect.bisect_right(track.offsets, track.origin_arc_m) - 1)
+        other = int(getattr(self.network.get_lane(track.lanes[i]), "priority", 0))
+        return float(np.sign(self.ego.priority - other))
 
     def leader(self, ego_vehicle, vehicles: Iterable) -> tuple[float, float] | None:
         """The nearest vehicle ahead in the ego's lane: ``(bumper gap [m], speed [m/s])``."""
@@ -779,7 +800,8 @@ class DefaultJudge:
             return
         dt = 1.0 / FREQUENCY_HZ
         a = (float(ego.speed) - v) / dt
-        _, verdict = self.planner.shield(v, a, conflicts, dt, lambda first: self.lead(v, first))
+        _, verdict = self.planner.shield(v, a, conflicts, dt, lambda first: self.lead(v, first),
+                                         driven=True)
         self.steps += 1
         self.admitted += verdict == "admitted"
         entry = projector.ego.entry_u_m
@@ -914,6 +936,12 @@ class EpisodeResult:
     #: what the shield's overrides cost (issue 25 item 6, as in SUMO): the mean over the
     #: planner's steps of |applied - proposed| [m/s^2] (0 where admitted; 0 for the default)
     override_mps2: float = 0.0
+    #: the responsibility rule (``av.shield = "responsibility"``, docs/method.md §12.13),
+    #: for the planner and for highway-env's own ego alike: who is at fault for the
+    #: episode's collision ("ego" or "other"; None: no collision, or another shield kind),
+    #: and the vehicle-steps in which another vehicle broke its duty under the rule
+    fault: str | None = None
+    duty_breaches: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -1008,6 +1036,10 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
                 frames.append(env.render())
             projections = observe(k)
         ego = u.vehicle
+        duties = (planner.planner if planner is not None
+                  else getattr(judge, "planner", None))
+        duties = None if duties is None else duties.duties
+        fault = duties.fault() if duties is not None and ego.crashed else None
         ego_first = other_first = contested = 0
         for c in contests.values():
             if not c.contested:
@@ -1048,7 +1080,8 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             entry_admitted=None if judge is None else judge.entry_admitted,
             horizon_s=float(u.config["duration"]),
             override_mps2=0.0 if planner is None or not planner.steps
-            else planner.override_sum / planner.steps)
+            else planner.override_sum / planner.steps,
+            fault=fault, duty_breaches=0 if duties is None else duties.other_breaches)
     finally:
         env.close()
 
@@ -1103,6 +1136,11 @@ class HighwayReport:
                 "uncertified_steps": sum(e.uncertified_steps for e in eps),
                 "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
             }
+            if self.shield == "responsibility":  # the rule's fault and duties
+                out[driver].update({
+                    "collisions_ego_at_fault": sum(e.fault == "ego" for e in eps),
+                    "collisions_other_at_fault": sum(e.fault == "other" for e in eps),
+                    "duty_breaches": sum(e.duty_breaches for e in eps)})
             judged = [e for e in eps if e.judged_steps is not None]
             if judged:  # highway-env's own ego, judged by the planner's shield
                 steps = sum(e.judged_steps for e in judged)

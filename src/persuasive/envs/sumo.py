@@ -373,6 +373,10 @@ class Route:
     lanes: tuple[str, ...]
     line: Polyline
     offsets: dict[str, tuple[float, float, float]]
+    #: SUMO's right of way on the route's first link into a junction (``hasPrio`` of
+    #: ``lane.getLinks``; None: the route enters no junction): what the responsibility shield
+    #: reads as the right of way (docs/method.md §12.13)
+    has_priority: bool | None = None
 
     def arc(self, lane: str, lane_pos_m: float) -> float | None:
         """The route coordinate of a point at ``lane_pos_m`` on ``lane`` (``None``: not on
@@ -424,6 +428,7 @@ class Projector:
         if route is not None:
             return route
         lanes = [f"{edges[0]}_0"]
+        has_priority = None
         for nxt in edges[1:]:
             lane = lanes[-1]
             while True:  # through the junction's internal lanes to the next edge
@@ -434,6 +439,8 @@ class Projector:
                     link = next((ln for ln in self._links(lane)
                                  if ln[0].rsplit("_", 1)[0] == nxt), None)
                     step = None if link is None else (link[4] or link[0])
+                    if link is not None and has_priority is None and link[4]:
+                        has_priority = bool(link[1])  # the first link into a junction
                 if step is None:
                     raise ConfigError(f"SUMO route {' '.join(edges)}: no connection from "
                                       f"{lane} to {nxt}")
@@ -451,7 +458,8 @@ class Projector:
             sumo_start += length
             points.append(pts if not points else pts[1:] if np.allclose(pts[0], points[-1][-1])
                           else pts)
-        route = Route(edges, tuple(lanes), Polyline.of(np.concatenate(points)), offsets)
+        route = Route(edges, tuple(lanes), Polyline.of(np.concatenate(points)), offsets,
+                      has_priority)
         self._routes[edges] = route
         return route
 
@@ -588,8 +596,14 @@ def conflicts_of(projector: Projector, ego: VehicleState, others: Sequence[Vehic
         if geo.kind == CROSSING and arc - geo.other_at_m > max(geo.other_occupancy[1],
                                                                 clear_m):
             continue  # past the ego's path for good
-        out.append(geo.conflict(o.vehicle, ego_arc, arc, o.speed_mps, o.limits,
-                                ego_occupancy=widened))
+        c = geo.conflict(o.vehicle, ego_arc, arc, o.speed_mps, o.limits,
+                         ego_occupancy=widened)
+        mine, theirs = projector.ego.has_priority, route.has_priority
+        if mine is not None and theirs is not None:  # SUMO's right of way at the junction
+            c = replace(c, right_of_way=float(int(mine) - int(theirs)))
+        if str(o.vehicle).startswith(ENTRY_PREFIX):  # no driver: no duty, no response
+            c.extra["placeholder"] = True
+        out.append(c)
     return out
 
 
@@ -631,6 +645,8 @@ def decide(planner: ExternalPlanner, projector: Projector, ego: VehicleState,
     if decision.verdict == "uncertified" and ego.speed_mps <= 0.0:
         exact = conflicts_of(projector, ego, others, clear_m, (0.0, slack[1]))
         u_min = planner.ego.u_min_mps2
+        if planner.duties is not None:  # this answer replaces the first for the rule's clocks
+            planner.duties.undo()
         a, verdict = planner.shield(0.0, u_min, exact, DT_S)
         if verdict != "uncertified":
             decision = replace(decision, accel_mps2=a,
@@ -693,6 +709,11 @@ class EpisodeResult:
     #: what the shield's overrides cost (issue 25 item 6): the mean over the planner's steps
     #: of |applied - proposed| [m/s^2] (0 where admitted; 0 for sumo and none)
     override_mps2: float = 0.0
+    #: the responsibility rule (a planner with ``av.shield = "responsibility"``,
+    #: docs/method.md §12.13; None otherwise): the ego's collisions at its own fault, and the
+    #: vehicle-steps in which one of SUMO's vehicles broke its duty under the rule
+    collisions_ego_at_fault: int | None = None
+    duty_breaches: int | None = None
 
     @property
     def uncertified_steps(self) -> int:
@@ -841,6 +862,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                                  "verdict", "decide_ms")} if logs else None
     timings: list[tuple[int, float]] = []
     pairs: dict[tuple[str, str], str] = {}
+    faults: dict[tuple[str, str], str] = {}  # the responsibility rule's, per pair
     overrides = uncertified = ego_steps = max_view = 0
     override_sum = 0.0
     stood_steps = 0
@@ -865,6 +887,9 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                 t = round(ls.simulation.getTime(), 6)
                 for c in ls.simulation.getCollisions():
                     if "ego" in (c.collider, c.victim):
+                        if (c.collider, c.victim) not in pairs and planner is not None \
+                                and planner.duties is not None:  # the rule's, when it happens
+                            faults[(c.collider, c.victim)] = planner.duties.fault()
                         pairs.setdefault((c.collider, c.victim), c.type)
                 ids = ls.vehicle.getIDList()
                 for vid in ids:  # who brakes hard (SUMO's vehicles; judged for every driver)
@@ -900,7 +925,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                 if judge is not None:
                     if before is not None:  # the step just driven, from its start
                         _, verdict = judge.shield(before[0], ls.vehicle.getAcceleration("ego"),
-                                                  before[1], DT_S)
+                                                  before[1], DT_S, driven=True)
                         judged += 1
                         admitted += verdict == "admitted"
                         if entry_ok is None and ego.lane.startswith(":"):
@@ -941,10 +966,14 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
         ttc, pet, drac = _ssm(folder / "ssm.xml") if with_ego else (None, None, None)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+    duties = None if planner is None else planner.duties
     result = EpisodeResult(
         scenario=scenario, seed=int(seed), driver=driver, flow_veh_h=float(flow_veh_h),
         ignore_foes=float(ignore_foes), collision=bool(pairs), collisions=len(pairs),
         ego_collider=sum(c == "ego" for c, _ in pairs),
+        collisions_ego_at_fault=None if duties is None else sum(
+            faults.get(p, "ego") == "ego" for p in pairs),
+        duty_breaches=None if duties is None else duties.other_breaches,
         junction_collisions=sum(kind == "junction" for kind in pairs.values()),
         crossed=crossed_at is not None,
         time_to_cross_s=None if crossed_at is None else round(crossed_at - depart_at, 6),
@@ -1046,6 +1075,12 @@ class SumoReport:
                 "steps_admitted_pct": (100.0 * sum(e.judged_admitted for e in eps)
                                        / max(1, sum(e.judged_steps for e in eps)))
                 if any(e.judged_steps is not None for e in eps) else None,
+                "collisions_ego_at_fault": sum(e.collisions_ego_at_fault for e in eps
+                                               if e.collisions_ego_at_fault is not None)
+                if any(e.collisions_ego_at_fault is not None for e in eps) else None,
+                "duty_breaches": sum(e.duty_breaches for e in eps
+                                     if e.duty_breaches is not None)
+                if any(e.duty_breaches is not None for e in eps) else None,
                 "decisions": len(times),
                 "decide_ms_median": float(np.median([m for _, m in times])) if times else None,
                 "decisions_10_in_view": len(ten),

@@ -84,7 +84,12 @@ tried only with the exact kinematics (no noise, no simulator lead), where that h
 is built (``persuasive.packing``), so floating-point rounding cannot turn an unsafe verdict into
 a safe one. The ``responsive`` kind is *not* a guarantee against every human: it assumes the
 human does anything for ``rho`` seconds and then brakes at its ``u_min`` (the frontier between
-safety and persuasion, docs/method.md §12.5).
+safety and persuasion, docs/method.md §12.5). Nor is the ``responsibility`` kind
+(docs/method.md §12.13): it certifies against the humans RSS's intersection rule obliges to
+respond (:func:`responsible_arrival`), keeping in each conflict vector what is left of each
+one's response and whether it owes one (``C_RESP_LEFT``, ``C_RESP_OWED``, written by
+:func:`shield_filter` after each decision), and its guarantee holds only while they keep the
+rule (``persuasive.safety.responsibility`` watches that).
 
 **One filter in one place.** :func:`shield_filter` is the only entry point that applies the
 shield: every loop and adapter (the compiled closed loop, the Python loop, ``Planner``, the
@@ -116,14 +121,22 @@ from ..kinematics import saturated_step
 # braking in the lane ahead of it [m/s^2, brakings positive]. Then the
 # half-widths of a uniform error on every measured position [m] and speed [m/s]
 # (``simulation.measurement_noise = "uniform"``; 0 otherwise): each measured state stands for
-# the box of true states around it (:func:`_fast`, :func:`_slow`). Last, the AV's braking
+# the box of true states around it (:func:`_fast`, :func:`_slow`). Then the AV's braking
 # command in the lane ahead of this vehicle (its ``C_R_UMIN`` held to the cut-in rule's in-lane
 # limit in a shared lane, :func:`lane_braking`; ``C_R_UMIN`` elsewhere): the filter's BRAKE
-# while the AV is there (:func:`braking`).
+# while the AV is there (:func:`braking`). Last, for the ``responsibility`` kind
+# (docs/method.md §12.13): who has the right of way (1 the AV, -1 the other, 0 neither); and
+# the filter's own state, which it writes after each decision and a caller keeps per vehicle
+# from one step to the next: the **response left** [s], what is left of this vehicle's
+# response time at the next step's start should that instant be dangerous (``rho`` after a
+# safe instant; ``inf``: not seen yet, its response starts with its first dangerous instant),
+# and 1.0 when the vehicle owes a response in a danger that began there (0.0: it has the
+# right of way and the AV could still stop at its last safe instant).
 (C_R_LO, C_R_HI, C_H_LO, C_H_HI, C_SHARED, C_GAP, C_KIND, C_RHO, C_R_UMIN, C_R_UMAX, C_R_VMIN,
  C_R_VMAX, C_H_UMIN, C_H_UMAX, C_H_VMIN, C_H_VMAX, C_R_LINE, C_R_NOISE, C_RESP_RHO,
- C_RESP_ACCEL, C_RESP_BRAKE, C_RESP_FRONT, C_MEAS_S, C_MEAS_V, C_R_ULANE) = range(25)
-N_CONFLICT = 25
+ C_RESP_ACCEL, C_RESP_BRAKE, C_RESP_FRONT, C_MEAS_S, C_MEAS_V, C_R_ULANE, C_PRIORITY,
+ C_RESP_LEFT, C_RESP_OWED) = range(28)
+N_CONFLICT = 28
 
 #: Verdicts of :func:`shield_filter` (the world logs them per step); ``OFF``: no shield.
 ADMITTED, BRAKE, GO, UNCERTIFIED, OFF = 0, 1, 2, 3, -1
@@ -172,6 +185,8 @@ def conflict_vector(P_av: np.ndarray, P_hv: np.ndarray, out: np.ndarray) -> None
     out[C_R_ULANE] = (lane_braking(P_av[slot.U_MIN], P_av[slot.RESP_FRONT_BRAKE], w)
                       if out[C_SHARED] != 0.0 else out[C_R_UMIN])
     out[C_MEAS_S], out[C_MEAS_V] = P_av[slot.MEAS_S], P_av[slot.MEAS_V]
+    out[C_PRIORITY] = P_av[slot.RIGHT_OF_WAY]
+    out[C_RESP_LEFT], out[C_RESP_OWED] = _INF, 1.0
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -298,12 +313,68 @@ def human_window(s_H: float, v_H: float, C: np.ndarray) -> tuple[float, float, b
     if sl > hi:
         return _INF, _INF, True
     sf, vf = _fast(s_H, v_H, v_min, v_max, C)
-    if C[C_KIND] == slot.SHIELD_RESPONSIVE:  # the furthest it gets: u_max for rho, then brake
+    kind = C[C_KIND]
+    if kind == slot.SHIELD_RESPONSIVE:  # the furthest it gets: u_max for rho, then brake
         t_in = profile_reach(sf, vf, u_max, C[C_RHO], u_min, lo, v_min, v_max)
+    elif kind == slot.SHIELD_RESPONSIBILITY and C[C_RESP_OWED] != 0.0 and C[C_SHARED] == 0.0:
+        # what is left of the response it owes (not seen yet: the whole of it)
+        left = C[C_RESP_LEFT]
+        t_in = responsible_arrival(s_H, v_H, C, C[C_RESP_RHO] if left == _INF else left)
     else:
         t_in = reach_time(sf, vf, u_max, lo, v_min, v_max)
     t_out = reach_time(sl, vl, u_min, hi, v_min, v_max)
     return t_in, t_out, False
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def owes_response(s_R: float, v_R: float, C: np.ndarray) -> float:
+    """1.0 when the other vehicle owes its response in a danger that begins now (the
+    ``responsibility`` kind, docs/method.md §12.13, after ``ad-rss``'s proper response): it
+    does unless it has the right of way and the AV can still stand before the intersection
+    (:func:`can_yield`; then the AV alone must yield)."""
+    if C[C_PRIORITY] < 0.0 and can_yield(s_R, v_R, C):
+        return 0.0
+    return 1.0
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def can_yield(s_R: float, v_R: float, C: np.ndarray) -> bool:
+    """The AV can still stand before the intersection as the responsibility rule reads it:
+    before its yield line where it has one (the junction's entry in SUMO and highway-env,
+    :func:`line_binds`), else before its occupancy interval (:func:`yields_before`)."""
+    if C[C_R_LINE] < C[C_R_LO]:
+        return line_binds(s_R, v_R, C)
+    return yields_before(s_R, v_R, C)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def fresh_response(s_R: float, v_R: float, dt: float, C: np.ndarray) -> float:
+    """The response time [s] a vehicle is granted from a safe instant: the coming step, in
+    which it cannot know that the next instant will be dangerous, and then the whole ``rho``
+    from that first dangerous instant; one step more when it has the right of way and the AV
+    can still stand before the intersection (:func:`can_yield`: it owes nothing before the AV
+    has passed that point, which takes at least the step)."""
+    fresh = C[C_RESP_RHO] + dt
+    if C[C_PRIORITY] < 0.0 and can_yield(s_R, v_R, C):
+        return fresh + dt
+    return fresh
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def responsible_arrival(s_H: float, v_H: float, C: np.ndarray, left: float) -> float:
+    """The earliest arrival [s] at ``H_lo`` of a **responsible** human (the
+    ``responsibility`` kind, docs/method.md §12.13, after RSS's intersection rule as
+    ``ad-rss`` computes a vehicle's time to reach an intersection): it accelerates at most
+    at the rule's ``C_RESP_ACCEL`` for the ``left`` seconds of its response time still to
+    run, then brakes at least at ``C_RESP_BRAKE`` until it stands (``inf``: it stands before
+    ``H_lo``). Under acceleration noise of half-width ``w`` its realised accelerations are
+    taken ``w`` worse, and never beyond its physical limits."""
+    v_min, v_max = C[C_H_VMIN], C[C_H_VMAX]
+    sf, vf = _fast(s_H, v_H, v_min, v_max, C)
+    w = C[C_R_NOISE]
+    acc = min(C[C_RESP_ACCEL] + w, C[C_H_UMAX])
+    brake = max(-C[C_RESP_BRAKE] + w, C[C_H_UMIN])
+    return profile_reach(sf, vf, acc, max(left, 0.0), brake, C[C_H_LO], v_min, v_max)
 
 
 # -- certification of one AV trajectory --------------------------------------------------------
@@ -678,6 +749,71 @@ def yields_before(s: float, v: float, C: np.ndarray) -> bool:
                       C[C_R_VMAX]) == _INF
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def _good(j: int, first: float, fb: float, shift: float, steps: int, dt: float, u_min: float,
+          u_max: float, v_R: float, s_R: np.ndarray, s_H: np.ndarray, v_H: np.ndarray,
+          C: np.ndarray, window: np.ndarray) -> bool:
+    """Whether the candidate "``first`` for a step, then ``fb``" (``steps >= 0``: ``u_max``
+    for that many steps first, the enter-then-follow fallback) is certified against vehicle
+    ``j`` (its window in ``window[j]``), the AV taken ``shift`` further along."""
+    past = window[j, 2] % 2.0 != 0.0
+    if steps >= 0:
+        return certified3(s_R[j] + shift, v_R, first, dt, u_max, steps * dt, fb, s_H[j],
+                          v_H[j], C[j], window[j, 0], window[j, 1], past)
+    if fb == u_min:
+        return brake_certified(s_R[j] + shift, v_R, first, dt, s_H[j], v_H[j], C[j],
+                               window[j, 0], window[j, 1], past, window[j, 2] >= 2.0, u_min)
+    return certified(s_R[j] + shift, v_R, first, dt, fb, s_H[j], v_H[j], C[j], window[j, 0],
+                     window[j, 1], past)
+
+
+@njit(cache=True, _nrt=False)
+def _pick(order, proposal_ok: bool, a: float, v_R: float, dt: float, s_R: np.ndarray,
+          s_H: np.ndarray, v_H: np.ndarray, C: np.ndarray, lead: np.ndarray,
+          window: np.ndarray, u_min: float, u_max: float, a_f: float, a_line: float,
+          m_a: int, m_g: int, yielding: bool, follow: bool):
+    """The first candidate of :func:`shield_filter`'s ``order`` certified against every
+    vehicle (their windows in ``window``): ``(found, first step, verdict, fallback, shift,
+    GO steps, candidate)``; a candidate above 9 in ``order`` is left out."""
+    n = s_R.shape[0]
+    for p in range(10):
+        c = order[p]
+        if c > 9 or (c < 4 and not proposal_ok):  # (c > 9: left out)
+            continue
+        steps = -1
+        if c < 2:
+            first, fb, shift, verdict = a, (u_min if c == 0 else u_max), lead[0], ADMITTED
+        elif c < 4:
+            if m_a < 0:
+                continue
+            first, fb, shift, verdict, steps = a, a_f, lead[0], ADMITTED, m_a + c - 2
+        elif c == 4:
+            if not yielding:
+                continue
+            first, fb, shift, verdict = a_line, u_min, lead[1], BRAKE
+        elif c == 5:
+            first, fb, shift, verdict = u_min, u_min, lead[1], BRAKE
+        elif c == 6:
+            first, fb, shift, verdict = u_max, u_max, lead[2], GO
+        elif c < 9:
+            if m_g < 0:
+                continue
+            first, fb, shift, verdict, steps = u_max, a_f, lead[2], GO, m_g + c - 7
+        else:
+            if not follow or a_f == u_min:
+                continue
+            first, fb, shift, verdict = a_f, a_f, lead[1], BRAKE
+        ok = True
+        for j in range(n):
+            if not _good(j, first, fb, shift, steps, dt, u_min, u_max, v_R, s_R, s_H, v_H, C,
+                         window):
+                ok = False
+                break
+        if ok:
+            return True, first, verdict, fb, shift, steps, c
+    return False, 0.0, UNCERTIFIED, 0.0, 0.0, -1, -1
+
+
 @njit(cache=True)
 def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
                   s_R: np.ndarray, s_H: np.ndarray, v_H: np.ndarray, C: np.ndarray,
@@ -723,6 +859,11 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
         window = np.empty((n, 3))
     for j in range(n):
         t_in, t_out, past = human_window(s_H[j], v_H[j], C[j])
+        if kind == slot.SHIELD_RESPONSIBILITY and not past and C[j, C_SHARED] == 0.0:
+            # first with a fresh response (a shared lane keeps the worst case: its rule is
+            # the cut-in rule, docs/method.md §12.10)
+            t_in = responsible_arrival(s_H[j], v_H[j], C[j], fresh_response(
+                s_R[j] + lead[1], v_R, dt, C[j]))
         window[j, 0], window[j, 1], window[j, 2] = t_in, t_out, 1.0 if past else 0.0
     # BRAKE: the AV's u_min, held to the cut-in rule's in-lane limit while it is in the lane
     # ahead of some vehicle (the weakest such command, allowed against every conflict)
@@ -775,6 +916,23 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     # an enter-then-follow fallback ends). Committed between a line and its interval, the
     # proposal is admitted with BRAKE only after every way through has failed (it would
     # stand there)
+    through = False
+    if kind == slot.SHIELD_RESPONSIBILITY and not yielding:
+        # under the rule others stop for an AV in their way, so an AV between a line and its
+        # interval or inside a crossing's interval that brakes (or stays at rest) is admitted
+        # where it blocks them, and standing there would count as safe (docs/method.md
+        # §12.13): it drives through instead; standing is its last resort and a safe instant
+        # only for the vehicles that do not block its way through (below)
+        for j in range(n):
+            s = s_R[j] + lead[1]
+            if C[j, C_SHARED] == 0.0 and (C[j, C_R_LO] <= s <= C[j, C_R_HI] or (
+                    C[j, C_R_LINE] < C[j, C_R_LO] and s < C[j, C_R_LO]
+                    and window[j, 2] < 2.0)):  # inside, or past its line (committed)
+                through = True
+        if through:
+            committed = True
+            if proposal_ok and (a < 0.0 or (a <= 0.0 and v_R <= 0.0)):
+                proposal_ok = False
     brake_first = yielding or (proposal_ok and a < u_min)
     if brake_first:
         order = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9)
@@ -782,51 +940,62 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
         order = (1, 2, 3, 6, 7, 8, 0, 5, 9, 4)
     else:
         order = (0, 1, 2, 3, 4, 6, 7, 8, 5, 9)
-    for p in range(10):
-        c = order[p]
-        if c < 4 and not proposal_ok:
-            continue
-        steps = -1
-        if c < 2:
-            first, fb, shift, verdict = a, (u_min if c == 0 else u_max), lead[0], ADMITTED
-        elif c < 4:
-            if m_a < 0:
-                continue
-            first, fb, shift, verdict, steps = a, a_f, lead[0], ADMITTED, m_a + c - 2
-        elif c == 4:
-            if not yielding:
-                continue
-            first, fb, shift, verdict = a_line, u_min, lead[1], BRAKE
-        elif c == 5:
-            first, fb, shift, verdict = u_min, u_min, lead[1], BRAKE
-        elif c == 6:
-            first, fb, shift, verdict = u_max, u_max, lead[2], GO
-        elif c < 9:
-            if m_g < 0:
-                continue
-            first, fb, shift, verdict, steps = u_max, a_f, lead[2], GO, m_g + c - 7
-        else:
-            if not follow or a_f == u_min:
-                continue
-            first, fb, shift, verdict = a_f, a_f, lead[1], BRAKE
-        ok = True
-        for j in range(n):
-            past = window[j, 2] % 2.0 != 0.0
-            if steps >= 0:
-                good = certified3(s_R[j] + shift, v_R, first, dt, u_max, steps * dt, fb,
-                                  s_H[j], v_H[j], C[j], window[j, 0], window[j, 1], past)
-            elif fb == u_min:
-                good = brake_certified(s_R[j] + shift, v_R, first, dt, s_H[j], v_H[j], C[j],
-                                       window[j, 0], window[j, 1], past, window[j, 2] >= 2.0,
-                                       u_min)
-            else:
-                good = certified(s_R[j] + shift, v_R, first, dt, fb, s_H[j], v_H[j], C[j],
-                                 window[j, 0], window[j, 1], past)
-            if not good:
-                ok = False
-                break
-        if ok:
+    # (the responsibility rule's first pass: only the ways through where the AV drives
+    # through, candidates 10 left out)
+    found, first, verdict, fb, shift, steps, c = _pick(
+        (1, 2, 3, 6, 7, 8, 10, 10, 10, 10) if through else order, proposal_ok, a, v_R, dt,
+        s_R, s_H, v_H, C, lead, window, u_min, u_max, a_f, a_line, m_a, m_g, yielding, follow)
+    if kind == slot.SHIELD_RESPONSIBILITY:
+        # the response (docs/method.md §12.13): an answer certified against every
+        # responsible human granted its fresh response makes this a safe instant for every
+        # vehicle (each has its whole rho from the next dangerous instant on); otherwise
+        # each vehicle keeps what is left of the response it owes since its own first
+        # dangerous instant (a vehicle with the right of way that owes none: the worst
+        # case), and after the answer a vehicle whose fresh window also certifies it has
+        # its safe instant now
+        if found:
+            for j in range(n):
+                C[j, C_RESP_LEFT] = C[j, C_RESP_RHO]
+                C[j, C_RESP_OWED] = owes_response(s_R[j] + lead[1], v_R, C[j])
             return first, verdict
+        for j in range(n):
+            if C[j, C_RESP_LEFT] == _INF:  # first seen: its last safe instant is now
+                C[j, C_RESP_LEFT] = fresh_response(s_R[j] + lead[1], v_R, dt, C[j])
+                C[j, C_RESP_OWED] = owes_response(s_R[j] + lead[1], v_R, C[j])
+            if window[j, 2] % 2.0 == 0.0:
+                window[j, 0] = human_window(s_H[j], v_H[j], C[j])[0]
+        found, first, verdict, fb, shift, steps, c = _pick(
+            order, proposal_ok, a, v_R, dt, s_R, s_H, v_H, C, lead, window, u_min, u_max,
+            a_f, a_line, m_a, m_g, yielding, follow)
+        # a braking answer where the AV should drive through: a vehicle's instant is safe
+        # only if GO would be certified against its fresh response (one that stopped for the
+        # AV, and blocks its way through, keeps its response running until it must stand)
+        stands = through and (c == 0 or c == 4 or c == 5 or c == 9)
+        for j in range(n):
+            safe = False
+            if found and window[j, 2] % 2.0 == 0.0:
+                held = window[j, 0]
+                if C[j, C_SHARED] == 0.0:
+                    window[j, 0] = responsible_arrival(s_H[j], v_H[j], C[j], fresh_response(
+                        s_R[j] + lead[1], v_R, dt, C[j]))
+                if stands:
+                    safe = _good(j, u_max, u_max, lead[2], -1, dt, u_min, u_max, v_R, s_R,
+                                 s_H, v_H, C, window)
+                else:
+                    safe = _good(j, first, fb, shift, steps, dt, u_min, u_max, v_R, s_R, s_H,
+                                 v_H, C, window)
+                window[j, 0] = held
+            elif found:
+                safe = True  # past its interval: it never occupies again
+            if safe:
+                C[j, C_RESP_LEFT] = C[j, C_RESP_RHO]
+                C[j, C_RESP_OWED] = owes_response(s_R[j] + lead[1], v_R, C[j])
+            else:
+                C[j, C_RESP_LEFT] -= dt
+        if found:
+            return first, verdict
+    elif found:
+        return first, verdict
     sb, lb, sg, lg = _INF, 0.0, _INF, 0.0
     for j in range(n):
         past = window[j, 2] % 2.0 != 0.0
