@@ -52,7 +52,7 @@ class DutyWatch:
     docstring), from one step's shield inputs to the next's.
 
     Call :meth:`step` after every decision with the step's conflicts (their keys), the
-    shield's inputs ``(s_H, v_H, C)`` with the clocks it wrote, and whether the ego's step
+    shield's inputs ``(s_H, v_H, C)`` with the state it wrote, and whether the ego's step
     was certified; :meth:`fault` names who broke the rule first."""
 
     def __init__(self, dt_s: float):
@@ -63,7 +63,9 @@ class DutyWatch:
         self.broken: dict[Hashable, tuple[float | None, float | None]] = {}
         self._k = 0  # decisions recorded
         self.other_breaches = 0  #: vehicle-steps in which another vehicle broke its duty
-        self.ego_breaches = 0  #: steps in which the ego's step was not certified
+        #: steps in which the ego's step was not certified (whether or not a breach by
+        #: another vehicle excused it)
+        self.ego_breaches = 0
         self._undo: tuple | None = None
 
     def left_of(self, key: Hashable) -> float:
