@@ -634,6 +634,26 @@ def test_every_vehicle_stays_inside_the_bound_the_shield_assumed():
 
 
 @pytest.mark.slow
+def test_highway_env_under_the_responsibility_rule():
+    """highway-env's traffic does not keep the rule: in seed 39 a car that owed its response
+    breaks it and the planner behind the responsibility shield is hit, the other's fault by
+    the rule; highway-env's own ego, judged by the same rule, collides in seed 2 at its own
+    fault; the summary counts both."""
+    from persuasive.envs.highway import HighwayReport, planner_config, run_episode
+
+    config = planner_config("persuasive", "responsibility")
+    planned = run_episode(39, "persuasive", config)
+    assert planned.collision and planned.fault == "other" and planned.duty_breaches > 0
+    default = run_episode(2, "default", config)
+    assert default.collision and default.fault == "ego"
+    s = HighwayReport("x", "persuasive", (39, 2), (planned, default),
+                      "responsibility").summary()
+    assert s["persuasive"]["collisions_other_at_fault"] == 1
+    assert s["default"]["collisions_ego_at_fault"] == 1
+    assert run_episode(39, "persuasive").fault is None  # the worst case judges no duty
+
+
+@pytest.mark.slow
 def test_highway_envs_own_ego_is_judged_by_the_shield_it_does_not_use():
     """Seed 3: highway-env's own ego enters the junction on a step the worst-case certificate
     does not admit (a crossing car could still reach it under the worst case) and the

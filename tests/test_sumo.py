@@ -425,6 +425,21 @@ def test_sumos_own_driver_is_judged_by_the_shield_it_does_not_use(nets):
     assert planner.judged_steps is None and planner.entry_admitted is None
 
 
+def test_the_responsibility_rule_judges_every_driver(nets):
+    """Against a stream that never yields (every driver ignores its foes) the responsibility
+    planner meets drivers that break the rule's duty (seed 4: they do not brake once their
+    response time has run, and leave it uncertified steps), and is never at fault; SUMO's
+    own ego is judged by the same rule; the worst-case planner carries no such judgement."""
+    r = S.run_episode("intersection", 4, "persuasive/responsibility", 900.0, 1.0,
+                      nets["intersection"]).result
+    assert r.duty_breaches > 0 and r.uncertified > 0 and r.collisions_ego_at_fault == 0
+    d = S.run_episode("intersection", 4, S.SUMO_DRIVER, 900.0, 1.0, nets["intersection"]).result
+    assert d.duty_breaches is not None and d.collisions_ego_at_fault == 0
+    w = S.run_episode("intersection", 4, "persuasive/worst-case", 900.0, 1.0,
+                      nets["intersection"]).result
+    assert w.duty_breaches is None and w.collisions_ego_at_fault is None
+
+
 def test_the_restricted_mean_counts_an_episode_that_never_crossed_at_the_window(nets):
     """Issue 25 item 6: the mean time to cross over the crossing episodes alone rewards failing
     the hard ones; the restricted mean counts an episode that never crossed at

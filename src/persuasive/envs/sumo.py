@@ -709,9 +709,9 @@ class EpisodeResult:
     #: what the shield's overrides cost (issue 25 item 6): the mean over the planner's steps
     #: of |applied - proposed| [m/s^2] (0 where admitted; 0 for sumo and none)
     override_mps2: float = 0.0
-    #: the responsibility rule (a planner with ``av.shield = "responsibility"``,
-    #: docs/method.md §12.13; None otherwise): the ego's collisions at its own fault, and the
-    #: vehicle-steps in which one of SUMO's vehicles broke its duty under the rule
+    #: the responsibility rule (a planner with ``av.shield = "responsibility"``, and SUMO's
+    #: own ego judged by it, docs/method.md §12.13; None otherwise): the ego's collisions at
+    #: its own fault, and the vehicle-steps in which one of SUMO's vehicles broke its duty
     collisions_ego_at_fault: int | None = None
     duty_breaches: int | None = None
 
@@ -845,6 +845,12 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
     # certificate would admit); the judge plans nothing, it only filters what SUMO drove
     judge = (ExternalPlanner(planner_config(scenario=scenario), seed)
              if driver == SUMO_DRIVER else None)
+    # and by the responsibility rule (docs/method.md §12.13): its fault in a collision and
+    # the traffic's breaches, by the same rule as a planner with that shield
+    rule_judge = (ExternalPlanner(planner_config(shield="responsibility", scenario=scenario),
+                                  seed) if driver == SUMO_DRIVER else None)
+    rules = planner if planner is not None and planner.config.shield == "responsibility" \
+        else rule_judge
     judged = admitted = 0
     entry_ok: bool | None = None
     before: tuple[float, list] | None = None
@@ -887,9 +893,9 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                 t = round(ls.simulation.getTime(), 6)
                 for c in ls.simulation.getCollisions():
                     if "ego" in (c.collider, c.victim):
-                        if (c.collider, c.victim) not in pairs and planner is not None \
-                                and planner.duties is not None:  # the rule's, when it happens
-                            faults[(c.collider, c.victim)] = planner.duties.fault()
+                        if (c.collider, c.victim) not in pairs and rules is not None \
+                                and rules.duties is not None:  # the rule's, when it happens
+                            faults[(c.collider, c.victim)] = rules.duties.fault()
                         pairs.setdefault((c.collider, c.victim), c.type)
                 ids = ls.vehicle.getIDList()
                 for vid in ids:  # who brakes hard (SUMO's vehicles; judged for every driver)
@@ -926,6 +932,8 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
                     if before is not None:  # the step just driven, from its start
                         _, verdict = judge.shield(before[0], ls.vehicle.getAcceleration("ego"),
                                                   before[1], DT_S, driven=True)
+                        rule_judge.shield(before[0], ls.vehicle.getAcceleration("ego"),
+                                          before[1], DT_S, driven=True)
                         judged += 1
                         admitted += verdict == "admitted"
                         if entry_ok is None and ego.lane.startswith(":"):
@@ -966,7 +974,7 @@ def run_episode(scenario: str, seed: int, driver: str, flow_veh_h: float, ignore
         ttc, pet, drac = _ssm(folder / "ssm.xml") if with_ego else (None, None, None)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    duties = None if planner is None else planner.duties
+    duties = None if rules is None else rules.duties
     result = EpisodeResult(
         scenario=scenario, seed=int(seed), driver=driver, flow_veh_h=float(flow_veh_h),
         ignore_foes=float(ignore_foes), collision=bool(pairs), collisions=len(pairs),
