@@ -3,7 +3,9 @@ fitting? (docs/guide/recordings.md, "The round trip, replicated").
 
     python benchmarks/recordings_roundtrip.py [--fixtures 50] [--runs 20] [--p-a 0.3,0.7]
                                               [--roles leader,follower] [--noise-m 0.05]
-                                              [--workers 2] [--out FILE.jsonl]
+                                              [--noise-mps 0.1] [--speed-from file]
+                                              [--no-measurement-model] [--workers 2]
+                                              [--out FILE.jsonl]
 
 A *fixture* is ``--runs`` simulated runs of an ``lfg`` human with a known ``roles.p_a`` and
 initial role, the design of the parameter-recovery benchmark (``benchmarks/fit_recovery.py``,
@@ -14,32 +16,31 @@ uses seeds ``1 + runs d + j`` and the ``d``-th setting of the (``p_a``, role) gr
 Each fixture then goes the whole way a recording goes:
 
 1. ``recordings export``: every run as an INTERACTION file (one recording per run), uniform
-   noise ``U(-noise, noise)`` on ``x`` and ``y`` (seed ``d``);
-2. read, smoothed (Savitzky-Golay, ``--window`` samples, the pipeline's 11 by default),
-   paired (``persuasive.recordings.pairs``, default parameters);
-3. the logs (``persuasive.recordings.logs.view_log``): vehicle 2 of each pair, the simulated
-   human, as the human (vehicle 1 is the AV, whose view is no human's);
+   noise ``U(-noise_m, noise_m)`` on ``x`` and ``y`` and ``U(-noise_mps, noise_mps)`` on the
+   speed (seed ``d``);
+2. read, smoothed (Savitzky-Golay, ``--window`` samples, the pipeline's 11 by default; speed
+   and acceleration from the files' speeds, or ``--speed-from positions``), paired
+   (``persuasive.recordings.pairs``, default parameters);
+3. the logs (``persuasive.recordings.logs.view_log``, the tracks' filter in their metadata):
+   vehicle 2 of each pair, the simulated human, as the human (vehicle 1 is the AV, whose view
+   is no human's);
 4. ``persuasive.fitting.fit_models`` with all four models (``lfg``, ``stubborn``, ``noisy``,
-   ``idm``), the ``lfg``'s 95 % profile interval for ``p_a``.
-
-``--model-smoothing``: before the fit, the models' accelerations (each role's, and each
-candidate trajectory's first one) pass through the pipeline's own smoothing as the recorded
-ones did: the centred Savitzky-Golay position filter, then its second derivative, as one
-kernel over the steps around each (its impulse response; the role and the candidate held over
-the window, the view's ends repeated). A test of whether smoothing explains the fitted noise,
-not part of ``persuasive fit``.
+   ``idm``), the ``lfg``'s 95 % profile interval for ``p_a``; the models' accelerations pass
+   through the tracks' filter first (the fit's measurement model,
+   ``persuasive.fitting.evidence.observe_through``), unless ``--no-measurement-model``.
 
 Per fixture: whether the interval covers the true ``p_a``, whether the smallest BIC selects
 ``lfg`` (the generating kind), the estimate, and the pairs found (a run whose two vehicles
 make no pair drops out). The summary: coverage and selection shares over the fixtures
-(targets: coverage 90-99 %, selection at least 90 %, over at least 50 fixtures) and the mean
-absolute error. ``--out`` appends one JSON line per fixture.
+(targets: coverage 90-99 %, selection at least 90 %, over at least 50 fixtures) with 95 %
+Wilson intervals, and the mean absolute error. ``--out`` appends one JSON line per fixture.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import asdict
 import os
 import tempfile
 import time
@@ -59,45 +60,8 @@ def configs(p_a: float, role: str):
             for av in ("persuasive", "passive")]
 
 
-def smoothing_kernel(window: int) -> dict[int, float]:
-    """``{d: w_d}``: the smoothed acceleration at step ``k`` is ``sum_d w_d a_{k+d}`` for the
-    true accelerations ``a`` (exact kinematics, 0.1 s steps), away from a track's ends: the
-    pipeline's centred Savitzky-Golay filter of the positions, then its second derivative
-    (``persuasive.recordings.tracks``), applied to a unit impulse."""
-    from persuasive.recordings.tracks import STEP_S, SmoothingParams, savgol
-
-    order = SmoothingParams(window=window).order
-    h = window // 2
-    n, j0, dt = 8 * window + 1, 4 * window, STEP_S
-
-    def observed(a):
-        v = 10.0 + np.concatenate([[0.0], np.cumsum(a[:-1]) * dt])
-        s = np.concatenate([[0.0], np.cumsum(v[:-1] * dt + 0.5 * a[:-1] * dt * dt)])
-        starts = np.array([0, n], np.int64)
-        return savgol(savgol(s, starts, window, order), starts, window, order, 2)
-
-    impulse = np.zeros(n)
-    impulse[j0] = 1.0
-    r = observed(impulse) - observed(np.zeros(n))
-    return {j0 - k: float(r[k]) for k in range(j0 - 2 * h, j0 + 2 * h + 1)}
-
-
-def smooth_models(ev, kernel: dict[int, float]) -> None:
-    """The evidence's model accelerations ``a_role`` and ``a_first`` through ``kernel``, run by
-    run, in place (the view's first and last steps repeated beyond its ends)."""
-    for i in range(ev.n_runs):
-        a, b = ev.starts[i], ev.starts[i + 1]
-        idx = np.arange(b - a)
-        for arr in (ev.a_role, ev.a_first):
-            seg = arr[a:b].copy()
-            out = np.zeros_like(seg)
-            for d, w in kernel.items():
-                out += w * seg[np.clip(idx + d, 0, b - a - 1)]
-            arr[a:b] = out
-
-
 def fixture(d: int, runs: int, p_a: float, role: str, noise_m: float, window: int = 11,
-            model_smoothing: bool = False) -> dict:
+            measurement: bool = True, noise_mps: float = 0.0, speed_from: str = "file") -> dict:
     """One fixture's round trip (module docstring)."""
     from persuasive import Config, simulate
     from persuasive.fitting import evidence_of, fit_models
@@ -118,30 +82,40 @@ def fixture(d: int, runs: int, p_a: float, role: str, noise_m: float, window: in
             paths.append(str(path))
         tracks = Path(tmp) / "tracks"
         tracks.mkdir()
-        export_runs(paths, tracks, noise_m, d)
-        result = find_pairs(smooth_tracks(read_tracks([str(tracks)]),
-                                          SmoothingParams(window=window)))
+        export_runs(paths, tracks, noise_m, d, noise_mps)
+        smoothing = SmoothingParams(window=window, speed=speed_from)
+        result = find_pairs(smooth_tracks(read_tracks([str(tracks)]), smoothing))
     frame = pairs_frame(result.pairs)
     base = Config(mode="corrected")
     logs = []
+    kept = asdict(smoothing) if measurement else None
     for pair_id, rows in frame.groupby("pair", sort=True):
-        config, log, meta = view_log(rows.sort_values("step"), 2, base)
+        config, log, meta = view_log(rows.sort_values("step"), 2, base, smoothing=kept)
         states = log[["av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m",
                       "hv_meas_v_mps"]].to_numpy(float)
         logs.append(RunLog(f"pair {int(pair_id)}", config, int(pair_id), None, states,
                            log["hv_accel_mps2"].to_numpy(float), meta))
     ev = evidence_of(logs)
-    if model_smoothing:
-        smooth_models(ev, smoothing_kernel(window))
     report = fit_models(ev, intervals=["lfg"])
     e = report.fits["lfg"].params["p_a"]
-    return {"fixture": d, "p_a": p_a, "role": role, "noise_m": noise_m, "window": window,
-            "model_smoothing": model_smoothing,
+    return {"fixture": d, "p_a": p_a, "role": role, "noise_m": noise_m,
+            "noise_mps": noise_mps, "window": window, "speed_from": speed_from,
+            "measurement_model": measurement,
             "runs": runs,
             "pairs": len(result.pairs), "p_hat": e.value, "low": e.low, "high": e.high,
             "covered": bool(e.low - 1e-9 <= p_a <= e.high + 1e-9),
             "selected": report.selected, "sigma_hat": report.fits["lfg"].theta["sigma"],
             "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> str:
+    """The 95 % Wilson score interval of ``k`` of ``n``, in per cent."""
+    if n == 0:
+        return "[nan, nan]"
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return f"[{100 * (centre - half):.0f}, {100 * (centre + half):.0f}] %"
 
 
 def main() -> None:
@@ -153,19 +127,25 @@ def main() -> None:
     ap.add_argument("--noise-m", type=float, default=0.05)
     ap.add_argument("--window", type=int, default=11,
                     help="the Savitzky-Golay window [samples] (the pipeline's default: 11)")
-    ap.add_argument("--model-smoothing", action="store_true",
-                    help="the models' accelerations through the pipeline's smoothing too")
+    ap.add_argument("--noise-mps", type=float, default=0.1,
+                    help="half-width of the uniform noise on the exported speeds [m/s]")
+    ap.add_argument("--speed-from", default="file", choices=("file", "positions"),
+                    help="the tracks' speed and acceleration: the files' or the positions'")
+    ap.add_argument("--no-measurement-model", action="store_true",
+                    help="fit the models' accelerations as they are, not as the filter "
+                         "records them")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default=None, help="append one JSON line per fixture")
     args = ap.parse_args()
     grid = [(float(p), r) for p in args.p_a.split(",") for r in args.roles.split(",")]
-    tasks = [(d, args.runs, *grid[d % len(grid)], args.noise_m, args.window,
-              args.model_smoothing) for d in range(args.fixtures)]
+    measurement = not args.no_measurement_model
+    tasks = [(d, args.runs, *grid[d % len(grid)], args.noise_m, args.window, measurement,
+              args.noise_mps, args.speed_from) for d in range(args.fixtures)]
     print(f"{args.fixtures} fixtures of {args.runs} runs, noise U(-{args.noise_m:g}, "
-          f"{args.noise_m:g}) m, smoothing window {args.window}"
-          f"{' (the models too)' if args.model_smoothing else ''}, settings (p_a, role) {grid}, "
-          f"{args.workers} workers",
-          flush=True)
+          f"{args.noise_m:g}) m and U(-{args.noise_mps:g}, {args.noise_mps:g}) m/s, smoothing "
+          f"window {args.window}, speed from the {args.speed_from}, measurement model "
+          f"{'on' if measurement else 'off'}, settings (p_a, role) {grid}, {args.workers} "
+          "workers", flush=True)
     t0 = time.perf_counter()
     rows = []
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one thread per worker
@@ -185,10 +165,16 @@ def main() -> None:
     select = np.mean([r["selected"] == "lfg" for r in rows])
     mae = np.mean([abs(r["p_hat"] - r["p_a"]) for r in rows])
     width = np.mean([r["high"] - r["low"] for r in rows])
+    n_cover = sum(r["covered"] for r in rows)
+    n_select = sum(r["selected"] == "lfg" for r in rows)
     print(f"{n} fixtures in {time.perf_counter() - t0:.0f} s: coverage of the 95 % interval "
-          f"{100 * cover:.0f} % ({sum(r['covered'] for r in rows)} of {n}; target 90-99 %), "
-          f"BIC selects lfg in {100 * select:.0f} % (target >= 90 %); MAE {mae:.3f}, mean "
-          f"interval width {width:.3f}")
+          f"{100 * cover:.0f} % ({n_cover} of {n}, 95 % CI {wilson(n_cover, n)}; target "
+          f"90-99 %), BIC selects lfg in {100 * select:.0f} % ({n_select} of {n}, 95 % CI "
+          f"{wilson(n_select, n)}; target >= 90 %); MAE {mae:.3f}, mean interval width "
+          f"{width:.3f}")
+    picked = {m: sum(r["selected"] == m for r in rows) for m in
+              sorted({r["selected"] for r in rows})}
+    print("  BIC selects: " + ", ".join(f"{m} {k}" for m, k in picked.items()))
     for (p, role) in grid:
         rs = [r for r in rows if r["p_a"] == p and r["role"] == role]
         if rs:

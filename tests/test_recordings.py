@@ -158,7 +158,9 @@ def test_a_right_angle_crossing_by_hand(tmp_path):
     p = result.pairs[0]
     assert (p.kind, p.tracks, p.first) == ("crossing", (1, 2), "1")
     assert p.angle_deg == pytest.approx(90.0, abs=1e-6)
-    assert p.conflict_xy == pytest.approx((0.0, 0.0), abs=0.13)
+    # the conflict point is the lines' exact crossing (route_conflict's samples are 0.25 m
+    # apart: its own closest pair of samples would be up to 0.125 m off on each line)
+    assert p.conflict_xy == pytest.approx((0.0, 0.0), abs=1e-6)
     assert p.t_pass_s == pytest.approx((5.0, 7.5), abs=0.02)
     # route_conflict: footprints touch within W = (1.8 + 1.8) / 2 + 0.5 of the other line,
     # widened by l / 2 + step / 2 + 0.05
@@ -169,9 +171,12 @@ def test_a_right_angle_crossing_by_hand(tmp_path):
     pet = (p.t_pass_s[1] + p.occupancy[1][0] / 8.0) - (p.t_pass_s[0] + p.occupancy[0][1] / 10.0)
     assert p.pet_s == pytest.approx(pet, abs=1e-6) and 1.3 < p.pet_s < 1.5  # 2.5 - 0.61 - 0.49
     assert p.second_slowed is False and p.second_speed_drop_mps == pytest.approx(0.0, abs=1e-6)
-    # steps: both present from 0 to 9.9 s; s relative to the conflict point, exact speeds
-    assert p.n_steps == 100
-    np.testing.assert_allclose(p.s[0], 10.0 * p.t - 50.0, atol=0.15)
+    # steps: both present from 0 to 9.9 s, where they lie in the tracks; s relative to the
+    # exact conflict point, exact speeds (the files' own)
+    assert p.n_steps == 100 and p.t[0] == 0.0 and p.t[-1] == 9.9
+    assert p.track_k0 == (0, 0) and p.track_n == (100, 120)
+    np.testing.assert_allclose(p.s[0], 10.0 * p.t - 50.0, atol=1e-6)
+    np.testing.assert_allclose(p.s[1], 8.0 * p.t - 60.0, atol=1e-6)
     np.testing.assert_allclose(p.v, np.array([[10.0], [8.0]]) * np.ones((2, 100)), atol=1e-6)
     np.testing.assert_allclose(p.a, 0.0, atol=1e-6)
 
@@ -244,7 +249,11 @@ def test_the_pairs_file_holds_one_row_per_pair_and_step(tmp_path):
     write_pairs(out, result, [path])
     frame, meta = read_pairs(out)
     assert len(frame) == 100 and set(frame["pair"]) == {0}
+    assert set(frame["track_n_1"]) == {100} and set(frame["track_n_2"]) == {120}
     assert meta["params"]["angle_range_deg"] == [20.0, 160.0] and meta["n_pairs"] == 1
+    # the tracks' filter, which the fit's measurement model needs, travels with the pairs
+    assert meta["smoothing"] == {"window": 11, "order": 3, "min_track_s": 2.0, "speed": "file"}
+    assert frame.attrs["smoothing"] == meta["smoothing"]
     assert frame["first"].iloc[0] == "1" and bool(frame["second_slowed"].iloc[0]) is False
     np.testing.assert_allclose(frame["s_1_m"], result.pairs[0].s[0])
 
@@ -255,3 +264,183 @@ def test_one_vehicle_and_pedestrians_make_no_pair(tmp_path):
                  straight(2, (0.0, -6.0), 90.0, [1.5] * 100, agent="pedestrian/bicycle"))
     with pytest.raises(RecordingError, match="one vehicle: it holds one vehicle only"):
         read_tracks([path])
+
+
+# -- the measurement model: what a recorded acceleration is ----------------------------------
+
+
+def exact_track(track: int, accel, v0: float = 8.0, x0: float = -60.0) -> pd.DataFrame:
+    """A track east along y = 0 driving the accelerations ``accel`` (held over each 0.1 s
+    frame) by the exact kinematics, its speed in ``vx``."""
+    a = np.asarray(accel, float)
+    v = v0 + np.concatenate([[0.0], np.cumsum(a) * 0.1])
+    x = x0 + np.concatenate([[0.0], np.cumsum(v[:-1] * 0.1 + 0.5 * a * 0.01)])
+    n = v.shape[0]
+    return pd.DataFrame({"track_id": track, "frame_id": np.arange(1, n + 1),
+                         "timestamp_ms": 100 * np.arange(n), "agent_type": "car", "x": x,
+                         "y": 0.0, "vx": v, "vy": 0.0, "psi_rad": 0.0, "length": 4.5,
+                         "width": 1.8})
+
+
+@pytest.mark.parametrize("speed", ["file", "positions"])
+@pytest.mark.parametrize("steps", [84, 30])
+def test_the_acceleration_filter_is_what_the_pipeline_records(tmp_path, speed, steps):
+    """A driver whose acceleration jumps (-2, +1, 0.3, ...) on a long and on a short track:
+    at every sample, the track's ends included, its smoothed acceleration is the band applied
+    to the true one, to rounding (a stretch of the track alike); away from the ends the band
+    is the kernel, whose weights sum to 1; the recorded jump is spread over the window."""
+    from persuasive.recordings.tracks import (SmoothingParams, acceleration_band,
+                                              acceleration_kernel)
+
+    rng = np.random.default_rng(5)
+    accel = np.repeat(rng.choice([-2.0, -0.5, 0.0, 0.3, 1.0], 12), 7)[:steps]
+    other = straight(2, (0.0, -60.0), 90.0, [8.0] * 40)
+    path = write(tmp_path / "vehicle_tracks_000.csv", exact_track(1, accel), other)
+    params = SmoothingParams(speed=speed)
+    tracks = smooth_tracks(read_tracks([path]), params)
+    recorded = tracks.a[tracks.rows(0)]
+    n = recorded.shape[0]
+    truth = np.concatenate([accel, [0.0]])  # the last sample's acceleration is never driven
+
+    def apply(first, count):
+        offsets, w = acceleration_band(params, n, first, count)
+        ks = first + np.arange(count)
+        idx = ks[:, None] + offsets[None, :]
+        return np.sum(w * truth[np.clip(idx, 0, n - 1)] * ((idx >= 0) & (idx < n)), axis=1)
+
+    np.testing.assert_allclose(apply(0, n), recorded, atol=1e-6)
+    np.testing.assert_allclose(apply(3, n - 7), recorded[3:n - 4], atol=1e-6)
+    kernel = acceleration_kernel(params)
+    assert sum(kernel.values()) == pytest.approx(1.0, abs=1e-9)
+    if steps == 84:  # a long track has an interior, where the band is the kernel
+        reach = max(abs(d) for d in kernel)
+        ks = np.arange(2 * reach, n - 2 * reach)
+        expected = np.array([sum(w * truth[k + d] for d, w in kernel.items()) for k in ks])
+        np.testing.assert_allclose(recorded[ks], expected, atol=1e-6)
+        assert np.max(np.abs(recorded[ks] - truth[ks])) > 0.5  # not the identity
+        shifted = np.array([sum(w * truth[k + d + 1] for d, w in kernel.items()) for k in ks])
+        assert np.max(np.abs(recorded[ks] - shifted)) > 0.1  # one step off is wrong
+    # the interior kernel at the ends would be wrong: the edge windows extrapolate
+    interior = acceleration_band(params, 0, 0, n)
+    idx = np.arange(n)[:, None] + interior[0][None, :]
+    naive = np.sum(interior[1] * truth[np.clip(idx, 0, n - 1)], axis=1)
+    assert np.max(np.abs(naive[:3] - recorded[:3])) > 0.05
+
+
+def test_observe_through_filters_each_run_within_its_own_steps():
+    from persuasive.fitting.evidence import observe_through
+
+    arr = np.array([[1.0], [2.0], [4.0], [10.0], [20.0]])
+    starts = np.array([0, 3, 5])
+    offsets = np.array([-1, 0, 1])
+    out = arr.copy()
+    observe_through(out, starts, np.array([0]), offsets, np.tile([0.25, 0.5, 0.25], (3, 1)))
+    # run 0's ends repeat its own first and last rows; run 1 is left as it was
+    np.testing.assert_allclose(out[:, 0], [1.25, 2.25, 3.5, 10.0, 20.0])
+    both = arr.copy()
+    weights = np.array([[0.25, 0.5, 0.25]] * 3 + [[0.0, 1.0, 0.0], [0.5, 0.5, 0.0]])
+    observe_through(both, starts, np.array([0, 1]), offsets, weights)
+    np.testing.assert_allclose(both[3:, 0], [10.0, 15.0])  # a row's own weights
+
+
+def test_a_recorded_log_is_fitted_through_its_filter_and_a_simulated_one_is_not():
+    """``evidence_of``: the same steps, once with the tracks' filter in the log's metadata
+    (``recording.smoothing``, as ``recordings logs`` writes it) and once without: the model's
+    accelerations are the filter's view of the plain ones; the states, the beliefs and the
+    recorded accelerations are the same."""
+    from persuasive import Config, simulate
+    from persuasive.fitting import evidence_of
+    from persuasive.fitting.evidence import observe_through, run_log_of
+    from persuasive.recordings.tracks import acceleration_band
+
+    config = Config(mode="corrected").with_overrides({"scenario.kind": "crossing",
+                                                      "simulation.n_steps": 60})
+    plain = run_log_of(simulate(config, 4), "run")
+    smoothing = {"window": 11, "order": 3, "min_track_s": 2.0, "speed": "file"}
+    recorded = type(plain)(plain.source, plain.config, plain.seed, None, plain.states,
+                           plain.accel, {"recording": {"smoothing": smoothing}})
+    ev = evidence_of([plain, recorded])
+    a, b = ev.starts[1], ev.starts[2]
+    expected = ev.a_role[:a].copy()
+    offsets, weights = acceleration_band(None, 0, 0, a)  # no track given: all interior
+    observe_through(expected, np.array([0, a]), np.array([0]), offsets, weights)
+    np.testing.assert_allclose(ev.a_role[a:b], expected, atol=1e-12)
+    assert np.max(np.abs(ev.a_role[a:b] - ev.a_role[:a])) > 0.1
+    np.testing.assert_array_equal(ev.belief[a:b], ev.belief[:a])
+    np.testing.assert_array_equal(ev.accel[a:b], ev.accel[:a])
+    with pytest.raises(Exception, match="recording.smoothing"):
+        evidence_of([type(plain)(plain.source, plain.config, plain.seed, None, plain.states,
+                                 plain.accel, {"recording": {"smoothing": {"window": 4}}})])
+
+
+def test_the_speed_limit_of_a_view_is_the_recorded_one_not_the_next_whole_m_s(tmp_path):
+    """A pair driven at 10.3 m/s: the view's limit is 10.3 m/s (the LFG's library eases its
+    acceleration near its limit; rounded up to 11 it would predict full throttle where the
+    driver was at its top speed)."""
+    from persuasive import Config
+    from persuasive.recordings.logs import view_log
+    from persuasive.recordings.pairs import pairs_frame
+
+    path = write(tmp_path / "vehicle_tracks_000.csv",
+                 straight(1, (-50.0, 0.0), 0.0, [10.3] * 100),
+                 straight(2, (0.0, -60.0), 90.0, [8.0] * 120))
+    frame = pairs_frame(pairs_of(path).pairs)
+    config, _, meta = view_log(frame, 2, Config(mode="corrected"))
+    assert config.vehicle_of("av").v_max_mps == pytest.approx(10.3, abs=1e-6)
+    assert "smoothing" not in meta["recording"]  # none given: no measurement model
+    _, _, meta = view_log(frame, 2, Config(mode="corrected"), smoothing={"window": 11})
+    assert meta["recording"]["smoothing"] == {"window": 11}
+
+
+def roundtrip_fixture(tmp_path, d: int, p_a: float, role: str, measurement: bool = True):
+    """One fixture of ``benchmarks/recordings_roundtrip.py``: 20 runs of an ``lfg`` human,
+    exported with 5 cm and 0.1 m/s of noise, read, paired, the human's views fitted."""
+    from dataclasses import asdict
+
+    from persuasive import Config, simulate
+    from persuasive.fitting import evidence_of, fit_models
+    from persuasive.fitting.evidence import RunLog
+    from persuasive.recordings.export import export_runs
+    from persuasive.recordings.logs import view_log
+    from persuasive.recordings.pairs import pairs_frame
+    from persuasive.recordings.tracks import SmoothingParams
+
+    base = {"scenario.kind": "crossing", "simulation.n_steps": 120, "hv.kind": "lfg",
+            "roles.p_a": p_a, "hv.role": role, "mpc.p_a_hat": 1.0, "av.shield": "off"}
+    configs = [Config(mode="corrected").with_overrides({**base, "av.kind": av})
+               for av in ("persuasive", "passive")]
+    folder = tmp_path / f"fixture{d}"
+    tracks = folder / "tracks"
+    tracks.mkdir(parents=True)
+    runs = []
+    for j in range(20):
+        runs.append(str(folder / f"run{j:02d}.parquet"))
+        simulate(configs[j % 2], 1 + 20 * d + j).save(runs[-1])
+    export_runs(runs, tracks, 0.05, d, 0.1)
+    smoothing = SmoothingParams()
+    result = find_pairs(smooth_tracks(read_tracks([str(tracks)]), smoothing))
+    logs = []
+    for pair_id, rows in pairs_frame(result.pairs).groupby("pair", sort=True):
+        config, log, meta = view_log(rows.sort_values("step"), 2, Config(mode="corrected"),
+                                     smoothing=asdict(smoothing) if measurement else None)
+        states = log[["av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m",
+                      "hv_meas_v_mps"]].to_numpy(float)
+        logs.append(RunLog(f"pair {pair_id}", config, int(pair_id), None, states,
+                           log["hv_accel_mps2"].to_numpy(float), meta))
+    return fit_models(evidence_of(logs), intervals=["lfg"])
+
+
+@pytest.mark.slow
+def test_the_round_trip_recovers_p_a_and_selects_the_lfg(tmp_path):
+    """Two fixtures of the replicated round trip (the benchmark's 0 and 2: ``p_a`` 0.3 and
+    0.7, the human starting as leader): the 95 % interval covers the generating ``p_a`` and BIC
+    selects the generating kind. Fitted without the measurement model (the models'
+    accelerations compared as they are with the filtered recorded ones), the first selects
+    the Boltzmann human instead (docs/guide/recordings.md, "The round trip, replicated")."""
+    for d, p_a in ((0, 0.3), (2, 0.7)):
+        report = roundtrip_fixture(tmp_path, d, p_a, "leader")
+        e = report.fits["lfg"].params["p_a"]
+        assert e.low <= p_a <= e.high, (d, e)
+        assert report.selected == "lfg", d
+    plain = roundtrip_fixture(tmp_path / "plain", 0, 0.3, "leader", measurement=False)
+    assert plain.selected == "noisy"

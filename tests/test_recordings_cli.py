@@ -40,8 +40,9 @@ def runs(tmp_path_factory):
 def test_round_trip_simulate_export_pairs_logs_fit(capsys, runs, tmp_path):
     tracks = tmp_path / "tracks"
     code, out, err = run(capsys, "recordings", "export", *runs, "--out", str(tracks),
-                         "--noise-m", "0.05", "--seed", "3")
+                         "--noise-m", "0.05", "--noise-mps", "0.1", "--seed", "3")
     assert code == 0 and err == "", err
+    assert "noise U(-0.05, 0.05) m, U(-0.1, 0.1) m/s on the speed, seed 3" in out
     assert sorted(p.name for p in tracks.iterdir()) == ["vehicle_tracks_000.csv",
                                                         "vehicle_tracks_001.csv"]
     # the exported centres are the scenario's positions plus noise within 0.05 m
@@ -54,6 +55,9 @@ def test_round_trip_simulate_export_pairs_logs_fit(capsys, runs, tmp_path):
     assert np.max(np.abs(hv["x"].to_numpy() - x)) <= 0.0505
     assert np.max(np.abs(hv["y"].to_numpy() - y)) <= 0.0505
     assert 0.02 < np.max(np.abs(hv["y"].to_numpy() - y))  # noise was added
+    speed = np.hypot(hv["vx"].to_numpy(), hv["vy"].to_numpy())
+    assert np.max(np.abs(speed - record.states[:, 3])) <= 0.1 + 1e-3  # vx, vy: 3 decimals
+    assert 0.05 < np.max(np.abs(speed - record.states[:, 3]))  # on the speed too
 
     pairs = tmp_path / "pairs.parquet"
     figure = tmp_path / "pair.png"
@@ -64,10 +68,12 @@ def test_round_trip_simulate_export_pairs_logs_fit(capsys, runs, tmp_path):
     assert figure.stat().st_size > 10_000
     frame, meta = read_pairs(pairs)
     # the pair's s is the simulator's (track 1 the AV), up to the noise and the smoothing
+    # (relative to the paths' exact crossing, not to route_conflict's 0.25 m samples)
     first = frame[frame["pair"] == 0]
-    steps = first["step"].to_numpy()
-    assert np.max(np.abs(first["s_1_m"].to_numpy() - record.states[steps, 0])) < 0.3
-    assert np.max(np.abs(first["v_2_mps"].to_numpy() - record.states[steps, 3])) < 0.6
+    steps = np.rint(first["t_s"].to_numpy() / 0.1).astype(int)
+    assert steps[0] == 0 and np.array_equal(steps, first["step"].to_numpy())
+    assert np.max(np.abs(first["s_1_m"].to_numpy() - record.states[steps, 0])) < 0.1
+    assert np.max(np.abs(first["v_2_mps"].to_numpy() - record.states[steps, 3])) < 0.3
     # who passed first agrees with the simulator's outcome at the conflict point
     label = {1: "1", 2: "2"}[record.outcome.first_at_conflict_point]
     assert first["first"].iloc[0] == label
@@ -85,6 +91,11 @@ def test_round_trip_simulate_export_pairs_logs_fit(capsys, runs, tmp_path):
     assert log.config.scenario.kind == "crossing" and log.config.scenario.angle_deg == 90.0
     assert log.config.simulation.dt_s == 0.1 and log.config.mode == "corrected"
     np.testing.assert_allclose(log.states[:, 2], first["s_2_m"].to_numpy()[:-1])
+    # the fit's measurement model: the tracks' filter and where the steps lie in the track
+    rec = log.meta["recording"]
+    assert rec["smoothing"] == {"window": 11, "order": 3, "min_track_s": 2.0, "speed": "file"}
+    assert rec["human"] == 2 and rec["track_k0_2"] == 0
+    assert rec["track_n_2"] == record.states.shape[0]
     back = load_record(logs / names[1])  # a full run record, outcome recomputed
     assert back.states.shape[0] == log.n_steps + 1
     code, out, err = run(capsys, "fit", *[str(logs / n) for n in names], "--model", "lfg",
@@ -174,6 +185,10 @@ def test_bad_track_files_end_in_one_line_and_exit_2_writing_nothing(capsys, tmp_
     (["export", "{tracks}", "--out", "{tmp}/out"], "is not a Parquet file"),
     (["export", "{tmp}/p.parquet", "--out", "{tmp}/out", "--noise-m", "-0.1"],
      "--noise-m = -0.1 is out of range"),
+    (["export", "{tmp}/p.parquet", "--out", "{tmp}/out", "--noise-mps", "nan"],
+     "--noise-mps = nan is out of range"),
+    (["pairs", "{tracks}", "--speed-from", "radar"],
+     "--speed-from = 'radar' is not allowed; allowed: file, positions"),
 ])
 def test_bad_options_end_in_one_line_and_exit_2_writing_nothing(args, words, tmp_path):
     tracks = _ok_tracks(tmp_path)

@@ -89,15 +89,23 @@ def _print_summary(info: dict) -> None:
               help="Largest crossing angle kept.")
 @click.option("--near-m", type=float, default=40.0, show_default=True, metavar="M",
               help="Both vehicles within this of the conflict point at one time.")
+@click.option("--speed-from", "speed_from", default="file", show_default=True,
+              metavar="SOURCE",
+              help="Speed and acceleration from the files' velocities, smoothed ('file'), or "
+                   "from the smoothed positions' derivatives ('positions').")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
-def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, as_json) -> None:
+def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, speed_from,
+                  as_json) -> None:
     """Find the crossing and merging pairs of recorded tracks (files or folders of
     INTERACTION vehicle_tracks_NNN.csv, inD NN_tracks.csv with NN_tracksMeta.csv)."""
     from .._files import check_output_file
     from ..recordings.formats import read_tracks
     from ..recordings.pairs import PairParams, find_pairs, pair_of, summary, write_pairs
-    from ..recordings.tracks import smooth_tracks
+    from ..recordings.tracks import SPEED_SOURCES, SmoothingParams, smooth_tracks
 
+    if speed_from not in SPEED_SOURCES:
+        raise _BadInput(f"--speed-from = {speed_from!r} is not allowed; allowed: "
+                        f"{', '.join(SPEED_SOURCES)}")
     if out:
         _guard(check_output_file, out, (".parquet",), "pairs")
     if (figure is None) != (pair_id is None):
@@ -109,7 +117,8 @@ def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, as_
         _guard(check_figure_path, figure)
     params = _guard(PairParams, angle_range_deg=(angle_min, angle_max), near_m=near_m)
     table = _guard(read_tracks, paths)
-    result = _guard(find_pairs, _guard(smooth_tracks, table), params)
+    result = _guard(find_pairs, _guard(smooth_tracks, table, SmoothingParams(speed=speed_from)),
+                    params)
     if not result.pairs:
         raise _BadInput(f"no crossing pair: {result.tracks.n_tracks} vehicle tracks, "
                         f"{result.candidates} candidate pairs, none crossing at "
@@ -172,6 +181,8 @@ def logs_command(pairs_file, out, force, mode, angle_step) -> None:
               help="Folder of the track files (written as a whole).")
 @click.option("--noise-m", type=float, default=0.0, show_default=True, metavar="M",
               help="Half-width of the uniform noise added to x and to y [m].")
+@click.option("--noise-mps", type=float, default=0.0, show_default=True, metavar="M/S",
+              help="Half-width of the uniform noise added to the speed (vx, vy) [m/s].")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
               help="Seed of the noise.")
 @click.option("--types", "types", multiple=True, type=click.Path(dir_okay=False),
@@ -179,7 +190,7 @@ def logs_command(pairs_file, out, force, mode, angle_step) -> None:
                                    "the vehicles' lengths and widths (fcd input only; "
                                    "repeatable).")
 @click.option("--force", is_flag=True, help="Replace a folder that holds other files.")
-def export_command(inputs, out, noise_m, seed, types, force) -> None:
+def export_command(inputs, out, noise_m, noise_mps, seed, types, force) -> None:
     """Write simulate --out runs (.parquet; track 1 the AV, track 2 the HV) or SUMO
     --fcd-output files (.xml) as INTERACTION track files, vehicle_tracks_NNN.csv, one per
     input."""
@@ -188,6 +199,9 @@ def export_command(inputs, out, noise_m, seed, types, force) -> None:
 
     if not (math.isfinite(noise_m) and noise_m >= 0.0):
         raise _BadInput(f"--noise-m = {noise_m:g} is out of range; allowed: a number >= 0 m")
+    if not (math.isfinite(noise_mps) and noise_mps >= 0.0):
+        raise _BadInput(f"--noise-mps = {noise_mps:g} is out of range; allowed: a number "
+                        ">= 0 m/s")
     fcd = [str(p).lower().endswith(".xml") for p in inputs]
     if any(fcd) and not all(fcd):
         raise _BadInput("give simulate --out runs (.parquet) or SUMO fcd files (.xml), not "
@@ -198,12 +212,13 @@ def export_command(inputs, out, noise_m, seed, types, force) -> None:
     # every input is read before anything is written; a failure removes the temporary folder
     with atomic_folder(out, "tracks folder") as tmp:
         if all(fcd):
-            names = _guard(export_fcd, inputs, tmp, noise_m, seed, types)
+            names = _guard(export_fcd, inputs, tmp, noise_m, seed, types, noise_mps)
         else:
-            names = _guard(export_runs, inputs, tmp, noise_m, seed)
+            names = _guard(export_runs, inputs, tmp, noise_m, seed, noise_mps)
     what = ", from SUMO fcd" if all(fcd) else ""
+    speed = f", U(-{noise_mps:g}, {noise_mps:g}) m/s on the speed" if noise_mps else ""
     click.echo(f"{len(names)} track file{'s' * (len(names) != 1)} (INTERACTION format{what}, "
-               f"noise U(-{noise_m:g}, {noise_m:g}) m, seed {seed}) in {out}")
+               f"noise U(-{noise_m:g}, {noise_m:g}) m{speed}, seed {seed}) in {out}")
 
 
 def _print_replay(info: dict, runs: list) -> None:

@@ -20,6 +20,19 @@ human does (``persuasive.policies.lfg``, docs/method.md §5), with the compiled
 - ``pl[k]``: its ``P(plausible = L)`` if its own role is L and if it is F (§5.1): equal unless
   the belief is exactly tied, when the plausible role is the human's own role.
 
+**Recorded accelerations are filtered ones.** A log written from recorded tracks
+(``persuasive recordings logs``, the held-out evaluation and replay's fitted other) carries
+the tracks' filter in its metadata (``recording.smoothing``). Its accelerations are the
+filter's view of the driver's, not the driver's: a step of the acceleration is spread over the
+window, half a step early. :func:`evidence_of` then passes the model's accelerations through
+the same filter before they are compared (:func:`observe_through`, the measurement model; the
+filter is ``persuasive.recordings.tracks.acceleration_band``, exact at the track's ends too,
+where the log says where its steps lie in the track): ``a_role[k, r]`` becomes ``sum_d
+w_kd a_role[k + d, r]``, each neighbour's prediction from its own measured state with the role
+held over the window, and every candidate's ``a_first`` alike (the candidate slot held); the
+run's first and last steps stand in for the steps beyond its ends. Simulated logs and drive
+trials record the applied acceleration itself and are not filtered.
+
 CSV logs are refused: they carry no configuration (mode, scenario, vehicles, library), and a
 game re-solved with the wrong one would be fitted without a warning.
 """
@@ -309,8 +322,68 @@ def evidence_of(logs: Sequence[RunLog]) -> Evidence:
     human_views(starts, np.ascontiguousarray(states[:, 0]), np.ascontiguousarray(states[:, 1]),
                 np.ascontiguousarray(states[:, 2]), np.ascontiguousarray(states[:, 3]), P_hv,
                 P_av, disc, a_role, pl, belief, q, a_first, work)
+    filtered = [(i, measurement_band(log)) for i, log in enumerate(logs)]
+    filtered = [(i, band) for i, band in filtered if band is not None]
+    if filtered:
+        runs = np.array([i for i, _ in filtered], np.int64)
+        reach = max(int(-band[0][0]) for _, band in filtered)
+        offsets = np.arange(-reach, reach + 1)
+        weights = np.zeros((int(sum(logs[i].n_steps for i in runs)), offsets.size))
+        row = 0
+        for _, (off, w) in filtered:
+            weights[row:row + w.shape[0], off[0] + reach:off[-1] + reach + 1] = w
+            row += w.shape[0]
+        for arr in (a_role, a_first):
+            observe_through(arr, starts, runs, offsets, weights)
     return Evidence(list(logs), starts, accel, a_role, pl, belief, q, a_first, states, P_hv,
                     P_av, dt)
+
+
+def measurement_band(log: RunLog) -> tuple[np.ndarray, np.ndarray] | None:
+    """The recorded acceleration's filter of a log from recorded tracks, as
+    ``persuasive.recordings.tracks.acceleration_band`` gives it for the log's steps (its
+    ``recording.smoothing``, the human's ``track_k0_<h>`` and ``track_n_<h>``; without those,
+    every step as an interior one); None for a log with no ``recording.smoothing``.
+    :class:`ConfigError` when the metadata does not describe a filter."""
+    from ..recordings.formats import RecordingError
+    from ..recordings.tracks import SmoothingParams, acceleration_band
+
+    rec = log.meta.get("recording") or {}
+    smoothing = rec.get("smoothing")
+    if smoothing is None:
+        return None
+    try:
+        params = SmoothingParams(**smoothing)
+    except (TypeError, RecordingError) as exc:
+        raise ConfigError(f"log {log.source!r}: recording.smoothing = {smoothing!r} is not a "
+                          f"filter the recordings' pipeline has: {exc}") from None
+    human = rec.get("human")
+    k0 = rec.get(f"track_k0_{human}")
+    n_track = rec.get(f"track_n_{human}")
+    if k0 is None or n_track is None:
+        k0, n_track = 0, 0
+    return acceleration_band(params, int(n_track), int(k0), log.n_steps)
+
+
+def observe_through(arr: np.ndarray, starts: np.ndarray, runs: np.ndarray,
+                    offsets: np.ndarray, weights: np.ndarray) -> None:
+    """In place, for the rows of runs ``runs`` in that order (``starts`` as
+    :attr:`Evidence.starts`; ``weights`` ``(their rows, len(offsets))``): ``arr[k] = sum_j
+    weights[k, j] arr[k + offsets[j]]``, ``k + offsets[j]`` held within ``k``'s run (its
+    first and last rows stand in beyond its ends); module docstring."""
+    lengths = starts[runs + 1] - starts[runs]
+    if lengths.sum() == 0:
+        return
+    rows = np.concatenate([np.arange(starts[i], starts[i + 1]) for i in runs])
+    lo = np.repeat(starts[runs], lengths)
+    hi = np.repeat(starts[runs + 1] - 1, lengths)
+    out = np.zeros((rows.shape[0],) + arr.shape[1:])
+    shape = (-1,) + (1,) * (arr.ndim - 1)
+    for j, d in enumerate(offsets):
+        w = weights[:, j]
+        if np.any(w):
+            out += w.reshape(shape) * arr[np.clip(rows + d, lo, hi)]
+    arr[rows] = out
 
 
 def check_distinct(paths: Sequence[str | Path]) -> None:
@@ -365,4 +438,5 @@ def load_logs(paths: Sequence[str | Path], scenario: str | None = None) -> list[
 
 
 __all__ = ["Evidence", "NEEDED_COLUMNS", "RunLog", "check_distinct", "evidence_of", "human_view",
-           "human_views", "load_logs", "participant_of", "read_log", "run_log_of"]
+           "human_views", "load_logs", "measurement_band", "observe_through", "participant_of",
+           "read_log", "run_log_of"]

@@ -11,8 +11,12 @@ included). The centre is the scenario's position of the vehicle's path coordinat
 (``Scenario.positions``, as the top-view figure draws it), plus **uniform measurement noise**
 ``U(-noise_m, noise_m)`` on ``x`` and on ``y``, independently, drawn from
 ``numpy.random.default_rng(seed)`` (one generator for all runs, in order); ``vx, vy`` are the
-true speed along the path's heading, ``psi_rad`` the path's heading, ``length`` and ``width``
-the configuration's vehicle. The runs' step must be INTERACTION's frame, 0.1 s.
+speed along the path's heading, with uniform noise ``U(-noise_mps, noise_mps)`` on the speed
+(:func:`persuasive.recordings.formats.noisy_speed`; none by default), ``psi_rad`` the path's
+heading, ``length`` and ``width`` the configuration's vehicle. The runs' step must be
+INTERACTION's frame, 0.1 s. A track's draws are its ``x`` noise, its ``y`` noise, then (only
+when ``noise_mps > 0``) its speed noise, track by track: without speed noise a seed gives the
+files it gave before the speed noise existed.
 """
 
 from __future__ import annotations
@@ -22,10 +26,11 @@ from typing import Sequence
 
 import numpy as np
 
-from .formats import INTERACTION_COLUMNS, RecordingError, write_interaction
+from .formats import INTERACTION_COLUMNS, RecordingError, noisy_speed, write_interaction
 
 
-def run_rows(record, rng: np.random.Generator, noise_m: float) -> dict[str, np.ndarray]:
+def run_rows(record, rng: np.random.Generator, noise_m: float,
+             noise_mps: float = 0.0) -> dict[str, np.ndarray]:
     """The INTERACTION rows of one :class:`persuasive.record.RunRecord` (module docstring)."""
     config = record.config
     if abs(config.simulation.dt_s - 0.1) > 1e-12:
@@ -40,6 +45,7 @@ def run_rows(record, rng: np.random.Generator, noise_m: float) -> dict[str, np.n
         x = np.asarray(x, float) + rng.uniform(-noise_m, noise_m, n)
         y = np.asarray(y, float) + rng.uniform(-noise_m, noise_m, n)
         heading = np.asarray(heading, float)
+        v = noisy_speed(np.asarray(v, float), rng, noise_mps)
         veh = config.vehicle_of(who)
         cols["track_id"].append(np.full(n, track, np.int64))
         cols["frame_id"].append(np.arange(1, n + 1, dtype=np.int64))
@@ -55,29 +61,32 @@ def run_rows(record, rng: np.random.Generator, noise_m: float) -> dict[str, np.n
     return {c: np.concatenate(parts) for c, parts in cols.items()}
 
 
-def _check_export(noise_m: float, count: int, what: str) -> None:
-    """The checks every export makes first: the noise's size and at most 1000 inputs (three
+def _check_export(noise_m: float, count: int, what: str, noise_mps: float = 0.0) -> None:
+    """The checks every export makes first: the noises' sizes and at most 1000 inputs (three
     digits in the names); :class:`RecordingError` otherwise."""
     if not (np.isfinite(noise_m) and noise_m >= 0.0):
         raise RecordingError(f"--noise-m = {noise_m!r} is out of range; allowed: a number "
                              ">= 0 m")
+    if not (np.isfinite(noise_mps) and noise_mps >= 0.0):
+        raise RecordingError(f"--noise-mps = {noise_mps!r} is out of range; allowed: a number "
+                             ">= 0 m/s")
     if count > 1000:
         raise RecordingError(f"{count} {what} given; allowed: at most 1000 "
                              "(vehicle_tracks_000 to _999)")
 
 
 def export_runs(runs: Sequence[str | Path], folder: str | Path, noise_m: float = 0.0,
-                seed: int = 0) -> list[str]:
+                seed: int = 0, noise_mps: float = 0.0) -> list[str]:
     """Write each run log of ``runs`` into ``folder`` (existing) as
     ``vehicle_tracks_<r>.csv``; the names written. Raises
     :class:`persuasive.config.ConfigError` (a run that cannot be read) or
     :class:`RecordingError` before writing anything."""
     from ..record import load_record
 
-    _check_export(noise_m, len(runs), "runs")
+    _check_export(noise_m, len(runs), "runs", noise_mps)
     records = [load_record(r) for r in runs]
     rng = np.random.default_rng(seed)
-    rows = [run_rows(rec, rng, noise_m) for rec in records]
+    rows = [run_rows(rec, rng, noise_m, noise_mps) for rec in records]
     names = []
     for r, cols in enumerate(rows):
         name = f"vehicle_tracks_{r:03d}.csv"
@@ -87,7 +96,8 @@ def export_runs(runs: Sequence[str | Path], folder: str | Path, noise_m: float =
 
 
 def export_fcd(files: Sequence[str | Path], folder: str | Path, noise_m: float = 0.0,
-               seed: int = 0, types: Sequence[str | Path] = ()) -> list[str]:
+               seed: int = 0, types: Sequence[str | Path] = (),
+               noise_mps: float = 0.0) -> list[str]:
     """Write each SUMO fcd file of ``files`` into ``folder`` (existing) as
     ``vehicle_tracks_<r>.csv`` (three digits, in the order given), with the SUMO ID of each
     track in ``vehicle_ids_<r>.csv`` (``track_id, sumo_id``); the track files' names. Every
@@ -99,10 +109,10 @@ def export_fcd(files: Sequence[str | Path], folder: str | Path, noise_m: float =
     from .._files import atomic_write
     from .sumo_fcd import read_fcd, read_types
 
-    _check_export(noise_m, len(files), "fcd files")
+    _check_export(noise_m, len(files), "fcd files", noise_mps)
     vtypes = read_types(types)
     rng = np.random.default_rng(seed)
-    read = [read_fcd(f, vtypes, rng, noise_m) for f in files]
+    read = [read_fcd(f, vtypes, rng, noise_m, noise_mps) for f in files]
     names = []
     for r, (cols, ids) in enumerate(read):
         name = f"vehicle_tracks_{r:03d}.csv"

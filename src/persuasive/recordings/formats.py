@@ -417,7 +417,17 @@ def write_interaction(path: str | Path, rows: dict[str, Iterable]) -> None:
     atomic_write(path, lambda p: frame.to_csv(p, index=False, float_format="%.3f"))
 
 
+def noisy_speed(speed: np.ndarray, rng: np.random.Generator, noise_mps: float) -> np.ndarray:
+    """``speed`` [m/s] with uniform noise ``U(-noise_mps, noise_mps)`` drawn from ``rng``, floored
+    at 0 (a speed is a magnitude); ``speed`` itself, and nothing drawn, when ``noise_mps`` is
+    0. A recording's velocities are its tracker's estimates, not exact: the noise stands for
+    their error."""
+    if noise_mps == 0.0:
+        return speed
+    return np.maximum(speed + rng.uniform(-noise_mps, noise_mps, speed.shape[0]), 0.0)
+
+
 __all__ = ["IND_AVERAGE_FRAMES", "INTERACTION_COLUMNS", "IND_COLUMNS", "MAX_SPEED_MPS",
            "RecordingError", "STEP_S", "TIDY_COLUMNS", "TrackFile", "VEHICLE_CLASSES",
-           "find_track_files", "read_ind", "read_interaction", "read_tracks",
+           "find_track_files", "noisy_speed", "read_ind", "read_interaction", "read_tracks",
            "write_interaction"]

@@ -26,7 +26,10 @@ The configuration in its metadata is the scenario form of the pair:
 - ``mode``: corrected (no reference quirks) unless asked otherwise;
 - each vehicle's ``length_m`` and ``width_m``: the recorded ones (``av.vehicle``,
   ``hv.vehicle``); ``vehicle.v_max_mps``: the configuration's, raised to the pair's highest
-  smoothed speed rounded up to a whole m/s, so that no recorded state lies above it;
+  smoothed speed where that is above it, so that no recorded state lies above it (not rounded
+  up: the LFG's library eases its acceleration as it nears the limit, and a limit raised by a
+  millimetre per second of smoothing to the next whole m/s predicted full throttle where the
+  driver was easing off);
 - ``simulation.dt_s = 0.1`` (the pairs' step) and ``simulation.n_steps`` the log's rows.
 
 The file is named ``<kind>-<angle>-p<pair>-hv<1|2>.parquet``, so that one scenario's logs are
@@ -44,7 +47,7 @@ import numpy as np
 
 from ..config import ANGLE_RANGES_DEG, Config
 from .formats import STEP_S, RecordingError
-from .pairs import PAIR_COLUMNS
+from .pairs import PAIR_COLUMNS, TRACK_COLUMNS
 
 #: Default rounding of a pair's angle [deg].
 ANGLE_STEP_DEG = 5.0
@@ -78,16 +81,20 @@ def pair_config(base: Config, kind: str, angle_deg: float, sizes: dict, v_max: f
     overrides = {"scenario.kind": kind, "scenario.angle_deg": angle_deg,
                  "simulation.dt_s": STEP_S, "library.sample_dt_s": STEP_S,
                  "simulation.n_steps": int(n_steps),
-                 "vehicle.v_max_mps": float(max(base.vehicle.v_max_mps, math.ceil(v_max)))}
+                 "vehicle.v_max_mps": float(max(base.vehicle.v_max_mps, v_max))}
     for who, (length, width) in sizes.items():
         overrides[f"{who}.vehicle.length_m"] = float(length)
         overrides[f"{who}.vehicle.width_m"] = float(width)
     return base.with_overrides(overrides)
 
 
-def view_log(pair_rows, human: int, base: Config, step_deg: float = ANGLE_STEP_DEG):
+def view_log(pair_rows, human: int, base: Config, step_deg: float = ANGLE_STEP_DEG,
+             smoothing: dict | None = None):
     """``(config, frame, meta)`` of one view of one pair: vehicle ``human`` (1 or 2) as the
-    ``hv``. ``pair_rows``: the pair's rows of the pairs file, in step order."""
+    ``hv``. ``pair_rows``: the pair's rows of the pairs file, in step order. ``smoothing``:
+    the tracks' filter (the pairs file's ``frame.attrs["smoothing"]``), kept in the metadata
+    as ``recording.smoothing`` for the fit's measurement model
+    (``persuasive.fitting.evidence.observe_through``); None: unknown, no measurement model."""
     import pandas as pd
 
     from ..record import static_setup
@@ -126,8 +133,11 @@ def view_log(pair_rows, human: int, base: Config, step_deg: float = ANGLE_STEP_D
         log[f"{who}_rec_x_m"] = col[who]["x"][rows]
         log[f"{who}_rec_y_m"] = col[who]["y"][rows]
     pair_info = {c: _plain(first[c]) for c in PAIR_COLUMNS}
+    pair_info.update({c: _plain(first[c]) for c in TRACK_COLUMNS if c in pair_rows})
     pair_info.update({"human": human, "t0_s": float(pair_rows["t_s"].iloc[0]),
                       "scenario_angle_deg": angle})
+    if smoothing is not None:
+        pair_info["smoothing"] = dict(smoothing)
     from .._version import __version__
 
     last = n - 1
@@ -167,10 +177,11 @@ def write_logs(frame, folder: str | Path, base: Config | None = None,
     base = base if base is not None else Config(mode="corrected")
     folder = Path(folder)
     written: list[LogFile] = []
+    smoothing = frame.attrs.get("smoothing")
     for pair_id, rows in frame.groupby("pair", sort=True):
         rows = rows.sort_values("step")
         for human in (1, 2):
-            config, log, meta = view_log(rows, human, base, step_deg)
+            config, log, meta = view_log(rows, human, base, step_deg, smoothing)
             angle = config.scenario.angle_deg
             name = log_name(config.scenario.kind, angle, int(pair_id), human)
             table = pa.Table.from_pandas(log, preserve_index=False)

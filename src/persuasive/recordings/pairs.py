@@ -13,13 +13,17 @@ paths (``|s| <= near_m``; the two stretches of time overlap).
 its own smoothed centres (cut to ``CUT_M`` = 30 m before and after the point where the paths
 meet), and
 :func:`persuasive.envs.external.route_conflict` gives the conflict of the pair, with the
-vehicles' recorded lengths and widths: the kind (crossing: the closest approach of the two
-centre lines is the conflict point; merge: the merging vehicle's first point on the other's
-path is the conflict point, ``merge_at``), each vehicle's position of the conflict point on
-its path, and the occupancy intervals (where its footprint can touch the other's path,
+vehicles' recorded lengths and widths: the kind (crossing: the two centre lines' crossing is
+the conflict point, exactly where they intersect, not at route_conflict's sampling step;
+merge: the merging vehicle's first point on the other's path is the conflict point,
+``merge_at``), each vehicle's position of the conflict point on its path, and the occupancy
+intervals (where its footprint can touch the other's path,
 relative to the conflict point). Vehicle 1 is route_conflict's ego: in a merge the merging
 vehicle, in a crossing the lower track ID. Per 10 Hz step that both are present: ``s``
-(relative to the conflict point, negative before it), ``v`` and ``a`` of both.
+(relative to the conflict point, negative before it), ``v`` and ``a`` of both; and where the
+steps lie in each vehicle's track (``track_k0``: the track's sample of the pair's first step,
+``track_n``: the track's samples), which the fit's measurement model needs (the filter
+differs near a track's ends, ``persuasive.recordings.tracks.acceleration_band``).
 
 **Labels** (every approaching pair is kept; the labels never filter):
 
@@ -134,6 +138,9 @@ class Pair:
     heading: np.ndarray = field(repr=False)
     #: indices of the two tracks in the :class:`Tracks` they came from (for figures)
     index: tuple[int, int] = (-1, -1)
+    #: per vehicle, the sample of its track at the pair's first step, and its track's samples
+    track_k0: tuple[int, int] = (0, 0)
+    track_n: tuple[int, int] = (0, 0)
 
     @property
     def n_steps(self) -> int:
@@ -295,8 +302,17 @@ def _project(tracks: Tracks, params: PairParams, i: int, j: int, kind: str, si: 
     if rc is None:
         return None
     cp_i, cp_j = off_i + rc.ego_at_m, off_j + rc.other_at_m
-    s_i, s_j = tracks.s[ri] - cp_i, tracks.s[rj] - cp_j
     occ = (tuple(map(float, rc.ego_occupancy)), tuple(map(float, rc.other_occupancy)))
+    if (rc.kind == CROSSING and abs(si - cp_i) <= params.step_m
+            and abs(sj - cp_j) <= params.step_m):
+        # the exact crossing of the two centre lines (the kernel's), not route_conflict's
+        # closest pair of samples step_m apart: that one is up to step_m / 2 off on each
+        # path, an offset every s of the pair would carry (the intervals, widened by step_m /
+        # 2 beyond the samples, are moved with the point and stay conservative)
+        occ = tuple((lo + c - e, hi + c - e) for (lo, hi), c, e
+                    in zip(occ, (cp_i, cp_j), (si, sj)))
+        cp_i, cp_j = si, sj
+    s_i, s_j = tracks.s[ri] - cp_i, tracks.s[rj] - cp_j
     # approaching: each observed before its occupancy interval, both near at one time
     if not (s_i[0] < occ[0][0] and s_j[0] < occ[1][0]):
         return None
@@ -322,7 +338,7 @@ def _project(tracks: Tracks, params: PairParams, i: int, j: int, kind: str, si: 
     ki = int(round((t_lo - ti[0]) / STEP_S)) + np.arange(n)
     kj = int(round((t_lo - tj[0]) / STEP_S)) + np.arange(n)
     gi, gj = ri.start + ki, rj.start + kj
-    xy = pi_.at(rc.ego_at_m)
+    xy = pi_.at(cp_i - off_i)
     return Pair(
         pair=-1, recording=str(tracks.recording[i]), kind=rc.kind,
         angle_deg=float(angle), tracks=(int(tracks.track[i]), int(tracks.track[j])),
@@ -333,7 +349,8 @@ def _project(tracks: Tracks, params: PairParams, i: int, j: int, kind: str, si: 
         t=np.round(ti[ki], 1), s=np.stack([s_i[ki], s_j[kj]]),
         v=np.stack([tracks.v[gi], tracks.v[gj]]), a=np.stack([tracks.a[gi], tracks.a[gj]]),
         x=np.stack([tracks.x[gi], tracks.x[gj]]), y=np.stack([tracks.y[gi], tracks.y[gj]]),
-        heading=np.stack([tracks.heading[gi], tracks.heading[gj]]), index=(i, j))
+        heading=np.stack([tracks.heading[gi], tracks.heading[gj]]), index=(i, j),
+        track_k0=(int(ki[0]), int(kj[0])), track_n=(int(ti.size), int(tj.size)))
 
 
 def _first(t1: float, t2: float) -> str:
@@ -381,6 +398,9 @@ PAIR_COLUMNS = ("pair", "recording", "kind", "angle_deg", "track_1", "track_2", 
                 "occupancy_1_lo_m", "occupancy_1_hi_m", "occupancy_2_lo_m", "occupancy_2_hi_m",
                 "conflict_x_m", "conflict_y_m", "first", "pet_s", "t_pass_1_s", "t_pass_2_s",
                 "second_slowed", "second_speed_drop_mps")
+#: Where the steps lie in each vehicle's track (per pair; optional when read: pairs files
+#: written before them have none, and their fit filters every step as an interior one).
+TRACK_COLUMNS = ("track_k0_1", "track_n_1", "track_k0_2", "track_n_2")
 #: The step columns (one row per pair and step).
 STEP_COLUMNS = ("step", "t_s", "s_1_m", "v_1_mps", "a_1_mps2", "x_1_m", "y_1_m",
                 "heading_1_rad", "s_2_m", "v_2_mps", "a_2_mps2", "x_2_m", "y_2_m",
@@ -388,7 +408,8 @@ STEP_COLUMNS = ("step", "t_s", "s_1_m", "v_1_mps", "a_1_mps2", "x_1_m", "y_1_m",
 
 
 def pairs_frame(pairs: Sequence[Pair]):
-    """One row per pair and step: :data:`PAIR_COLUMNS` then :data:`STEP_COLUMNS`."""
+    """One row per pair and step: :data:`PAIR_COLUMNS`, :data:`TRACK_COLUMNS`, then
+    :data:`STEP_COLUMNS`."""
     import pandas as pd
 
     n = np.array([p.n_steps for p in pairs], np.int64)
@@ -425,6 +446,9 @@ def pairs_frame(pairs: Sequence[Pair]):
         "second_slowed": pd.array(np.repeat(np.array([p.second_slowed for p in pairs],
                                                      dtype=object), n), dtype="boolean"),
         "second_speed_drop_mps": rep([p.second_speed_drop_mps for p in pairs], float),
+        **{f"track_{what}_{k + 1}": rep([getattr(p, f"track_{what}")[k] for p in pairs],
+                                        np.int64)
+           for k in (0, 1) for what in ("k0", "n")},
         "step": cat(lambda p: np.arange(p.n_steps)).astype(np.int64),
         "t_s": cat(lambda p: p.t),
     }
@@ -436,7 +460,7 @@ def pairs_frame(pairs: Sequence[Pair]):
         cols[f"x_{tag}_m"] = cat(lambda p: p.x[k])
         cols[f"y_{tag}_m"] = cat(lambda p: p.y[k])
         cols[f"heading_{tag}_rad"] = cat(lambda p: p.heading[k])
-    return pd.DataFrame(cols, columns=[*PAIR_COLUMNS, *STEP_COLUMNS])
+    return pd.DataFrame(cols, columns=[*PAIR_COLUMNS, *TRACK_COLUMNS, *STEP_COLUMNS])
 
 
 def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
@@ -455,7 +479,7 @@ def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
     meta = {"params": asdict(result.params), "sources": [str(s) for s in sources],
             "n_pairs": len(result.pairs), "candidates": result.candidates,
             "vehicle_tracks": result.tracks.n_tracks, "version": __version__,
-            "step_s": STEP_S}
+            "step_s": STEP_S, "smoothing": asdict(result.tracks.params)}
     table = table.replace_schema_metadata({**(table.schema.metadata or {}),
                                            PAIRS_METADATA: json.dumps(meta)})
     atomic_write(path, lambda p: pq.write_table(table, p))
@@ -463,7 +487,9 @@ def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
 
 def read_pairs(path):
     """The pairs file ``path`` as ``(frame, metadata)``; :class:`RecordingError` (one line
-    naming it) when it is not one."""
+    naming it) when it is not one. ``frame.attrs["smoothing"]``: the tracks' filter
+    (:class:`~persuasive.recordings.tracks.SmoothingParams` as a dict; None for a file written
+    before it was recorded), which the fit's measurement model needs."""
     import json
     from pathlib import Path
 
@@ -492,7 +518,10 @@ def read_pairs(path):
     frame = table.to_pandas()
     if frame.empty:
         raise RecordingError(f"pairs file {name!r} holds no pair")
-    return frame, json.loads(raw)
+    meta = json.loads(raw)
+    # the filter its accelerations went through (files of before it was kept: unknown)
+    frame.attrs["smoothing"] = meta.get("smoothing")
+    return frame, meta
 
 
 def summary(result: PairsResult) -> dict:
@@ -536,5 +565,5 @@ def pair_of(result: PairsResult, pair_id: int) -> Pair:
 
 
 __all__ = ["CROSSING", "FIRST_LABELS", "MERGE", "PAIRS_METADATA", "PAIR_COLUMNS", "Pair",
-           "PairParams", "PairsResult", "STEP_COLUMNS", "candidates", "find_pairs",
-           "pair_of", "pairs_frame", "read_pairs", "summary", "write_pairs"]
+           "PairParams", "PairsResult", "STEP_COLUMNS", "TRACK_COLUMNS", "candidates",
+           "find_pairs", "pair_of", "pairs_frame", "read_pairs", "summary", "write_pairs"]

@@ -27,7 +27,9 @@ the recorded driver's replayed acceleration within the human vehicle's ``[u_min,
 its speed within ``[v_min, v_max]`` of the run's configuration, to ``ENVELOPE_TOL``. The
 recorded driver is tested whichever ``other`` drives; its steps beyond are counted. (``v_max``
 of a pair's configuration is raised to the pair's highest speed, so only an acceleration can
-leave the envelope.)
+leave the envelope.) Steps that read one of its track's first or last ``window // 2`` samples
+are not tested: there the filter's values are its edge windows' extrapolations
+(``persuasive.recordings.tracks``), not the driver's.
 
 **Whether the start is certified.** The AV's recorded start is in the shield's invariant set
 ``S`` when it can stand before its occupancy interval by braking
@@ -66,6 +68,7 @@ from ..config import AV_KINDS, SHIELD_KINDS, Config
 from ..safety.measures import restricted_mean
 from .formats import STEP_S, RecordingError
 from .logs import ANGLE_STEP_DEG, view_log
+from .tracks import SmoothingParams
 
 #: Who drives the other vehicle.
 OTHERS = ("replay", "fitted")
@@ -284,11 +287,25 @@ def _first_time(hit: np.ndarray) -> float:
     return float((k[0] + 1) * STEP_S) if k.size else math.nan
 
 
+def edge_steps(rows, human: int, half_window: int) -> np.ndarray:
+    """``(n - 1,)`` bool: the pair's steps ``k`` whose replayed acceleration (from the speeds
+    at ``k`` and ``k + 1``) reads one of vehicle ``human``'s track's first or last
+    ``half_window`` samples (all False for a pairs file that does not say where its steps lie
+    in the tracks)."""
+    n = len(rows) - 1
+    k0, n_track = f"track_k0_{human}", f"track_n_{human}"
+    if k0 not in rows or half_window <= 0:
+        return np.zeros(n, bool)
+    k = int(rows[k0].iloc[0]) + np.arange(n)
+    return (k < half_window) | (k + 1 > int(rows[n_track].iloc[0]) - 1 - half_window)
+
+
 def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: str = "",
-             fitted: dict | None = None) -> SeatRun:
+             fitted: dict | None = None, half_window: int = 0) -> SeatRun:
     """The run of one pair (its rows of the pairs file, in step order) with the AV in vehicle
     ``seat``'s place (module docstring). ``fitted``: the config overrides and parameters of a
-    ``fitted`` other (:func:`fitted_overrides`)."""
+    ``fitted`` other (:func:`fitted_overrides`); ``half_window``: the tracks' filter's
+    (:func:`edge_steps`)."""
     from ..record import ARRIVAL_LABELS
 
     human = 3 - seat
@@ -320,7 +337,8 @@ def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: st
     out = record.outcome
     scenario = record.scenario
     veh = config.vehicle_of("hv")
-    excess = envelope_excess(a_rec, v_hv, veh)
+    tested = ~edge_steps(rows, human, half_window)
+    excess = envelope_excess(a_rec, v_hv, veh) & tested
     first_rec = _recorded_first(str(rows["first"].iloc[0]), seat)
     label = ARRIVAL_LABELS[out.first_at_conflict_point]
     first_replay = {"HV": "other"}.get(label, label)
@@ -337,7 +355,7 @@ def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: st
         angle_deg=float(config.scenario.angle_deg), seat=seat, steps=config.simulation.n_steps,
         recorded_steps=n,
         start_certified=start_in_s(record, s_av[0], v_av[0]),
-        envelope_steps=int(excess.size), excess_steps=int(excess.sum()),
+        envelope_steps=int(tested.sum()), excess_steps=int(excess.sum()),
         within_envelope=not bool(excess.any()),
         accel_min_mps2=float(a_rec.min()), accel_max_mps2=float(a_rec.max()),
         u_min_mps2=veh.u_min_mps2, u_max_mps2=veh.u_max_mps2,
@@ -359,10 +377,11 @@ def pair_run_logs(frame, base: Config, step_deg: float = ANGLE_STEP_DEG) -> list
     from ..fitting.evidence import RunLog
 
     out = []
+    smoothing = frame.attrs.get("smoothing")
     for pair_id, rows in frame.groupby("pair", sort=True):
         rows = rows.sort_values("step")
         for human in (1, 2):
-            config, log, meta = view_log(rows, human, base, step_deg)
+            config, log, meta = view_log(rows, human, base, step_deg, smoothing)
             states = log[["av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m",
                           "hv_meas_v_mps"]].to_numpy(float)
             out.append(RunLog(f"pair {int(pair_id)} vehicle {human}", config, int(pair_id),
@@ -424,6 +443,8 @@ def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | N
     settings = settings or ReplaySettings()
     base = base if base is not None else Config(mode=settings.mode)
     fits = fit_left_out(frame, settings, base) if settings.other == "fitted" else {}
+    smoothing = frame.attrs.get("smoothing") or {}
+    half = int(smoothing.get("window", SmoothingParams().window)) // 2
     runs = []
     for _, rows in frame.groupby("pair", sort=True):
         rows = rows.sort_values("step")
@@ -432,11 +453,11 @@ def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | N
                                  "replay needs two")
         rec = str(rows["recording"].iloc[0])
         for seat in settings.seats:
-            runs.append(run_seat(rows, seat, settings, base, source, fits.get(rec)))
+            runs.append(run_seat(rows, seat, settings, base, source, fits.get(rec), half))
     return ReplayResult(runs, settings, {k: v["params"] for k, v in fits.items()})
 
 
 __all__ = ["ENVELOPE_TOL", "FITTED_MODELS", "INVALID_REAR_END", "INVALID_YIELDED", "OTHERS",
            "ReplayResult", "ReplaySettings", "SeatRun", "envelope_excess", "fit_left_out",
            "fitted_overrides", "pair_run_logs", "replay_accelerations", "replay_pairs",
-           "run_from", "run_seat", "summarise"]
+           "edge_steps", "run_from", "run_seat", "summarise"]

@@ -37,7 +37,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .formats import INTERACTION_COLUMNS, RecordingError
+from .formats import INTERACTION_COLUMNS, RecordingError, noisy_speed
 
 #: SUMO's default length and width per vehicle class [m] (SUMO's "Vehicle Type Parameter
 #: Defaults").
@@ -98,9 +98,10 @@ def _float(el, name: str, path: Path, t: str) -> float:
 
 
 def read_fcd(path: str | Path, types: dict[str, tuple[float, float, str]],
-             rng: np.random.Generator, noise_m: float = 0.0
+             rng: np.random.Generator, noise_m: float = 0.0, noise_mps: float = 0.0
              ) -> tuple[dict[str, np.ndarray], list[str]]:
-    """The INTERACTION rows of one fcd file (module docstring) and the SUMO ID of each track
+    """The INTERACTION rows of one fcd file (module docstring; ``noise_mps``: as
+    :func:`persuasive.recordings.formats.noisy_speed`) and the SUMO ID of each track
     (track ``i + 1`` is ``ids[i]``). :class:`RecordingError` (one line naming the file and
     the check) for a file that is not an fcd file, a value that is missing or not finite, an
     unknown vehicle type, a vehicle whose frames are not one 100 ms step apart, or no
@@ -179,7 +180,7 @@ def read_fcd(path: str | Path, types: dict[str, tuple[float, float, str]],
     x = x + rng.uniform(-noise_m, noise_m, n)
     y = y + rng.uniform(-noise_m, noise_m, n)
     psi = np.angle(np.exp(1j * (math.pi / 2.0 - angle)))
-    speed = get["speed"].astype(float)
+    speed = noisy_speed(get["speed"].astype(float), rng, noise_mps)
     out = {"track_id": track, "frame_id": frame + 1, "timestamp_ms": frame * 100,
            "agent_type": get["agent"].astype(object), "x": x, "y": y,
            "vx": speed * np.cos(psi), "vy": speed * np.sin(psi), "psi_rad": psi,

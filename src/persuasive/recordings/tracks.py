@@ -11,8 +11,24 @@ smoothed with a **Savitzky-Golay filter** (a least-squares polynomial over a sli
 - ``x, y``: the smoothed centre [m];
 - ``s``: the arc length travelled along the smoothed positions, ``s_0 = 0``, ``s_k = s_{k-1} +
   |p_k - p_{k-1}|`` [m] (non-decreasing: the track is its own path);
-- ``v``: the filter's first derivative of ``s``, floored at 0 [m/s]; ``a``: its second
-  derivative [m/s^2] (``dt = 0.1 s``).
+- ``v``, ``a`` (``speed = "file"``, the default): the file's speed (``hypot(vx, vy)``), smoothed
+  by the same filter and floored at 0 [m/s], and the filter's first derivative of it [m/s^2];
+  (``speed = "positions"``): the filter's first and second derivatives of ``s`` (``dt =
+  0.1 s``). A recording's velocities are its own estimates (INTERACTION's and inD's come from
+  their trackers); differentiating positions instead bends a speed that changes its slope
+  within the window by up to 0.2 m/s (a step of 3 m/s^2 in the acceleration, the window of
+  1 s), and the games of the fit are solved at that speed (docs/guide/recordings.md, "The
+  round trip, replicated").
+
+At a track's first and last ``window // 2`` samples the values are the edge windows'
+polynomials, extrapolated: a slope there can overshoot (1.6 m/s^2 at the first sample of a
+driver at 0.8 that brakes 0.3 s later). The pairs keep them (the fit's measurement model is
+exact there too, :func:`acceleration_band`); the replay's envelope test leaves them out.
+
+What the recorded acceleration is, as a function of the true one, is a linear filter
+(:func:`acceleration_kernel`: the filter above applied to the speed or the position that the
+acceleration integrates to); the fit passes the models' accelerations through it before it
+compares them with the recorded ones (``persuasive.fitting.evidence.observe_through``).
 
 The filter is applied to all tracks at once (a matrix product over sliding windows of the
 concatenated samples, each track's ends by its own edge windows), with no loop per track.
@@ -27,6 +43,10 @@ import numpy as np
 from .formats import STEP_S, VEHICLE_CLASSES, RecordingError
 
 
+#: Where a track's speed and acceleration come from (:class:`SmoothingParams`).
+SPEED_SOURCES = ("file", "positions")
+
+
 @dataclass(frozen=True)
 class SmoothingParams:
     """The Savitzky-Golay filter and which tracks are kept."""
@@ -34,6 +54,9 @@ class SmoothingParams:
     window: int = 11  #: samples in the filter's window (odd; 11 = 1.0 s at 10 Hz) [-]
     order: int = 3  #: the polynomial's degree [-]
     min_track_s: float = 2.0  #: shorter vehicle tracks are left out [s]
+    #: where speed and acceleration come from: "file" (the file's speed, smoothed, and its
+    #: derivative) or "positions" (the derivatives of the smoothed arc length)
+    speed: str = "file"
 
     def __post_init__(self) -> None:
         if not (isinstance(self.window, int) and self.window >= 3 and self.window % 2 == 1):
@@ -46,6 +69,9 @@ class SmoothingParams:
                 * STEP_S):
             raise RecordingError(f"min_track_s = {self.min_track_s!r} is out of range; "
                                  f"allowed: at least the window, {(self.window - 1) * STEP_S:g} s")
+        if self.speed not in SPEED_SOURCES:
+            raise RecordingError(f"speed = {self.speed!r} is out of range; allowed: "
+                                 f"{', '.join(SPEED_SOURCES)}")
 
 
 @dataclass(frozen=True)
@@ -69,6 +95,7 @@ class Tracks:
     v: np.ndarray = field(repr=False)
     a: np.ndarray = field(repr=False)
     heading: np.ndarray = field(repr=False)
+    params: SmoothingParams = field(default_factory=lambda: SmoothingParams())  #: the filter
 
     @property
     def n_tracks(self) -> int:
@@ -147,13 +174,94 @@ def smooth_tracks(table, params: SmoothingParams | None = None) -> Tracks:
     chord[new_starts[:-1]] = 0.0
     c = np.cumsum(chord)
     s = c - np.repeat(c[new_starts[:-1]], n_kept)
-    v = np.maximum(savgol(s, new_starts, w, p, 1), 0.0) if s.size else s
-    a = savgol(s, new_starts, w, p, 2) if s.size else s
+    if params.speed == "file":
+        speed = take("speed_mps")[keep]
+        v = np.maximum(savgol(speed, new_starts, w, p), 0.0) if s.size else s
+        a = savgol(speed, new_starts, w, p, 1) if s.size else s
+    else:
+        v = np.maximum(savgol(s, new_starts, w, p, 1), 0.0) if s.size else s
+        a = savgol(s, new_starts, w, p, 2) if s.size else s
     seg = np.repeat(np.arange(n_kept.shape[0]), n_kept)
     med_len = _median_by(length, seg, n_kept.shape[0])
     med_wid = _median_by(width, seg, n_kept.shape[0])
     return Tracks(rec_names[rec_codes[first]], track[first], cls[first], med_len, med_wid,
-                  new_starts, t, xs, ys, s, v, a, heading)
+                  new_starts, t, xs, ys, s, v, a, heading, params)
+
+
+def _recorded_accel(params: SmoothingParams, accel: np.ndarray) -> np.ndarray:
+    """The pipeline's acceleration of one straight track (all its samples) that drove
+    ``accel`` (held over each 0.1 s step; the last sample's is not driven) from 10 m/s."""
+    window, order, dt = params.window, params.order, STEP_S
+    starts = np.array([0, accel.shape[0]], np.int64)
+    v = 10.0 + np.concatenate([[0.0], np.cumsum(accel[:-1]) * dt])
+    if params.speed == "file":
+        return savgol(v, starts, window, order, 1)
+    s = np.concatenate([[0.0], np.cumsum(v[:-1] * dt + 0.5 * accel[:-1] * dt * dt)])
+    return savgol(savgol(s, starts, window, order), starts, window, order, 2)
+
+
+_RESPONSES: dict[tuple, np.ndarray] = {}
+
+
+def _responses(params: SmoothingParams, n: int) -> np.ndarray:
+    """``R`` ``(n, n)``: the pipeline's acceleration at sample ``k`` of an ``n``-sample track
+    is ``sum_i R[k, i] a_i`` (the filter is linear; its edge windows included). Cached."""
+    key = (params.window, params.order, params.speed, n)
+    R = _RESPONSES.get(key)
+    if R is None:
+        base = _recorded_accel(params, np.zeros(n))
+        R = np.empty((n, n))
+        for i in range(n):
+            impulse = np.zeros(n)
+            impulse[i] = 1.0
+            R[:, i] = _recorded_accel(params, impulse) - base
+        R[np.abs(R) < 1e-9] = 0.0  # rounding of positions of hundreds of metres
+        _RESPONSES[key] = R
+    return R
+
+
+def acceleration_band(params: SmoothingParams | None, n_track: int, first: int,
+                      n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The recorded acceleration of samples ``first .. first + n_steps - 1`` of an
+    ``n_track``-sample track as a band over the true ones: ``(offsets (m,), weights
+    (n_steps, m))`` with the recorded value at step ``k`` ``sum_j weights[k, j]
+    a_{k + offsets[j]}`` (steps counted from ``first``; weights 0 beyond the track). Exact
+    everywhere, the track's edge windows included: the filter of a long track is the same at
+    every sample more than ``4 window`` from both ends (:func:`acceleration_kernel`), and its
+    first and last ``4 window`` samples see only their end. ``n_track = 0``: the track is not
+    known (a pairs file written before it was recorded): every step is taken as interior."""
+    params = params or SmoothingParams()
+    long_n = 8 * params.window + 1
+    R = _responses(params, long_n if n_track <= 0 or n_track > long_n else n_track)
+    L = R.shape[0]
+    mid = L // 2
+    j = first + np.arange(n_steps)
+    if n_track <= 0:
+        src = np.full(n_steps, mid)
+    elif n_track <= long_n:
+        src = j
+    else:  # rows of the long track: its start, its end, or its middle (the interior)
+        src = np.where(j < mid, j, np.where(n_track - 1 - j < mid, L - (n_track - j), mid))
+    reach = int(max(np.max(np.abs(np.nonzero(R)[1] - np.nonzero(R)[0])), 0))
+    offsets = np.arange(-reach, reach + 1)
+    cols = src[:, None] + offsets[None, :]
+    inside = (cols >= 0) & (cols < L)
+    weights = np.where(inside, R[src[:, None], np.clip(cols, 0, L - 1)], 0.0)
+    return offsets, weights
+
+
+def acceleration_kernel(params: SmoothingParams | None = None) -> dict[int, float]:
+    """``{d: w_d}``: a track's smoothed acceleration at step ``k`` is ``sum_d w_d a_{k+d}`` for
+    the true accelerations ``a`` (held over each 0.1 s step), away from the track's first and
+    last ``window // 2`` samples, where the filter takes the edge windows' polynomials
+    (module docstring). Found by the pipeline's own filter on a unit impulse: for ``speed =
+    "file"``, the speed it integrates to, filtered and differentiated once; for
+    ``"positions"``, the position, smoothed (as the centres are), then differentiated twice.
+    The weights sum to 1 (a constant acceleration is recorded as it is)."""
+    params = params or SmoothingParams()
+    R = _responses(params, 8 * params.window + 1)
+    mid = R.shape[0] // 2
+    return {int(i - mid): float(R[mid, i]) for i in np.flatnonzero(R[mid])}
 
 
 def _codes(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
