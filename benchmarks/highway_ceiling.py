@@ -3,6 +3,7 @@
 
     python benchmarks/highway_ceiling.py [--episodes 20] [--seed 1]
                                          [--variants as-is,exact,no-stand-ins,u-max-3,responsive]
+                                         [--full-throttle worst-case,responsive]
 
 Drives highway-env's own ego (``persuasive highway``'s ``default`` driver) on seeds
 ``SEED .. SEED + EPISODES - 1`` and judges every step it drove by a shield it does not use
@@ -23,6 +24,13 @@ traffic. The variants change one assumption each:
 - ``responsive``: the ``responsive`` shield (any other driver brakes after a fixed time).
 
 Prints, per variant, entries admitted of entries judged and the steps admitted.
+
+``--full-throttle SHIELDS`` (comma-separated shield kinds; empty: none) adds a second table:
+the ego driven through ``persuasive highway``'s adapter and shield on the same seeds, but
+proposing full throttle at every step (``u_max``, capped by the IDM gap to a leader on its
+own lane, as the planner's proposal is) instead of planning: the shield alone decides when it
+enters. Crossings, collisions and uncertified steps, beside what the planner does behind the
+same shield, tell whether the planner or the shield holds the ego back.
 """
 
 from __future__ import annotations
@@ -50,6 +58,24 @@ def judge_of(variant: str):
     return DefaultJudge
 
 
+def full_throttle_class():
+    """The adapter whose every per-vehicle proposal is full throttle (module docstring)."""
+    from persuasive.envs.external import ExternalPlanner
+
+    class FullThrottle(ExternalPlanner):
+        class _Throttle:
+            def __init__(self, u_max: float):
+                self.u_max = u_max
+
+            def accel(self, ego, other) -> float:
+                return self.u_max
+
+        def planner_for(self, key):
+            return self._Throttle(self.ego.u_max_mps2)
+
+    return FullThrottle
+
+
 def config_of(variant: str):
     from persuasive.envs.highway import planner_config
 
@@ -66,18 +92,28 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--full-throttle", default="",
+                    help="shield kinds to drive the full-throttle ego behind (comma-separated)")
     args = ap.parse_args()
-    variants = args.variants.split(",")
+    variants = [v for v in args.variants.split(",") if v]
     for v in variants:
         if v not in VARIANTS:
             raise SystemExit(f"--variants: {v!r} is not one of {', '.join(VARIANTS)}")
-    from persuasive.envs.highway import DEFAULT_DRIVER, run_episode
+    from persuasive.config import SHIELD_KINDS
+    from persuasive.envs.highway import DEFAULT_DRIVER, planner_config, run_episode
+
+    shields = [k for k in args.full_throttle.split(",") if k]
+    for k in shields:
+        if k not in SHIELD_KINDS or k == "off":
+            raise SystemExit(f"--full-throttle: {k!r} is not one of "
+                             f"{', '.join(x for x in SHIELD_KINDS if x != 'off')}")
 
     seeds = range(args.seed, args.seed + args.episodes)
-    print(f"highway-env's own ego, seeds {seeds.start}..{seeds.stop - 1}, judged by a shield "
-          "it does not use")
-    print("| variant | crossed | entries admitted | steps admitted % | wall s |")
-    print("|---|---|---|---|---|")
+    if variants:
+        print(f"highway-env's own ego, seeds {seeds.start}..{seeds.stop - 1}, judged by a "
+              "shield it does not use")
+        print("| variant | crossed | entries admitted | steps admitted % | wall s |")
+        print("|---|---|---|---|---|")
     for variant in variants:
         t0 = time.perf_counter()
         config, judge = config_of(variant), judge_of(variant)
@@ -88,6 +124,20 @@ def main() -> None:
               f"{sum(e.entry_admitted for e in entries)} of {len(entries)} | "
               f"{100.0 * sum(e.judged_admitted for e in eps) / max(1, steps):.1f} | "
               f"{time.perf_counter() - t0:.0f} |", flush=True)
+    if shields:
+        print(f"\nThe ego behind the shield, seeds {seeds.start}..{seeds.stop - 1}: the planner "
+              "and a proposer that always asks for full throttle")
+        print("| shield | proposer | crossed | collisions | uncertified steps | wall s |")
+        print("|---|---|---|---|---|---|")
+        throttle = full_throttle_class()
+    for shield in shields:
+        config = planner_config("persuasive", shield)
+        for name, cls in (("planner", None), ("full throttle", throttle)):
+            t0 = time.perf_counter()
+            eps = [run_episode(s, "persuasive", config, planner_class=cls) for s in seeds]
+            print(f"| {shield} | {name} | {sum(e.crossed for e in eps)} of {len(eps)} | "
+                  f"{sum(e.collision for e in eps)} | {sum(e.uncertified_steps for e in eps)} | "
+                  f"{time.perf_counter() - t0:.0f} |", flush=True)
 
 
 if __name__ == "__main__":

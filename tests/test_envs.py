@@ -685,6 +685,65 @@ def test_highway_envs_own_ego_is_judged_by_the_shield_it_does_not_use():
         np.mean([e.time_to_cross_s for e in worst]))
 
 
+def _full_throttle(proposals: list, conflicts: list | None = None):
+    """An adapter whose every per-vehicle proposal is full throttle, recording what its
+    shield is asked (the proposals, and the conflicts when a list is given)."""
+    from persuasive.envs.external import ExternalPlanner
+
+    class Throttle(ExternalPlanner):
+        def planner_for(self, key):
+            u_max = self.ego.u_max_mps2
+            return type("Throttle", (), {"accel": lambda _self, ego, other: u_max})()
+
+        def shield(self, ego_v_mps, proposed_mps2, conflicts_now, *args, **kwargs):
+            proposals.append(proposed_mps2)
+            if conflicts is not None:
+                conflicts.append(list(conflicts_now))
+            return super().shield(ego_v_mps, proposed_mps2, conflicts_now, *args, **kwargs)
+
+    return Throttle
+
+
+@pytest.mark.slow
+def test_a_leader_turning_out_of_the_lane_is_followed_until_it_has_left():
+    """Seed 72, the ego proposing full throttle behind the worst-case shield: the car it
+    follows into the junction turns off the ego's path ahead of it. Projected as a crossing
+    the moment it left the lane, both vehicles were inside their occupancy intervals at once
+    and no fallback was certified (53 steps). It now stays a vehicle to follow, standing at its
+    nearest corner, until it has left the stretch where its footprint can touch the ego's."""
+    from persuasive.envs.external import FOLLOW
+    from persuasive.envs.highway import planner_config, run_episode
+
+    seen: list = []
+    r = run_episode(72, "persuasive", planner_config("persuasive", "worst-case"),
+                    planner_class=_full_throttle([], seen))
+    assert r.uncertified_steps == 0 and not r.collision and r.guarantee_held
+    standing = [c for step in seen for c in step if c.kind == FOLLOW and c.other_v_mps == 0.0
+                and c.other_s_m - c.ego_s_m > 0.0]
+    assert standing  # the leaver, held as standing ahead
+    assert len({c.key for c in standing}) == 1
+
+
+@pytest.mark.slow
+def test_a_proposer_behind_the_same_shield_drives_through_the_adapter_it_is_given():
+    """``run_episode(planner_class=...)``: the ego is driven through that adapter and its
+    proposals, behind the same shield (``benchmarks/highway_ceiling.py --full-throttle``). A
+    proposer that always asks for full throttle: the shield sees nothing but ``u_max`` (or the
+    IDM gap to a leader below it), overrides it where it cannot certify it, and the ego
+    crosses seed 5 without a collision or an uncertified step."""
+    from persuasive.envs.highway import planner_config, run_episode
+
+    proposals: list[float] = []
+    Throttle = _full_throttle(proposals)
+    config = planner_config("persuasive", "worst-case")
+    r = run_episode(5, "persuasive", config, planner_class=Throttle)
+    u_max = config.vehicle_of("av").u_max_mps2
+    assert len(proposals) == r.steps and max(proposals) == u_max
+    assert sum(p == u_max for p in proposals) > 0.5 * len(proposals)
+    assert r.crossed and not r.collision and r.uncertified_steps == 0
+    assert r.shield_interventions > 0  # the shield, not the proposer, held it back
+
+
 @pytest.mark.slow
 def test_a_crash_between_two_other_vehicles_is_counted_apart_and_voids_the_guarantee():
     """Seed 15 with the shielded planner: two other vehicles collide, and highway-env sets

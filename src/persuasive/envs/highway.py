@@ -33,7 +33,12 @@ stretch of the ego's path facing it (widened by ``ego length / 2 + its half-diag
 whose lanes stay in that band to their end joins the ego's lane (a merge, with its merge point
 where its lane centre comes within :data:`SAME_LANE_M` of the ego's line), one in the ego's lane
 ahead of it is followed (the traffic is :class:`ForwardIDMVehicle`, highway-env's ``IDMVehicle``
-that stops at rest instead of driving backwards). Its limits are highway-env's own: ``IDMVehicle``
+that stops at rest instead of driving backwards). A vehicle that was followed and turns out of
+the ego's lane stays a vehicle to follow until it has left the stretch of its lanes where its
+footprint can touch the ego's, taken as standing where its nearest corner is (it may stop
+there, and its progress along the ego's line is not its speed): as a crossing it would put both
+vehicles inside their occupancy intervals at once, where no fallback is certified (seed 72,
+the ego proposing full throttle: 53 uncertified steps before this rule). Its limits are highway-env's own: ``IDMVehicle``
 accelerates at most at its ``COMFORT_ACC_MAX``, brakes at most at its ``ACC_MAX`` and never drives faster than the larger
 of its speed and the speed limit of every lane on its way (:func:`speed_bound`: the IDM clips its
 target to the lane's limit, whatever target ``RegulatedRoad`` sets while it makes a vehicle yield
@@ -406,6 +411,8 @@ class Projector:
         self.ego_size = ego_size  #: the ego's (length, width) [m]
         self.euler_margin_m = euler_margin_m  #: widening for Euler steps [m] (module docstring)
         self._tracks: dict[int, Track] = {}
+        #: vehicles followed in the ego's lane, kept while they turn out of it (module docstring)
+        self._leaders: set[int] = set()
 
     def track(self, vehicle) -> Track:
         """The vehicle's :class:`Track`, made when it is first seen (or when it has left the
@@ -542,8 +549,15 @@ class Projector:
         limits = highway_limits(v)
         if self.in_ego_lane(v):
             u = self.ego.coordinates(v.position)[0]
-            return Conflict(id(v), FOLLOW, u_ego, u, float(v.speed), other=limits) \
-                if u > u_ego else None
+            if u <= u_ego:
+                return None
+            self._leaders.add(id(v))
+            return Conflict(id(v), FOLLOW, u_ego, u, float(v.speed), other=limits)
+        if id(v) in self._leaders:
+            leaving = self.leaving_leader(v, u_ego)
+            if leaving is not None:
+                return Conflict(id(v), FOLLOW, u_ego, leaving, 0.0, other=limits)
+            self._leaders.discard(id(v))
         track = self.track(v)
         if track.kind is None:
             return None
@@ -557,6 +571,25 @@ class Projector:
         return Conflict(id(track), CROSSING if track.kind == "crossing" else MERGE, s_ego,
                         s_other, float(v.speed), track.ego_occupancy, track.other_occupancy,
                         limits, ego_line_m=line, right_of_way=self.right_of_way(track))
+
+    def leaving_leader(self, v, u_ego: float) -> float | None:
+        """For a followed vehicle turning out of the ego's lane: where to take it on the ego's
+        line while it has not yet left the stretch of its lanes where its footprint can touch
+        the ego's (its track's occupancy, the same stretch a crossing would be certified
+        against) and its nearest corner is ahead of the ego, as a vehicle of its length whose
+        rear is that corner; None once it is out (module docstring)."""
+        track = self.track(v)
+        if track.kind is None or (self.arc_position(track, v) - track.origin_arc_m
+                                  > track.other_occupancy[1]):
+            return None
+        d = np.asarray(v.direction, float)
+        n = np.array([-d[1], d[0]])
+        p = np.asarray(v.position, float)
+        nearest = min(self.ego.coordinates(p + 0.5 * sx * v.LENGTH * d + 0.5 * sy * v.WIDTH * n)[0]
+                      for sx in (-1.0, 1.0) for sy in (-1.0, 1.0))
+        if nearest <= u_ego:
+            return None
+        return float(nearest + 0.5 * v.LENGTH)
 
     def right_of_way(self, track: Track) -> float:
         """Who has the right of way at a track's conflict, by highway-env's own rule
@@ -721,11 +754,11 @@ class PlannerDriver:
     the most cautious answer, an IDM gap to a leader, the shield over all, the vehicles not
     spawned yet included: :func:`spawn_stand_ins`)."""
 
-    def __init__(self, config: Config, seed: int):
+    def __init__(self, config: Config, seed: int, planner_class: type | None = None):
         from .external import ExternalPlanner
 
         self.config = config
-        self.planner = ExternalPlanner(config, seed)
+        self.planner = (planner_class or ExternalPlanner)(config, seed)
         self.last_targets = 0  #: vehicles planned against at the last step
         self.interventions = 0  #: steps where the shield overrode the planner
         self.uncertified = 0  #: of which no fallback was certified
@@ -955,7 +988,8 @@ class _Contest:
 
 
 def run_episode(seed: int, driver: str = "persuasive", config: Config | None = None,
-                frames: list | None = None, judge_class: type | None = None) -> EpisodeResult:
+                frames: list | None = None, judge_class: type | None = None,
+                planner_class: type | None = None) -> EpisodeResult:
     """One episode of highway-env's intersection with ``seed``.
 
     ``driver``: an AV kind (the planner drives the ego, :class:`PlannerDriver`) or
@@ -963,7 +997,9 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
     planner's (default :func:`planner_config` of ``driver``). ``frames``: a list that receives
     the ``rgb_array`` frames (after the reset and after each step). ``judge_class``: what
     judges highway-env's own ego (default :class:`DefaultJudge`; a subclass may judge it on
-    other assumptions, ``benchmarks/highway_ceiling.py``).
+    other assumptions, ``benchmarks/highway_ceiling.py``). ``planner_class``: the adapter
+    the planner drives through (default :class:`~persuasive.envs.external.ExternalPlanner`; a
+    subclass may propose otherwise behind the same shield, ``benchmarks/highway_ceiling.py``).
     """
     if driver != DEFAULT_DRIVER:
         config = config if config is not None else planner_config(driver)
@@ -988,7 +1024,7 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             if config.shield != "off":
                 judge = (judge_class or DefaultJudge)(config, seed, env)
         else:
-            planner = PlannerDriver(config, seed)
+            planner = PlannerDriver(config, seed, planner_class)
         if frames is not None:
             frames.append(env.render())
         contests: dict[int, _Contest] = {}

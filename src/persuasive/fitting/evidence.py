@@ -21,8 +21,9 @@ human does (``persuasive.policies.lfg``, docs/method.md §5), with the compiled
   the belief is exactly tied, when the plausible role is the human's own role.
 
 **Recorded accelerations are filtered ones.** A log written from recorded tracks
-(``persuasive recordings logs``, the held-out evaluation and replay's fitted other) carries
-the tracks' filter in its metadata (``recording.smoothing``). Its accelerations are the
+(``persuasive recordings logs``, replay's fitted other, ``benchmarks/recordings_roundtrip.py``)
+carries the tracks' filter in its metadata (``recording.smoothing``; the held-out evaluation's
+views do not: a filtered prediction reads states after its step, docs/method.md §13.10). Its accelerations are the
 filter's view of the driver's, not the driver's: a step of the acceleration is spread over the
 window, half a step early. :func:`evidence_of` then passes the model's accelerations through
 the same filter before they are compared (:func:`observe_through`, the measurement model; the
