@@ -142,6 +142,22 @@ def test_a_driver_beyond_the_envelope_is_reported(tmp_path):
     assert info["within_envelope_certified_start"]["runs"] == 0
 
 
+def test_the_envelope_test_leaves_out_the_filters_edge_samples():
+    """A pair's steps that read one of the track's first or last samples the edge windows
+    reach (5 for the files' speeds, 10 for speeds from the positions) are not tested; a pairs
+    file that does not say where its steps lie tests every step."""
+    import pandas as pd
+
+    from persuasive.recordings.replay import edge_steps
+    from persuasive.recordings.tracks import SmoothingParams, edge_samples
+
+    assert edge_samples() == 5 and edge_samples(SmoothingParams(speed="positions")) == 10
+    rows = pd.DataFrame({"track_k0_2": [3] * 21, "track_n_2": [27] * 21})
+    edge = edge_steps(rows, 2, 5)  # step k reads samples 3 + k, 4 + k; 22..26 are the end
+    assert edge.tolist() == [True, True] + [False] * 16 + [True, True]
+    assert not edge_steps(rows.drop(columns=["track_k0_2", "track_n_2"]), 2, 5).any()
+
+
 def test_the_envelope_test_by_hand():
     from persuasive.config import VehicleParams
 

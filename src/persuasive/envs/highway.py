@@ -38,8 +38,9 @@ the ego's lane stays a vehicle to follow until it has left the stretch of its la
 footprint can touch the ego's, taken as standing where its nearest corner is (it may stop
 there, and its progress along the ego's line is not its speed): as a crossing it would put both
 vehicles inside their occupancy intervals at once, where no fallback is certified (seed 72,
-the ego proposing full throttle: 53 uncertified steps before this rule). Its limits are highway-env's own: ``IDMVehicle``
-accelerates at most at its ``COMFORT_ACC_MAX``, brakes at most at its ``ACC_MAX`` and never drives faster than the larger
+the ego proposing full throttle: 53 uncertified steps before this rule). Its limits are
+highway-env's own: ``IDMVehicle`` accelerates at most at its ``COMFORT_ACC_MAX``, brakes at
+most at its ``ACC_MAX`` and never drives faster than the larger
 of its speed and the speed limit of every lane on its way (:func:`speed_bound`: the IDM clips its
 target to the lane's limit, whatever target ``RegulatedRoad`` sets while it makes a vehicle yield
 and after); every episode checks that every vehicle stayed inside that envelope
@@ -585,8 +586,9 @@ class Projector:
         d = np.asarray(v.direction, float)
         n = np.array([-d[1], d[0]])
         p = np.asarray(v.position, float)
-        nearest = min(self.ego.coordinates(p + 0.5 * sx * v.LENGTH * d + 0.5 * sy * v.WIDTH * n)[0]
-                      for sx in (-1.0, 1.0) for sy in (-1.0, 1.0))
+        corners = [p + 0.5 * sx * v.LENGTH * d + 0.5 * sy * v.WIDTH * n
+                   for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)]
+        nearest = min(self.ego.coordinates(c)[0] for c in corners)
         if nearest <= u_ego:
             return None
         return float(nearest + 0.5 * v.LENGTH)

@@ -23,16 +23,17 @@ human does (``persuasive.policies.lfg``, docs/method.md §5), with the compiled
 **Recorded accelerations are filtered ones.** A log written from recorded tracks
 (``persuasive recordings logs``, replay's fitted other, ``benchmarks/recordings_roundtrip.py``)
 carries the tracks' filter in its metadata (``recording.smoothing``; the held-out evaluation's
-views do not: a filtered prediction reads states after its step, docs/method.md §13.10). Its accelerations are the
-filter's view of the driver's, not the driver's: a step of the acceleration is spread over the
-window, half a step early. :func:`evidence_of` then passes the model's accelerations through
-the same filter before they are compared (:func:`observe_through`, the measurement model; the
-filter is ``persuasive.recordings.tracks.acceleration_band``, exact at the track's ends too,
-where the log says where its steps lie in the track): ``a_role[k, r]`` becomes ``sum_d
-w_kd a_role[k + d, r]``, each neighbour's prediction from its own measured state with the role
-held over the window, and every candidate's ``a_first`` alike (the candidate slot held); the
-run's first and last steps stand in for the steps beyond its ends. Simulated logs and drive
-trials record the applied acceleration itself and are not filtered.
+views do not: a filtered prediction reads states after its step, docs/method.md §13.10). Its
+accelerations are the filter's view of the driver's, not the driver's: a step of the
+acceleration is spread over the window, half a step early. :func:`evidence_of` then passes
+the model's accelerations through the same filter before they are compared
+(:func:`observe_through`, the measurement model; the filter is
+``persuasive.recordings.tracks.acceleration_band``, exact at the track's ends too, where the
+log says where its steps lie in the track): ``a_role[k, r]`` becomes ``sum_d w_kd a_role[k +
+d, r]``, each neighbour's prediction from its own measured state with the role held over the
+window, and every candidate's ``a_first`` alike (the candidate slot held); the run's first
+and last steps stand in for the steps beyond its ends. Simulated logs and drive trials record
+the applied acceleration itself and are not filtered.
 
 CSV logs are refused: they carry no configuration (mode, scenario, vehicles, library), and a
 game re-solved with the wrong one would be fitted without a warning.

@@ -27,9 +27,9 @@ the recorded driver's replayed acceleration within the human vehicle's ``[u_min,
 its speed within ``[v_min, v_max]`` of the run's configuration, to ``ENVELOPE_TOL``. The
 recorded driver is tested whichever ``other`` drives; its steps beyond are counted. (``v_max``
 of a pair's configuration is raised to the pair's highest speed, so only an acceleration can
-leave the envelope.) Steps that read one of its track's first or last ``window // 2`` samples
-are not tested: there the filter's values are its edge windows' extrapolations
-(``persuasive.recordings.tracks``), not the driver's.
+leave the envelope.) Steps that read one of its track's first or last samples
+(``persuasive.recordings.tracks.edge_samples``) are not tested: there the filter's values are
+its edge windows' extrapolations, not the driver's.
 
 **Whether the start is certified.** The AV's recorded start is in the shield's invariant set
 ``S`` when it can stand before its occupancy interval by braking
@@ -68,7 +68,7 @@ from ..config import AV_KINDS, SHIELD_KINDS, Config
 from ..safety.measures import restricted_mean
 from .formats import STEP_S, RecordingError
 from .logs import ANGLE_STEP_DEG, view_log
-from .tracks import SmoothingParams
+from .tracks import SmoothingParams, edge_samples
 
 #: Who drives the other vehicle.
 OTHERS = ("replay", "fitted")
@@ -287,25 +287,25 @@ def _first_time(hit: np.ndarray) -> float:
     return float((k[0] + 1) * STEP_S) if k.size else math.nan
 
 
-def edge_steps(rows, human: int, half_window: int) -> np.ndarray:
+def edge_steps(rows, human: int, edge: int) -> np.ndarray:
     """``(n - 1,)`` bool: the pair's steps ``k`` whose replayed acceleration (from the speeds
-    at ``k`` and ``k + 1``) reads one of vehicle ``human``'s track's first or last
-    ``half_window`` samples (all False for a pairs file that does not say where its steps lie
-    in the tracks)."""
+    at ``k`` and ``k + 1``) reads one of vehicle ``human``'s track's first or last ``edge``
+    samples (``persuasive.recordings.tracks.edge_samples``; all False for a pairs file that
+    does not say where its steps lie in the tracks)."""
     n = len(rows) - 1
     k0, n_track = f"track_k0_{human}", f"track_n_{human}"
-    if k0 not in rows or half_window <= 0:
+    if k0 not in rows or edge <= 0:
         return np.zeros(n, bool)
     k = int(rows[k0].iloc[0]) + np.arange(n)
-    return (k < half_window) | (k + 1 > int(rows[n_track].iloc[0]) - 1 - half_window)
+    return (k < edge) | (k + 1 > int(rows[n_track].iloc[0]) - 1 - edge)
 
 
 def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: str = "",
-             fitted: dict | None = None, half_window: int = 0) -> SeatRun:
+             fitted: dict | None = None, edge: int = 0) -> SeatRun:
     """The run of one pair (its rows of the pairs file, in step order) with the AV in vehicle
     ``seat``'s place (module docstring). ``fitted``: the config overrides and parameters of a
-    ``fitted`` other (:func:`fitted_overrides`); ``half_window``: the tracks' filter's
-    (:func:`edge_steps`)."""
+    ``fitted`` other (:func:`fitted_overrides`); ``edge``: the samples at each end of a track
+    its envelope test leaves out (:func:`edge_steps`)."""
     from ..record import ARRIVAL_LABELS
 
     human = 3 - seat
@@ -337,7 +337,7 @@ def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: st
     out = record.outcome
     scenario = record.scenario
     veh = config.vehicle_of("hv")
-    tested = ~edge_steps(rows, human, half_window)
+    tested = ~edge_steps(rows, human, edge)
     excess = envelope_excess(a_rec, v_hv, veh) & tested
     first_rec = _recorded_first(str(rows["first"].iloc[0]), seat)
     label = ARRIVAL_LABELS[out.first_at_conflict_point]
@@ -443,8 +443,8 @@ def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | N
     settings = settings or ReplaySettings()
     base = base if base is not None else Config(mode=settings.mode)
     fits = fit_left_out(frame, settings, base) if settings.other == "fitted" else {}
-    smoothing = frame.attrs.get("smoothing") or {}
-    half = int(smoothing.get("window", SmoothingParams().window)) // 2
+    smoothing = frame.attrs.get("smoothing")
+    edge = edge_samples(SmoothingParams(**smoothing) if smoothing else None)
     runs = []
     for _, rows in frame.groupby("pair", sort=True):
         rows = rows.sort_values("step")
@@ -453,7 +453,7 @@ def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | N
                                  "replay needs two")
         rec = str(rows["recording"].iloc[0])
         for seat in settings.seats:
-            runs.append(run_seat(rows, seat, settings, base, source, fits.get(rec), half))
+            runs.append(run_seat(rows, seat, settings, base, source, fits.get(rec), edge))
     return ReplayResult(runs, settings, {k: v["params"] for k, v in fits.items()})
 
 

@@ -20,7 +20,7 @@ smoothed with a **Savitzky-Golay filter** (a least-squares polynomial over a sli
   1 s), and the games of the fit are solved at that speed (docs/guide/recordings.md, "The
   round trip, replicated").
 
-At a track's first and last ``window // 2`` samples the values are the edge windows'
+At a track's first and last samples (:func:`edge_samples`) the values are the edge windows'
 polynomials, extrapolated: a slope there can overshoot (1.6 m/s^2 at the first sample of a
 driver at 0.8 that brakes 0.3 s later). The pairs keep them (the fit's measurement model is
 exact there too, :func:`acceleration_band`); the replay's envelope test leaves them out.
@@ -95,7 +95,7 @@ class Tracks:
     v: np.ndarray = field(repr=False)
     a: np.ndarray = field(repr=False)
     heading: np.ndarray = field(repr=False)
-    params: SmoothingParams = field(default_factory=lambda: SmoothingParams())  #: the filter
+    params: SmoothingParams = field(default_factory=SmoothingParams)  #: the filter
 
     @property
     def n_tracks(self) -> int:
@@ -200,15 +200,16 @@ def _recorded_accel(params: SmoothingParams, accel: np.ndarray) -> np.ndarray:
     return savgol(savgol(s, starts, window, order), starts, window, order, 2)
 
 
-_RESPONSES: dict[tuple, np.ndarray] = {}
+_RESPONSES: dict[tuple, tuple[np.ndarray, int]] = {}
 
 
-def _responses(params: SmoothingParams, n: int) -> np.ndarray:
-    """``R`` ``(n, n)``: the pipeline's acceleration at sample ``k`` of an ``n``-sample track
-    is ``sum_i R[k, i] a_i`` (the filter is linear; its edge windows included). Cached."""
+def _responses(params: SmoothingParams, n: int) -> tuple[np.ndarray, int]:
+    """``(R, reach)``: ``R`` ``(n, n)``, the pipeline's acceleration at sample ``k`` of an
+    ``n``-sample track is ``sum_i R[k, i] a_i`` (the filter is linear; its edge windows
+    included), and ``reach`` the largest ``|i - k|`` with a weight. Cached."""
     key = (params.window, params.order, params.speed, n)
-    R = _RESPONSES.get(key)
-    if R is None:
+    found = _RESPONSES.get(key)
+    if found is None:
         base = _recorded_accel(params, np.zeros(n))
         R = np.empty((n, n))
         for i in range(n):
@@ -216,8 +217,9 @@ def _responses(params: SmoothingParams, n: int) -> np.ndarray:
             impulse[i] = 1.0
             R[:, i] = _recorded_accel(params, impulse) - base
         R[np.abs(R) < 1e-9] = 0.0  # rounding of positions of hundreds of metres
-        _RESPONSES[key] = R
-    return R
+        rows, cols = np.nonzero(R)
+        found = _RESPONSES[key] = (R, int(np.max(np.abs(cols - rows), initial=0)))
+    return found
 
 
 def acceleration_band(params: SmoothingParams | None, n_track: int, first: int,
@@ -232,7 +234,7 @@ def acceleration_band(params: SmoothingParams | None, n_track: int, first: int,
     known (a pairs file written before it was recorded): every step is taken as interior."""
     params = params or SmoothingParams()
     long_n = 8 * params.window + 1
-    R = _responses(params, long_n if n_track <= 0 or n_track > long_n else n_track)
+    R, reach = _responses(params, long_n if n_track <= 0 or n_track > long_n else n_track)
     L = R.shape[0]
     mid = L // 2
     j = first + np.arange(n_steps)
@@ -242,7 +244,6 @@ def acceleration_band(params: SmoothingParams | None, n_track: int, first: int,
         src = j
     else:  # rows of the long track: its start, its end, or its middle (the interior)
         src = np.where(j < mid, j, np.where(n_track - 1 - j < mid, L - (n_track - j), mid))
-    reach = int(max(np.max(np.abs(np.nonzero(R)[1] - np.nonzero(R)[0])), 0))
     offsets = np.arange(-reach, reach + 1)
     cols = src[:, None] + offsets[None, :]
     inside = (cols >= 0) & (cols < L)
@@ -250,16 +251,24 @@ def acceleration_band(params: SmoothingParams | None, n_track: int, first: int,
     return offsets, weights
 
 
+def edge_samples(params: SmoothingParams | None = None) -> int:
+    """How many of a track's first (and last) samples have a speed that the edge windows'
+    polynomials reach: ``window // 2`` for the file's speeds, twice that for speeds from the
+    positions (the centres are smoothed, then the arc length differentiated)."""
+    params = params or SmoothingParams()
+    return (params.window // 2) * (1 if params.speed == "file" else 2)
+
+
 def acceleration_kernel(params: SmoothingParams | None = None) -> dict[int, float]:
     """``{d: w_d}``: a track's smoothed acceleration at step ``k`` is ``sum_d w_d a_{k+d}`` for
     the true accelerations ``a`` (held over each 0.1 s step), away from the track's first and
-    last ``window // 2`` samples, where the filter takes the edge windows' polynomials
-    (module docstring). Found by the pipeline's own filter on a unit impulse: for ``speed =
+    last :func:`edge_samples`, where the filter takes the edge windows' polynomials (module
+    docstring). Found by the pipeline's own filter on a unit impulse: for ``speed =
     "file"``, the speed it integrates to, filtered and differentiated once; for
     ``"positions"``, the position, smoothed (as the centres are), then differentiated twice.
     The weights sum to 1 (a constant acceleration is recorded as it is)."""
     params = params or SmoothingParams()
-    R = _responses(params, 8 * params.window + 1)
+    R, _ = _responses(params, 8 * params.window + 1)
     mid = R.shape[0] // 2
     return {int(i - mid): float(R[mid, i]) for i in np.flatnonzero(R[mid])}
 
@@ -280,4 +289,5 @@ def _median_by(x: np.ndarray, group: np.ndarray, n: int) -> np.ndarray:
     return pd.Series(x).groupby(group).median().reindex(range(n)).to_numpy(float)
 
 
-__all__ = ["SmoothingParams", "Tracks", "savgol", "savgol_matrix", "smooth_tracks"]
+__all__ = ["SPEED_SOURCES", "SmoothingParams", "Tracks", "acceleration_band",
+           "acceleration_kernel", "edge_samples", "savgol", "savgol_matrix", "smooth_tracks"]
