@@ -74,6 +74,9 @@ def _print_summary(info: dict) -> None:
         f"{('vehicle ' + k) if k in ('1', '2') else k} {v}" for k, v in first.items()))
     click.echo(f"second passer slowed (speed drop >= the stated threshold): "
                f"{info['second_slowed']} of {info['second_known']}")
+    if set(info["control"]) != {"unknown"}:
+        click.echo("the map's rule: " + ", ".join(
+            f"{k.replace('_', ' ')} {v}" for k, v in info["control"].items()))
 
 
 @recordings.command("pairs")
@@ -93,9 +96,16 @@ def _print_summary(info: dict) -> None:
               metavar="SOURCE",
               help="Speed and acceleration from the files' velocities, smoothed ('file'), or "
                    "from the smoothed positions' derivatives ('positions').")
+@click.option("--map", "map_path", type=click.Path(dir_okay=False), default=None,
+              metavar="FILE.osm",
+              help="Lanelet2 map of the recordings' site: each pair's rule (right of way, "
+                   "all-way stop) from it (needs the lanelet2 package: persuasive[maps]).")
+@click.option("--map-origin", default="0,0", show_default=True, metavar="LAT,LON",
+              help="The map's projection origin [deg] (INTERACTION: 0,0; inD: the "
+                   "recording's latLocation,lonLocation).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, speed_from,
-                  as_json) -> None:
+                  map_path, map_origin, as_json) -> None:
     """Find the crossing and merging pairs of recorded tracks (files or folders of
     INTERACTION vehicle_tracks_NNN.csv, inD NN_tracks.csv with NN_tracksMeta.csv)."""
     from .._files import check_output_file
@@ -116,6 +126,16 @@ def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, spe
 
         _guard(check_figure_path, figure)
     params = _guard(PairParams, angle_range_deg=(angle_min, angle_max), near_m=near_m)
+    road_map = None
+    if map_path is not None:
+        from ..recordings.lanelet_map import read_map
+
+        try:
+            origin = [float(v) for v in map_origin.split(",")]
+        except ValueError:
+            raise _BadInput(f"--map-origin = {map_origin!r} is out of range; allowed: LAT,LON "
+                            "in degrees") from None
+        road_map = _guard(read_map, map_path, origin)
     table = _guard(read_tracks, paths)
     result = _guard(find_pairs, _guard(smooth_tracks, table, SmoothingParams(speed=speed_from)),
                     params)
@@ -124,6 +144,13 @@ def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, spe
                         f"{result.candidates} candidate pairs, none crossing at "
                         f"[{angle_min:g}, {angle_max:g}] deg or merging with both approaching "
                         f"within {near_m:g} m at one time")
+    if road_map is not None:
+        from dataclasses import replace
+
+        from ..recordings.lanelet_map import annotate_pairs
+
+        result = replace(result, pairs=annotate_pairs(result.pairs, road_map),
+                         road_map={"path": str(map_path), "origin": list(road_map.origin)})
     chosen = _guard(pair_of, result, pair_id) if figure else None
     if out:
         write_pairs(out, result, paths)
@@ -189,8 +216,12 @@ def logs_command(pairs_file, out, force, mode, angle_step) -> None:
               metavar="FILE", help="SUMO route or additional file whose vType elements give "
                                    "the vehicles' lengths and widths (fcd input only; "
                                    "repeatable).")
+@click.option("--map-rule", "map_rule", default=None, metavar="RULE",
+              help="Also write map.osm, the runs' scenario as a Lanelet2 map with this rule: "
+                   "'av' or 'hv' (who has the right of way), 'all-way-stop' (runs only; needs "
+                   "persuasive[maps]).")
 @click.option("--force", is_flag=True, help="Replace a folder that holds other files.")
-def export_command(inputs, out, noise_m, noise_mps, seed, types, force) -> None:
+def export_command(inputs, out, noise_m, noise_mps, seed, types, map_rule, force) -> None:
     """Write simulate --out runs (.parquet; track 1 the AV, track 2 the HV) or SUMO
     --fcd-output files (.xml) as INTERACTION track files, vehicle_tracks_NNN.csv, one per
     input."""
@@ -208,17 +239,26 @@ def export_command(inputs, out, noise_m, noise_mps, seed, types, force) -> None:
                         "both in one export")
     if types and not all(fcd):
         raise _BadInput("--types is read with SUMO fcd files (.xml) only")
+    from ..recordings.lanelet_map import MAP_RULES
+
+    if map_rule is not None and map_rule not in MAP_RULES:
+        raise _BadInput(f"--map-rule = {map_rule!r} is not allowed; allowed: "
+                        f"{', '.join(MAP_RULES)}")
+    if map_rule is not None and all(fcd):
+        raise _BadInput("--map-rule is written for simulate --out runs (.parquet) only")
     _guard(check_replaceable_folder, out, force, "tracks folder")
     # every input is read before anything is written; a failure removes the temporary folder
     with atomic_folder(out, "tracks folder") as tmp:
         if all(fcd):
             names = _guard(export_fcd, inputs, tmp, noise_m, seed, types, noise_mps)
         else:
-            names = _guard(export_runs, inputs, tmp, noise_m, seed, noise_mps)
+            names = _guard(export_runs, inputs, tmp, noise_m, seed, noise_mps, map_rule)
     what = ", from SUMO fcd" if all(fcd) else ""
     speed = f", U(-{noise_mps:g}, {noise_mps:g}) m/s on the speed" if noise_mps else ""
-    click.echo(f"{len(names)} track file{'s' * (len(names) != 1)} (INTERACTION format{what}, "
-               f"noise U(-{noise_m:g}, {noise_m:g}) m{speed}, seed {seed}) in {out}")
+    tracks = [n for n in names if n.endswith(".csv")]
+    drawn = f"; the map ({map_rule}) in map.osm" if map_rule else ""
+    click.echo(f"{len(tracks)} track file{'s' * (len(tracks) != 1)} (INTERACTION format{what}, "
+               f"noise U(-{noise_m:g}, {noise_m:g}) m{speed}, seed {seed}) in {out}{drawn}")
 
 
 def _print_replay(info: dict, runs: list) -> None:

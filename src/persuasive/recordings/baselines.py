@@ -19,10 +19,16 @@ predicts ``P(vehicle 1 passes first)``:
   standardised by the training means and deviations, with a ridge penalty
   ``RIDGE / 2 |w|^2`` on the weights (not the intercept): a Normal(0, 1) prior on each
   standardised weight, which keeps them finite when the training pairs are separable;
-- ``right_of_way``: the vehicle from the right goes first (the right-before-left rule of an
-  unsigned junction): at a crossing vehicle 1 has the right of way when it comes from vehicle
-  2's right, ``cross(u_2, u_1) > 0`` for the directions of travel ``u`` (x east, y north); in
-  a merge the vehicle already in the lane (vehicle 2) has it;
+- ``right_of_way``: the junction's rule. Where the pairs were found with a Lanelet2 map
+  (``recordings pairs --map``, :mod:`persuasive.recordings.lanelet_map`), the map's: its
+  right of way where it gives one; at an all-way stop, arrival order: the vehicle that reached
+  its stop line (within :data:`ARRIVED_M` of it) first goes first, a vehicle not there yet
+  arriving at constant speed from the moment (a stop line the map does not give is taken at
+  the start of the vehicle's occupancy interval). Where there is no map, or the map has no
+  rule for the two lanelets, the vehicle from the right goes first (the right-before-left
+  rule of an unsigned junction): at a crossing vehicle 1 has the right of way when it comes
+  from vehicle 2's right, ``cross(u_2, u_1) > 0`` for the directions of travel ``u`` (x east,
+  y north); in a merge the vehicle already in the lane (vehicle 2) has it;
 - ``sumo_rule``: SUMO's junction rule: the vehicle without the right of way goes first only
   if, at constant speed, it leaves its occupancy interval at least ``SUMO_GAP_S`` (1 s)
   before the other enters its own; otherwise the one with the right of way goes first.
@@ -48,6 +54,8 @@ LOGISTIC_CAP_S = 30.0
 RIDGE = 1.0
 #: SUMO's gap for the vehicle without the right of way [s] (jmTimegapMinor's default).
 SUMO_GAP_S = 1.0
+#: A vehicle within this of its stop line has arrived at it (all-way stops) [m].
+ARRIVED_M = 2.0
 #: The baselines, in the order reported.
 BASELINES = ("majority", "arrive_cv", "arrive_ca", "logistic_gap", "right_of_way",
              "sumo_rule", "role_belief")
@@ -57,7 +65,7 @@ BASELINE_NAMES = {
     "arrive_cv": "first to arrive, constant speed",
     "arrive_ca": "first to arrive, constant acceleration",
     "logistic_gap": "logistic gap acceptance",
-    "right_of_way": "right of way (from the right)",
+    "right_of_way": "right of way (the map's, else from the right)",
     "sumo_rule": "SUMO's rule (1 s gap)",
     "role_belief": "role belief, online (Bayes, §5.5)",
 }
@@ -68,7 +76,11 @@ class Features:
     """What each pair shows at its prediction moment; arrays ``(n, 2)`` per vehicle 1, 2
     unless stated: ``s`` [m] (relative to the conflict point, negative before it), ``v``
     [m/s], ``a`` [m/s^2], ``direction`` [rad] (of travel, x east, y north), ``occ_lo``,
-    ``occ_hi`` [m] (the occupancy interval), ``merge`` ``(n,)``."""
+    ``occ_hi`` [m] (the occupancy interval), ``merge`` ``(n,)``; from a map (None: no map
+    for any pair): ``priority`` ``(n,)`` (1, 2: the vehicle with the right of way, 0: none),
+    ``all_way`` ``(n,)`` (an all-way stop), ``stop_arrival`` [s] (when each reached its stop
+    line, relative to the moment: negative when it has, positive at constant speed when it has
+    not)."""
 
     s: np.ndarray
     v: np.ndarray
@@ -77,14 +89,19 @@ class Features:
     occ_lo: np.ndarray
     occ_hi: np.ndarray
     merge: np.ndarray = field(repr=False)
+    priority: np.ndarray | None = field(default=None, repr=False)
+    all_way: np.ndarray | None = field(default=None, repr=False)
+    stop_arrival: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def n(self) -> int:
         return int(self.s.shape[0])
 
     def take(self, idx) -> Features:
+        pick = (lambda x: None if x is None else x[idx])
         return Features(self.s[idx], self.v[idx], self.a[idx], self.direction[idx],
-                        self.occ_lo[idx], self.occ_hi[idx], self.merge[idx])
+                        self.occ_lo[idx], self.occ_hi[idx], self.merge[idx],
+                        pick(self.priority), pick(self.all_way), pick(self.stop_arrival))
 
 
 def arrival_cv(f: Features) -> np.ndarray:
@@ -109,7 +126,13 @@ def right_of_way(f: Features) -> np.ndarray:
     u1 = np.stack([np.cos(f.direction[:, 0]), np.sin(f.direction[:, 0])], axis=1)
     u2 = np.stack([np.cos(f.direction[:, 1]), np.sin(f.direction[:, 1])], axis=1)
     from_right = u2[:, 0] * u1[:, 1] - u2[:, 1] * u1[:, 0] > 0.0
-    return np.where(f.merge, 0, from_right.astype(np.int64))
+    rule = np.where(f.merge, 0, from_right.astype(np.int64))
+    if f.priority is not None:
+        rule = np.where(f.priority == 1, 1, np.where(f.priority == 2, 0, rule))
+    if f.all_way is not None:
+        first = (f.stop_arrival[:, 0] <= f.stop_arrival[:, 1]).astype(np.int64)
+        rule = np.where(f.all_way, first, rule)
+    return rule
 
 
 def sumo_rule(f: Features, gap_s: float = SUMO_GAP_S) -> np.ndarray:
@@ -249,6 +272,6 @@ class Baselines:
                 "right_of_way_hit_rate": self.row_hit, "sumo_rule_hit_rate": self.sumo_hit}
 
 
-__all__ = ["BASELINES", "BASELINE_NAMES", "Baselines", "CAPS_S", "Features", "LOGISTIC_CAP_S",
+__all__ = ["ARRIVED_M", "BASELINES", "BASELINE_NAMES", "Baselines", "CAPS_S", "Features", "LOGISTIC_CAP_S",
            "RIDGE", "SUMO_GAP_S", "V_FLOOR", "arrival_ca", "arrival_cv", "fit_logistic",
            "fit_scale", "right_of_way", "rule_hit_rate", "rule_probability", "sumo_rule"]

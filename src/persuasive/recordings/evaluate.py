@@ -156,6 +156,10 @@ class PairData:
     a: np.ndarray = field(default=None, repr=False)
     x: np.ndarray = field(default=None, repr=False)
     y: np.ndarray = field(default=None, repr=False)
+    #: the junction's rule from a map (``persuasive.recordings.pairs.MAP_COLUMNS``)
+    control: str = "unknown"
+    priority: int = 0
+    stop_s: tuple[float, float] = (math.nan, math.nan)
 
     @property
     def n(self) -> int:
@@ -212,7 +216,10 @@ def pairs_of(frame, site: str, prefix: bool) -> list[PairData]:
             first=str(r0["first"]), pet_s=float(r0["pet_s"]),
             t_pass_s=(float(r0["t_pass_1_s"]), float(r0["t_pass_2_s"])),
             t=rows["t_s"].to_numpy(float), s=both("s", "m"), v=both("v", "mps"),
-            a=both("a", "mps2"), x=both("x", "m"), y=both("y", "m")))
+            a=both("a", "mps2"), x=both("x", "m"), y=both("y", "m"),
+            **({"control": str(r0["control"]), "priority": int(r0["priority"]),
+                "stop_s": (float(r0["stop_1_m"]), float(r0["stop_2_m"]))}
+               if "control" in rows else {})))
     return out
 
 
@@ -248,18 +255,44 @@ def direction_at(p: PairData, k: int, back: int = 10) -> np.ndarray:
     return np.arctan2(p.y[:, k] - p.y[:, j], p.x[:, k] - p.x[:, j])
 
 
+def stop_arrival(p: PairData, k: int) -> np.ndarray:
+    """When each vehicle of ``p`` reached its stop line, relative to step ``k`` ``(2,)`` [s]:
+    the first step up to ``k`` at which it was within ``ARRIVED_M`` of it (negative or 0), or,
+    when it is not there yet, at constant speed from step ``k`` (``V_FLOOR`` at least; the
+    steps after ``k`` are not read). A stop line the map does not give is taken at the start
+    of the vehicle's occupancy interval."""
+    from .baselines import ARRIVED_M, V_FLOOR
+
+    out = np.empty(2)
+    for i in range(2):
+        line = p.stop_s[i] if math.isfinite(p.stop_s[i]) else float(p.occupancy[i, 0])
+        there = np.flatnonzero(p.s[i, :k + 1] >= line - ARRIVED_M)
+        if there.size:
+            out[i] = float(p.t[there[0]] - p.t[k])
+        else:
+            out[i] = (line - ARRIVED_M - float(p.s[i, k])) / max(float(p.v[i, k]), V_FLOOR)
+    return out
+
+
 def features_of(pairs: Sequence[PairData], seen: Sequence[int]) -> Features:
     """The :class:`Features` of each pair at its last step seen."""
     n = len(pairs)
     s, v, a, d = (np.zeros((n, 2)) for _ in range(4))
     lo, hi = np.zeros((n, 2)), np.zeros((n, 2))
     merge = np.zeros(n, bool)
+    priority, all_way, arrival = np.zeros(n, np.int64), np.zeros(n, bool), np.zeros((n, 2))
     for i, (p, k) in enumerate(zip(pairs, seen)):
         s[i], v[i], a[i] = p.s[:, k], p.v[:, k], p.a[:, k]
         d[i] = direction_at(p, k)
         lo[i], hi[i] = p.occupancy[:, 0], p.occupancy[:, 1]
         merge[i] = p.kind != CROSSING
-    return Features(s, v, a, d, lo, hi, merge)
+        priority[i] = p.priority if p.control == "right_of_way" else 0
+        all_way[i] = p.control == "all_way_stop"
+        if all_way[i]:
+            arrival[i] = stop_arrival(p, k)
+    mapped = any(p.control != "unknown" for p in pairs)
+    return Features(s, v, a, d, lo, hi, merge, *((priority, all_way, arrival) if mapped
+                                                  else (None, None, None)))
 
 
 # -- splits -----------------------------------------------------------------------------------
@@ -726,4 +759,5 @@ __all__ = ["DECIDED", "ENDS", "EvalParams", "Evaluation", "FoldResult", "KEPT", 
            "NO_PASSER", "PairData", "STATUSES", "SPLITS", "Split", "ViewBuilder", "combine",
            "evaluate", "evaluate_fold", "features_of", "fold_tests", "heldout_loglik",
            "idm_rollout", "is_pairs_file", "motion_sigma", "pairs_of", "prediction_moment",
-           "read_sites", "recording_file", "role_posteriors", "score", "vehicle_limits"]
+           "read_sites", "recording_file", "role_posteriors", "score", "stop_arrival",
+           "vehicle_limits"]

@@ -76,15 +76,28 @@ def _check_export(noise_m: float, count: int, what: str, noise_mps: float = 0.0)
 
 
 def export_runs(runs: Sequence[str | Path], folder: str | Path, noise_m: float = 0.0,
-                seed: int = 0, noise_mps: float = 0.0) -> list[str]:
+                seed: int = 0, noise_mps: float = 0.0, map_rule: str | None = None
+                ) -> list[str]:
     """Write each run log of ``runs`` into ``folder`` (existing) as
-    ``vehicle_tracks_<r>.csv``; the names written. Raises
+    ``vehicle_tracks_<r>.csv``; the names written. ``map_rule``
+    (``persuasive.recordings.lanelet_map.MAP_RULES``): also ``map.osm``, the runs' scenario as
+    a Lanelet2 map with that rule (every run must be of one scenario geometry). Raises
     :class:`persuasive.config.ConfigError` (a run that cannot be read) or
     :class:`RecordingError` before writing anything."""
     from ..record import load_record
 
     _check_export(noise_m, len(runs), "runs", noise_mps)
     records = [load_record(r) for r in runs]
+    if map_rule is not None:
+        from ..fitting.evidence import describe_scenario, scenario_key
+        from .lanelet_map import _lanelet2
+
+        _lanelet2()
+        keys = {scenario_key(rec.config) for rec in records}
+        if len(keys) > 1:
+            raise RecordingError("--map-rule draws one map: the runs are of "
+                                 f"{len(keys)} scenario geometries "
+                                 f"({', '.join(sorted(describe_scenario(k) for k in keys))})")
     rng = np.random.default_rng(seed)
     rows = [run_rows(rec, rng, noise_m, noise_mps) for rec in records]
     names = []
@@ -92,6 +105,11 @@ def export_runs(runs: Sequence[str | Path], folder: str | Path, noise_m: float =
         name = f"vehicle_tracks_{r:03d}.csv"
         write_interaction(Path(folder) / name, cols)
         names.append(name)
+    if map_rule is not None:
+        from .lanelet_map import write_map
+
+        write_map(Path(folder) / "map.osm", records[0].scenario, map_rule)
+        names.append("map.osm")
     return names
 
 

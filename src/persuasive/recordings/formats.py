@@ -92,6 +92,17 @@ def _header(path: Path) -> list[str]:
     return [c.strip().strip('"') for c in line.strip().split(",")]
 
 
+def file_head(path: str | Path, n: int, what: str) -> bytes:
+    """The first ``n`` bytes of file ``path``; :class:`RecordingError` naming it as ``what``
+    (``"pairs file"``, ``"map file"``) when it cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(n)
+    except OSError as exc:
+        raise RecordingError(f"{what} {str(path)!r} cannot be read: "
+                             f"{(exc.strerror or str(exc)).lower()}") from None
+
+
 def _format_of(path: Path) -> str:
     """The format of a track file from its header; :class:`RecordingError` when it is none."""
     cols = _header(path)

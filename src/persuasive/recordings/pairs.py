@@ -141,6 +141,13 @@ class Pair:
     #: per vehicle, the sample of its track at the pair's first step, and its track's samples
     track_k0: tuple[int, int] = (0, 0)
     track_n: tuple[int, int] = (0, 0)
+    #: the junction's rule from a Lanelet2 map (``persuasive.recordings.lanelet_map``):
+    #: "unknown" (no map), "none", "right_of_way" or "all_way_stop"; ``priority``: the vehicle
+    #: (1, 2) with the right of way, 0 for none; ``stop_s``: each one's stop line at an
+    #: all-way stop, relative to its conflict point [m] (NaN: none)
+    control: str = "unknown"
+    priority: int = 0
+    stop_s: tuple[float, float] = (math.nan, math.nan)
 
     @property
     def n_steps(self) -> int:
@@ -155,6 +162,8 @@ class PairsResult:
     tracks: Tracks = field(repr=False)
     candidates: int  #: candidate pairs compared (times and boxes meet)
     params: PairParams
+    #: the Lanelet2 map the rules came from (``{"path", "origin"}``); None: no map
+    road_map: dict | None = None
 
 
 def candidates(tracks: Tracks, params: PairParams) -> tuple[np.ndarray, np.ndarray]:
@@ -401,6 +410,9 @@ PAIR_COLUMNS = ("pair", "recording", "kind", "angle_deg", "track_1", "track_2", 
 #: Where the steps lie in each vehicle's track (per pair; optional when read: pairs files
 #: written before them have none, and their fit filters every step as an interior one).
 TRACK_COLUMNS = ("track_k0_1", "track_n_1", "track_k0_2", "track_n_2")
+#: The junction's rule from a map (per pair; optional when read: files written before them
+#: read as "unknown", no map).
+MAP_COLUMNS = ("control", "priority", "stop_1_m", "stop_2_m")
 #: The step columns (one row per pair and step).
 STEP_COLUMNS = ("step", "t_s", "s_1_m", "v_1_mps", "a_1_mps2", "x_1_m", "y_1_m",
                 "heading_1_rad", "s_2_m", "v_2_mps", "a_2_mps2", "x_2_m", "y_2_m",
@@ -408,8 +420,8 @@ STEP_COLUMNS = ("step", "t_s", "s_1_m", "v_1_mps", "a_1_mps2", "x_1_m", "y_1_m",
 
 
 def pairs_frame(pairs: Sequence[Pair]):
-    """One row per pair and step: :data:`PAIR_COLUMNS`, :data:`TRACK_COLUMNS`, then
-    :data:`STEP_COLUMNS`."""
+    """One row per pair and step: :data:`PAIR_COLUMNS`, :data:`TRACK_COLUMNS`,
+    :data:`MAP_COLUMNS`, then :data:`STEP_COLUMNS`."""
     import pandas as pd
 
     n = np.array([p.n_steps for p in pairs], np.int64)
@@ -449,6 +461,10 @@ def pairs_frame(pairs: Sequence[Pair]):
         **{f"track_{what}_{k + 1}": rep([getattr(p, f"track_{what}")[k] for p in pairs],
                                         np.int64)
            for k in (0, 1) for what in ("k0", "n")},
+        "control": rep([p.control for p in pairs], object),
+        "priority": rep([p.priority for p in pairs], np.int64),
+        "stop_1_m": rep([p.stop_s[0] for p in pairs], float),
+        "stop_2_m": rep([p.stop_s[1] for p in pairs], float),
         "step": cat(lambda p: np.arange(p.n_steps)).astype(np.int64),
         "t_s": cat(lambda p: p.t),
     }
@@ -460,7 +476,8 @@ def pairs_frame(pairs: Sequence[Pair]):
         cols[f"x_{tag}_m"] = cat(lambda p: p.x[k])
         cols[f"y_{tag}_m"] = cat(lambda p: p.y[k])
         cols[f"heading_{tag}_rad"] = cat(lambda p: p.heading[k])
-    return pd.DataFrame(cols, columns=[*PAIR_COLUMNS, *TRACK_COLUMNS, *STEP_COLUMNS])
+    return pd.DataFrame(cols, columns=[*PAIR_COLUMNS, *TRACK_COLUMNS, *MAP_COLUMNS,
+                                       *STEP_COLUMNS])
 
 
 def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
@@ -479,7 +496,8 @@ def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
     meta = {"params": asdict(result.params), "sources": [str(s) for s in sources],
             "n_pairs": len(result.pairs), "candidates": result.candidates,
             "vehicle_tracks": result.tracks.n_tracks, "version": __version__,
-            "step_s": STEP_S, "smoothing": asdict(result.tracks.params)}
+            "step_s": STEP_S, "smoothing": asdict(result.tracks.params),
+            "map": result.road_map}
     table = table.replace_schema_metadata({**(table.schema.metadata or {}),
                                            PAIRS_METADATA: json.dumps(meta)})
     atomic_write(path, lambda p: pq.write_table(table, p))
@@ -495,14 +513,10 @@ def read_pairs(path):
 
     import pyarrow.parquet as pq
 
+    from .formats import file_head
+
     name = str(path)
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(4)
-    except OSError as exc:
-        raise RecordingError(f"pairs file {name!r} cannot be read: "
-                             f"{(exc.strerror or str(exc)).lower()}") from None
-    if head != b"PAR1":
+    if file_head(path, 4, "pairs file") != b"PAR1":
         raise RecordingError(f"pairs file {name!r} is not a Parquet file (write it with "
                              "'persuasive recordings pairs PATHS... --out FILE.parquet')")
     try:
@@ -552,6 +566,8 @@ def summary(result: PairsResult) -> dict:
         "first": {label: sum(p.first == label for p in pairs) for label in FIRST_LABELS},
         "second_slowed": int(sum(slowed)),
         "second_known": len(slowed),
+        "control": {c: n for c in ("right_of_way", "all_way_stop", "none", "unknown")
+                    if (n := sum(p.control == c for p in pairs))},
     }
 
 
@@ -564,6 +580,7 @@ def pair_of(result: PairsResult, pair_id: int) -> Pair:
                          f"[0, {len(result.pairs) - 1}]")
 
 
-__all__ = ["CROSSING", "FIRST_LABELS", "MERGE", "PAIRS_METADATA", "PAIR_COLUMNS", "Pair",
+__all__ = ["CROSSING", "FIRST_LABELS", "MAP_COLUMNS", "MERGE", "PAIRS_METADATA", "PAIR_COLUMNS",
+           "Pair",
            "PairParams", "PairsResult", "STEP_COLUMNS", "TRACK_COLUMNS", "candidates",
            "find_pairs", "pair_of", "pairs_frame", "read_pairs", "summary", "write_pairs"]
