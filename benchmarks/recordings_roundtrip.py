@@ -18,7 +18,7 @@ Each fixture then goes the whole way a recording goes:
 1. ``recordings export``: every run as an INTERACTION file (one recording per run), uniform
    noise ``U(-noise_m, noise_m)`` on ``x`` and ``y`` and ``U(-noise_mps, noise_mps)`` on the
    speed (seed ``d``);
-2. read, smoothed (Savitzky-Golay, ``--window`` samples, the pipeline's 11 by default; speed
+2. read, smoothed (Savitzky-Golay, ``--window`` samples, the pipeline's 7 by default; speed
    and acceleration from the files' speeds, or ``--speed-from positions``), paired
    (``persuasive.recordings.pairs``, default parameters);
 3. the logs (``persuasive.recordings.logs.view_log``, the tracks' filter in their metadata):
@@ -26,8 +26,10 @@ Each fixture then goes the whole way a recording goes:
    is no human's);
 4. ``persuasive.fitting.fit_models`` with all four models (``lfg``, ``stubborn``, ``noisy``,
    ``idm``), the ``lfg``'s 95 % profile interval for ``p_a``; the models' accelerations pass
-   through the tracks' filter first (the fit's measurement model,
-   ``persuasive.fitting.evidence.observe_through``), unless ``--no-measurement-model``.
+   through the tracks' filter first (the fit's measurement model: the ``lfg`` and ``stubborn``
+   over the role paths of each window, ``persuasive.fitting.models.path_loglik``; ``noisy``
+   with each candidate held over the window, ``persuasive.fitting.evidence.observe_through``),
+   unless ``--no-measurement-model``.
 
 Per fixture: whether the interval covers the true ``p_a``, whether the smallest BIC selects
 ``lfg`` (the generating kind), the estimate, and the pairs found (a run whose two vehicles
@@ -60,7 +62,7 @@ def configs(p_a: float, role: str):
             for av in ("persuasive", "passive")]
 
 
-def fixture(d: int, runs: int, p_a: float, role: str, noise_m: float, window: int = 11,
+def fixture(d: int, runs: int, p_a: float, role: str, noise_m: float, window: int = 7,
             measurement: bool = True, noise_mps: float = 0.0, speed_from: str = "file") -> dict:
     """One fixture's round trip (module docstring)."""
     from persuasive import Config, simulate
@@ -125,8 +127,8 @@ def main() -> None:
     ap.add_argument("--p-a", default="0.3,0.7")
     ap.add_argument("--roles", default="leader,follower")
     ap.add_argument("--noise-m", type=float, default=0.05)
-    ap.add_argument("--window", type=int, default=11,
-                    help="the Savitzky-Golay window [samples] (the pipeline's default: 11)")
+    ap.add_argument("--window", type=int, default=7,
+                    help="the Savitzky-Golay window [samples] (the pipeline's default: 7)")
     ap.add_argument("--noise-mps", type=float, default=0.1,
                     help="half-width of the uniform noise on the exported speeds [m/s]")
     ap.add_argument("--speed-from", default="file", choices=("file", "positions"),

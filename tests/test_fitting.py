@@ -30,6 +30,7 @@ from persuasive.fitting.evidence import Evidence, run_log_of
 from persuasive.fitting.filter import (filter_loglik, filter_posterior, filter_start,
                                        filter_step, role_transition, smooth_roles)
 from persuasive.fitting.models import (EMIT_LFG, EMIT_NOISY, IDM_NAMES, best_initial_role,
+                                       path_loglik, path_loglik_serial,
                                        first_of_equal, hmm_loglik, hmm_loglik_serial,
                                        idm_groups, idm_sse, idm_sse_serial,
                                        step_log_emissions)
@@ -653,3 +654,87 @@ def test_an_idm_estimate_on_its_bound_gets_a_profile_interval_inside_the_range()
         assert lo <= est.low <= est.value <= est.high <= hi, name
     imp = fit.params["impatience_per_s"]
     assert (imp.low, imp.high) == (0.0, 2.0) and "whole range" in imp.note
+
+
+# -- the measurement model over role paths ---------------------------------------------------
+
+
+@pytest.mark.parametrize("sigma", [0.05, 0.3])
+def test_the_path_likelihood_equals_brute_force_enumeration(sigma):
+    """A filtered run (``persuasive.fitting.models.path_loglik_run``): the recorded value of a
+    step is a band over the neighbours' accelerations, each in the role it held then; the
+    forward pass over role paths equals the sum over every role sequence of the run (9 steps
+    around a role change; a band of 4 taps, its weights different on every row)."""
+    records, ev_all = dataset(p_a=0.5, runs=4, first_seed=2)
+    i, k = next((i, int(np.flatnonzero(r.log["hv_next_role"] != r.log["hv_role"])[0]))
+                for i, r in enumerate(records) if r.outcome.hv_role_changes)
+    a = ev_all.starts[i] + max(0, k - 4)
+    n = 9
+    a_raw = ev_all.a_role[a:a + n].copy()
+    pl = ev_all.pl[a:a + n].copy()
+    rng = np.random.default_rng(3)
+    off = np.array([-2, -1, 0, 1])
+    W = rng.uniform(0.1, 1.0, (n, off.size))
+    W /= W.sum(axis=1, keepdims=True)
+    # what the band records of the true roles' accelerations, plus noise
+    accel = ev_all.accel[a:a + n] + rng.normal(0.0, 0.02, n)
+    p_a = np.array([0.0, 0.37, 1.0])
+    sig = np.full(3, sigma)
+    out = np.empty((1, 3, 2))
+    path_loglik_serial(np.array([0]), np.array([0, n]), accel, a_raw, pl, off, W, p_a, sig, out)
+    both = np.empty_like(out)
+    path_loglik(np.array([0]), np.array([0, n]), accel, a_raw, pl, off, W, p_a, sig, both)
+    np.testing.assert_array_equal(out, both)
+    for g, p in enumerate(p_a):
+        for r0 in (0, 1):
+            terms = []
+            for path in itertools.product((0, 1), repeat=n):
+                if path[0] != r0:
+                    continue
+                lp = 0.0
+                for t in range(n - 1):
+                    tr = transition_matrix(pl[t, path[t]], p)[path[t + 1], path[t]]
+                    lp += math.log(tr) if tr > 0 else -math.inf
+                for t in range(n):
+                    c = np.clip(t + off, 0, n - 1)
+                    mu = float(np.sum(W[t] * a_raw[c, np.array(path)[c]]))
+                    z = (accel[t] - mu) / sigma
+                    lp += -0.5 * z * z - math.log(sigma) - 0.5 * math.log(2.0 * math.pi)
+                terms.append(lp)
+            want = _log_sum(terms)
+            assert math.isclose(out[0, g, r0], want, rel_tol=1e-10, abs_tol=1e-9), (g, r0)
+
+
+def test_exactly_filtered_runs_recover_the_unfiltered_fit():
+    """Runs whose recorded accelerations are exactly the tracks' filter of the applied ones
+    (window 7, each run a whole track): the fit over role paths gives the ``lfg`` the ``p_a``
+    and ``sigma`` of the unfiltered runs; holding the role over the window (the approximation
+    :attr:`Evidence.a_role` keeps) biases ``p_a`` low and reads the role changes as noise."""
+    from dataclasses import replace
+
+    from persuasive.fitting.evidence import RunLog
+    from persuasive.recordings.tracks import SmoothingParams, acceleration_band
+
+    records, plain = dataset(p_a=0.7, runs=12, first_seed=40)
+    smoothing = SmoothingParams()
+    logs = []
+    for j, r in enumerate(records):
+        log = run_log_of(r, f"run{j}")
+        n = log.n_steps
+        off, w = acceleration_band(smoothing, n + 1, 0, n)
+        idx = np.arange(n)[:, None] + off[None, :]
+        inside = (idx >= 0) & (idx < n)
+        accel = np.sum(w * log.accel[np.clip(idx, 0, n - 1)] * inside, axis=1)
+        meta = {"recording": {"smoothing": {"window": 7, "order": 3, "min_track_s": 2.0,
+                                            "speed": "file"},
+                              "human": 2, "track_k0_2": 0, "track_n_2": n + 1}}
+        logs.append(RunLog(log.source, log.config, log.seed, None, log.states, accel, meta))
+    ev = evidence_of(logs)
+    assert ev.filtered.all() and set(range(-3, 3)) <= set(ev.band_off.tolist())
+    truth = fit_models(plain, ["lfg"], intervals=False).fits["lfg"].theta
+    paths = fit_models(ev, ["lfg"], intervals=False).fits["lfg"].theta
+    held = fit_models(replace(ev, filtered=None), ["lfg"], intervals=False).fits["lfg"].theta
+    # 0.7028 and sigma at its floor both ways; held over the window: 0.53, sigma 0.15
+    assert paths["p_a"] == pytest.approx(truth["p_a"], abs=1e-6)
+    assert paths["sigma"] == pytest.approx(truth["sigma"], abs=1e-9)
+    assert abs(held["p_a"] - truth["p_a"]) > 0.1 and held["sigma"] > 0.1

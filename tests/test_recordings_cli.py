@@ -93,7 +93,7 @@ def test_round_trip_simulate_export_pairs_logs_fit(capsys, runs, tmp_path):
     np.testing.assert_allclose(log.states[:, 2], first["s_2_m"].to_numpy()[:-1])
     # the fit's measurement model: the tracks' filter and where the steps lie in the track
     rec = log.meta["recording"]
-    assert rec["smoothing"] == {"window": 11, "order": 3, "min_track_s": 2.0, "speed": "file"}
+    assert rec["smoothing"] == {"window": 7, "order": 3, "min_track_s": 2.0, "speed": "file"}
     assert rec["human"] == 2 and rec["track_k0_2"] == 0
     assert rec["track_n_2"] == record.states.shape[0]
     back = load_record(logs / names[1])  # a full run record, outcome recomputed

@@ -77,9 +77,9 @@ def test_within_the_envelope_the_worst_case_shield_has_no_av_caused_collision(si
     result = replay_pairs(frame, ReplaySettings())
     assert len(result.runs) == 2 * frame["pair"].nunique() == 6
     for r in result.runs:
-        # the 100 replayed steps less the 10 that read a track's first or last 5 samples
-        # (the filter's edge windows: extrapolations, 1.6 m/s^2 for a driver at 0.8)
-        assert r.within_envelope and r.excess_steps == 0 and r.envelope_steps == 90
+        # the 100 replayed steps less the 6 that read a track's first or last 3 samples
+        # (the filter's edge windows: extrapolations)
+        assert r.within_envelope and r.excess_steps == 0 and r.envelope_steps == 94
         assert r.start_certified and r.uncertified_steps == 0 and r.guarantee_held
         assert not r.collision_caused_by_av
         assert r.steps == 100 + 100  # the recorded steps (101 states) and 10 s more
@@ -144,14 +144,16 @@ def test_a_driver_beyond_the_envelope_is_reported(tmp_path):
 
 def test_the_envelope_test_leaves_out_the_filters_edge_samples():
     """A pair's steps that read one of the track's first or last samples the edge windows
-    reach (5 for the files' speeds, 10 for speeds from the positions) are not tested; a pairs
-    file that does not say where its steps lie tests every step."""
+    reach (3 for the files' speeds, 6 for speeds from the positions, with the default window
+    of 7 samples; 5 and 10 with 11) are not tested; a pairs file that does not say where its
+    steps lie tests every step."""
     import pandas as pd
 
     from persuasive.recordings.replay import edge_steps
     from persuasive.recordings.tracks import SmoothingParams, edge_samples
 
-    assert edge_samples() == 5 and edge_samples(SmoothingParams(speed="positions")) == 10
+    assert edge_samples() == 3 and edge_samples(SmoothingParams(speed="positions")) == 6
+    assert edge_samples(SmoothingParams(window=11, speed="positions")) == 10
     rows = pd.DataFrame({"track_k0_2": [3] * 21, "track_n_2": [27] * 21})
     edge = edge_steps(rows, 2, 5)  # step k reads samples 3 + k, 4 + k; 22..26 are the end
     assert edge.tolist() == [True, True] + [False] * 16 + [True, True]

@@ -182,7 +182,7 @@ def _print_evaluation(d: dict, elapsed: float, out: str | None) -> None:
     mo = d["moment"]
     lead = mo["lead_time_s_quantiles"]
     click.echo(f"prediction moment: {mo['rule']}; seen up to {mo['seen_until_s_before']:g} s "
-               "before it (the smoothing's half-window)"
+               "before it (no smoothed value seen uses a later sample)"
                + (f"; first arrival {lead['50%']:.2f} s after it (median)" if lead else ""))
     q = lim["quantiles"]
     click.echo(f"vehicle limits: the {q[0]:g} and {q[1]:g} quantiles of the "

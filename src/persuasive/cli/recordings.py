@@ -96,6 +96,8 @@ def _print_summary(info: dict) -> None:
               metavar="SOURCE",
               help="Speed and acceleration from the files' velocities, smoothed ('file'), or "
                    "from the smoothed positions' derivatives ('positions').")
+@click.option("--window", type=int, default=7, show_default=True, metavar="SAMPLES",
+              help="The Savitzky-Golay filter's window (odd, at least 3; 7 = 0.6 s at 10 Hz).")
 @click.option("--map", "map_path", type=click.Path(dir_okay=False), default=None,
               metavar="FILE.osm",
               help="Lanelet2 map of the recordings' site: each pair's rule (right of way, "
@@ -105,7 +107,7 @@ def _print_summary(info: dict) -> None:
                    "recording's latLocation,lonLocation).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, speed_from,
-                  map_path, map_origin, as_json) -> None:
+                  window, map_path, map_origin, as_json) -> None:
     """Find the crossing and merging pairs of recorded tracks (files or folders of
     INTERACTION vehicle_tracks_NNN.csv, inD NN_tracks.csv with NN_tracksMeta.csv)."""
     from .._files import check_output_file
@@ -126,6 +128,7 @@ def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, spe
 
         _guard(check_figure_path, figure)
     params = _guard(PairParams, angle_range_deg=(angle_min, angle_max), near_m=near_m)
+    smoothing = _guard(SmoothingParams, window=window, speed=speed_from)
     road_map = None
     if map_path is not None:
         from ..recordings.lanelet_map import read_map
@@ -137,8 +140,7 @@ def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, spe
                             "in degrees") from None
         road_map = _guard(read_map, map_path, origin)
     table = _guard(read_tracks, paths)
-    result = _guard(find_pairs, _guard(smooth_tracks, table, SmoothingParams(speed=speed_from)),
-                    params)
+    result = _guard(find_pairs, _guard(smooth_tracks, table, smoothing), params)
     if not result.pairs:
         raise _BadInput(f"no crossing pair: {result.tracks.n_tracks} vehicle tracks, "
                         f"{result.candidates} candidate pairs, none crossing at "

@@ -43,7 +43,8 @@ import numpy as np
 
 from ..config import ConfigError
 from .evidence import Evidence
-from .models import EMIT_LFG, EMIT_NOISY, best_initial_role, hmm_loglik, hmm_loglik_serial
+from .models import (EMIT_LFG, EMIT_NOISY, best_initial_role, hmm_loglik, hmm_loglik_serial,
+                     path_loglik, path_loglik_serial)
 from .optimize import hessian_at, maximise_rows
 
 #: Default lower bound of the noise's standard deviation [m/s^2] (exact data end on it).
@@ -225,9 +226,17 @@ class RoleObjective:
         out = np.empty((ev.n_runs, len(X), 2))
         work = ev.n_steps * len(X) * (12 if self.emit == EMIT_NOISY else 1)
         kernel = hmm_loglik if work >= PARALLEL_WORK and ev.n_runs > 1 else hmm_loglik_serial
+        sigma = np.ascontiguousarray(np.exp(X[:, LOG_SIGMA]))
         kernel(self.emit, ev.starts, ev.accel, ev.a_role, ev.pl, ev.q, ev.a_first,
-                   np.ascontiguousarray(p), np.ascontiguousarray(np.exp(X[:, LOG_SIGMA])),
-                   np.ascontiguousarray(self.beta(X[:, LOG_BETA])), out)
+               np.ascontiguousarray(p), sigma, np.ascontiguousarray(self.beta(X[:, LOG_BETA])),
+               out)
+        if self.emit == EMIT_LFG and ev.filtered is not None:
+            # runs recorded through a filter: over role paths (models.path_loglik_run)
+            runs = np.flatnonzero(ev.filtered).astype(np.int64)
+            paths = path_loglik if len(runs) > 1 and work >= PARALLEL_WORK else \
+                path_loglik_serial
+            paths(runs, ev.starts, ev.accel, ev.a_raw, ev.pl, ev.band_off, ev.band_w,
+                  np.ascontiguousarray(p), sigma, out)
         self.calls += 1
         self.rows += len(X)
         return out

@@ -25,15 +25,21 @@ human does (``persuasive.policies.lfg``, docs/method.md §5), with the compiled
 carries the tracks' filter in its metadata (``recording.smoothing``; the held-out evaluation's
 views do not: a filtered prediction reads states after its step, docs/method.md §13.10). Its
 accelerations are the filter's view of the driver's, not the driver's: a step of the
-acceleration is spread over the window, half a step early. :func:`evidence_of` then passes
-the model's accelerations through the same filter before they are compared
-(:func:`observe_through`, the measurement model; the filter is
-``persuasive.recordings.tracks.acceleration_band``, exact at the track's ends too, where the
-log says where its steps lie in the track): ``a_role[k, r]`` becomes ``sum_d w_kd a_role[k +
-d, r]``, each neighbour's prediction from its own measured state with the role held over the
-window, and every candidate's ``a_first`` alike (the candidate slot held); the run's first
-and last steps stand in for the steps beyond its ends. Simulated logs and drive trials record
-the applied acceleration itself and are not filtered.
+acceleration is spread over the window, half a step early. The fit passes the models'
+accelerations through the same filter before they are compared (the measurement model; the
+filter is ``persuasive.recordings.tracks.acceleration_band``, exact at the track's ends too,
+where the log says where its steps lie in the track; the run's first and last steps stand in
+for the steps beyond its ends). For the ``lfg`` and ``stubborn`` it is exact: the recorded
+value of step ``k`` is ``sum_d w_kd a_role[k + d, r_{k+d}]``, each neighbour's prediction from
+its own measured state *in the role it held then*, and the forward filter runs over the role
+paths of the window (:attr:`Evidence.a_raw`, :attr:`Evidence.band_w`;
+``persuasive.fitting.models.path_loglik``). :func:`observe_through` gives the approximation
+with the role held over the window, ``a_role[k, r]`` becoming ``sum_d w_kd a_role[k + d, r]``:
+what :attr:`Evidence.a_role` holds for such runs (the role posteriors and the starting values
+read it), and every candidate's ``a_first`` alike for the ``noisy`` (the candidate slot held).
+Holding the role biased the ``lfg``'s ``p_a`` low wherever the role changes within a window
+(docs/guide/recordings.md, "The round trip, replicated"). Simulated logs and drive trials
+record the applied acceleration itself and are not filtered.
 
 CSV logs are refused: they carry no configuration (mode, scenario, vehicles, library), and a
 game re-solved with the wrong one would be fitted without a warning.
@@ -270,6 +276,15 @@ class Evidence:
     P_hv: np.ndarray
     P_av: np.ndarray
     dt: np.ndarray
+    #: runs recorded through a filter (None: none was): ``filtered`` ``(n_runs,)``, the
+    #: ``lfg``'s accelerations before the filter ``a_raw`` ``(n, 2)``, and the filter as a band,
+    #: ``band_off`` ``(m,)`` and ``band_w`` ``(n, m)`` (rows of unfiltered runs 0); the
+    #: ``lfg`` and ``stubborn`` score these runs over role paths
+    #: (``persuasive.fitting.models.path_loglik``)
+    filtered: np.ndarray | None = None
+    a_raw: np.ndarray | None = field(default=None, repr=False)
+    band_off: np.ndarray | None = field(default=None, repr=False)
+    band_w: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def n_runs(self) -> int:
@@ -286,10 +301,14 @@ class Evidence:
         take = np.concatenate(rows) if rows else np.zeros(0, np.int64)
         lengths = np.array([r.size for r in rows], np.int64)
         starts = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+        band = {}
+        if self.filtered is not None:
+            band = {"filtered": self.filtered[indices], "a_raw": self.a_raw[take],
+                    "band_off": self.band_off, "band_w": self.band_w[take]}
         return Evidence([self.runs[i] for i in indices], starts, self.accel[take],
                         self.a_role[take], self.pl[take], self.belief[take], self.q[take],
                         self.a_first[take], self.states[take], self.P_hv[indices],
-                        self.P_av[indices], self.dt[indices])
+                        self.P_av[indices], self.dt[indices], **band)
 
 
 def evidence_of(logs: Sequence[RunLog]) -> Evidence:
@@ -326,19 +345,30 @@ def evidence_of(logs: Sequence[RunLog]) -> Evidence:
                 P_av, disc, a_role, pl, belief, q, a_first, work)
     filtered = [(i, measurement_band(log)) for i, log in enumerate(logs)]
     filtered = [(i, band) for i, band in filtered if band is not None]
+    band = {}
     if filtered:
         runs = np.array([i for i, _ in filtered], np.int64)
         reach = max(int(-band[0][0]) for _, band in filtered)
         offsets = np.arange(-reach, reach + 1)
         weights = np.zeros((int(sum(logs[i].n_steps for i in runs)), offsets.size))
+        every = np.zeros((n, offsets.size))
         row = 0
-        for _, (off, w) in filtered:
-            weights[row:row + w.shape[0], off[0] + reach:off[-1] + reach + 1] = w
+        for i, (off, w) in filtered:
+            cols = slice(off[0] + reach, off[-1] + reach + 1)
+            weights[row:row + w.shape[0], cols] = w
+            every[starts[i]:starts[i + 1], cols] = w
             row += w.shape[0]
+        used = np.flatnonzero(np.any(every != 0.0, axis=0))
+        keep = slice(int(used[0]), int(used[-1]) + 1) if used.size else slice(reach, reach + 1)
+        is_filtered = np.zeros(len(logs), bool)
+        is_filtered[runs] = True
+        band = {"filtered": is_filtered, "a_raw": a_role.copy(),
+                "band_off": np.ascontiguousarray(offsets[keep]),
+                "band_w": np.ascontiguousarray(every[:, keep])}
         for arr in (a_role, a_first):
             observe_through(arr, starts, runs, offsets, weights)
     return Evidence(list(logs), starts, accel, a_role, pl, belief, q, a_first, states, P_hv,
-                    P_av, dt)
+                    P_av, dt, **band)
 
 
 def measurement_band(log: RunLog) -> tuple[np.ndarray, np.ndarray] | None:

@@ -35,7 +35,7 @@ from .. import packing as slot
 from ..policies.idm import (_SLOW_MPS, PRM_B, PRM_GAP, PRM_IMPATIENCE, idm_branches,
                             idm_commits, idm_times)
 from .filter import (emission_lik, filter_loglik, filter_predict, filter_update_lik,
-                     smooth_roles)
+                     role_transition, smooth_roles)
 
 #: Emission kinds of :func:`hmm_loglik`.
 EMIT_LFG, EMIT_NOISY = 0, 1
@@ -285,6 +285,176 @@ def hmm_loglik_serial(kind: int, starts: np.ndarray, accel: np.ndarray, a_role: 
                        sigma, beta, inv_s, log_c, share, out[i])
 
 
+#: The most role paths :func:`path_loglik_run` keeps per step (module docstring of
+#: :mod:`persuasive.fitting.evidence`); beyond it the least likely are dropped.
+PATH_CAP = 4096
+
+
+@njit(cache=True)
+def path_loglik_run(a: int, b: int, accel: np.ndarray, a_raw: np.ndarray, pl: np.ndarray,
+                    off: np.ndarray, W: np.ndarray, p_a: np.ndarray, sigma: np.ndarray,
+                    r0: int, out: np.ndarray) -> None:
+    """The ``lfg``'s log-likelihood of the run in rows ``a:b`` whose accelerations were
+    recorded through a filter, given the initial role ``r0``, for ``G`` rows ``p_a``,
+    ``sigma`` ``(G,)``, into ``out`` ``(G,)``.
+
+    The recorded acceleration of step ``k`` is ``sum_j W[k, j] a_{k + off[j]}`` (rows
+    ``a:b`` of ``W``; ``off`` ascending, ``off[0] <= 0 <= off[-1]``), where ``a_t =
+    a_raw[t, r_t]`` is the LFG's acceleration in the role it held at step ``t`` (steps beyond
+    the run's ends stand in by its first and last). So the emission of step ``k`` depends on
+    the roles over the window ``k + off[0] .. k + off[-1]``, not on ``r_k`` alone: the forward
+    filter runs over *role paths*, the roles of the last ``L = off[-1] - off[0] + 1`` steps as
+    bits (bit ``j``: the role ``j`` steps back; 1 = F), and emits step ``k`` once the path
+    reaches ``k + off[-1]``. A path grows by the role transition ``Pi(pl, p_a)`` of the step
+    (the LFG's, :mod:`persuasive.role_filter`); paths that agree on the last ``L`` steps
+    merge. The human's plausible role is 0 or 1, so a role changes only toward it and few
+    paths are alive at once; at most :data:`PATH_CAP` are kept (the least likely dropped
+    beyond that). Exact otherwise: the filter of a window of the LFG's own role process,
+    not the role held over the window."""
+    n = b - a
+    D = off.shape[0]
+    R2 = off[D - 1]
+    L = off[D - 1] - off[0] + 1
+    mask = (1 << L) - 1
+    G = p_a.shape[0]
+    cap = min(1 << L, PATH_CAP)
+    pat = np.empty(cap, np.int64)
+    new_pat = np.empty(cap, np.int64)
+    alpha = np.zeros((cap, G))
+    new_alpha = np.zeros((cap, G))
+    mu = np.empty(cap)
+    Tg = np.empty((G, 2, 2))
+    T = np.empty((2, 2))
+    logs = np.zeros(G)
+    npat = 1
+    pat[0] = mask if r0 == 1 else 0
+    for g in range(G):
+        alpha[0, g] = 1.0
+    for t in range(n + R2):
+        if 0 < t <= n - 1:
+            tp = a + t - 1
+            for g in range(G):
+                role_transition(p_a[g], pl[tp, 0], pl[tp, 1], T)
+                Tg[g, 0, 0], Tg[g, 0, 1], Tg[g, 1, 0], Tg[g, 1, 1] = \
+                    T[0, 0], T[0, 1], T[1, 0], T[1, 1]
+            nn = 0
+            for i in range(npat):
+                bits = pat[i]
+                r = bits & 1
+                for rn in range(2):
+                    alive = False
+                    for g in range(G):
+                        if Tg[g, rn, r] > 0.0 and alpha[i, g] > 0.0:
+                            alive = True
+                            break
+                    if not alive:
+                        continue
+                    nb = ((bits << 1) | rn) & mask
+                    j = -1
+                    for q in range(nn):
+                        if new_pat[q] == nb:
+                            j = q
+                            break
+                    if j < 0:
+                        if nn == cap:  # full: this path joins the least likely kept one
+                            worst, w_val = 0, np.inf
+                            for q in range(nn):
+                                m = 0.0
+                                for g in range(G):
+                                    m = max(m, new_alpha[q, g])
+                                if m < w_val:
+                                    worst, w_val = q, m
+                            j = worst
+                        else:
+                            j = nn
+                            nn += 1
+                            new_pat[j] = nb
+                            for g in range(G):
+                                new_alpha[j, g] = 0.0
+                    for g in range(G):
+                        new_alpha[j, g] += Tg[g, rn, r] * alpha[i, g]
+            npat = nn
+            for i in range(nn):
+                pat[i] = new_pat[i]
+                for g in range(G):
+                    alpha[i, g] = new_alpha[i, g]
+        k = t - R2
+        if k < 0:
+            continue
+        tc = min(t, n - 1)  # the path's last step (it stops growing at the run's end)
+        for i in range(npat):
+            bits = pat[i]
+            acc = 0.0
+            for j in range(D):
+                c = min(max(k + off[j], 0), n - 1)
+                age = min(tc - c, L - 1)
+                acc += W[a + k, j] * a_raw[a + c, (bits >> age) & 1]
+            mu[i] = acc
+        x = accel[a + k]
+        for g in range(G):
+            if logs[g] == -np.inf:
+                continue
+            inv = 1.0 / sigma[g]
+            best = -np.inf
+            for i in range(npat):
+                if alpha[i, g] > 0.0:
+                    z = (x - mu[i]) * inv
+                    best = max(best, -0.5 * z * z)
+            if best == -np.inf:
+                logs[g] = -np.inf
+                continue
+            tot = 0.0
+            for i in range(npat):
+                if alpha[i, g] > 0.0:
+                    z = (x - mu[i]) * inv
+                    alpha[i, g] *= math.exp(-0.5 * z * z - best)
+                    tot += alpha[i, g]
+            for i in range(npat):
+                alpha[i, g] /= tot
+            logs[g] += math.log(tot) + best - math.log(sigma[g]) - _LOG_SQRT_2PI
+        nn = 0  # drop the paths no row keeps
+        for i in range(npat):
+            keep = False
+            for g in range(G):
+                if alpha[i, g] > 0.0:
+                    keep = True
+                    break
+            if keep:
+                pat[nn] = pat[i]
+                for g in range(G):
+                    alpha[nn, g] = alpha[i, g]
+                nn += 1
+        npat = max(nn, 1)
+    for g in range(G):
+        out[g] = logs[g]
+
+
+@njit(cache=True, parallel=True)
+def path_loglik(runs: np.ndarray, starts: np.ndarray, accel: np.ndarray, a_raw: np.ndarray,
+                pl: np.ndarray, off: np.ndarray, W: np.ndarray, p_a: np.ndarray,
+                sigma: np.ndarray, out: np.ndarray) -> None:
+    """:func:`path_loglik_run` of the runs ``runs`` (indices into ``starts``), both initial
+    roles, into ``out[runs[i], :, r0]`` (``out`` as :func:`hmm_loglik`'s); the runs in
+    parallel (:func:`path_loglik_serial`: one after the other)."""
+    for i in prange(runs.shape[0]):
+        r = runs[i]
+        for r0 in range(2):
+            path_loglik_run(starts[r], starts[r + 1], accel, a_raw, pl, off, W, p_a, sigma,
+                            r0, out[r, :, r0])
+
+
+@njit(cache=True)
+def path_loglik_serial(runs: np.ndarray, starts: np.ndarray, accel: np.ndarray,
+                       a_raw: np.ndarray, pl: np.ndarray, off: np.ndarray, W: np.ndarray,
+                       p_a: np.ndarray, sigma: np.ndarray, out: np.ndarray) -> None:
+    """:func:`path_loglik` on one thread."""
+    for i in range(runs.shape[0]):
+        r = runs[i]
+        for r0 in range(2):
+            path_loglik_run(starts[r], starts[r + 1], accel, a_raw, pl, off, W, p_a, sigma,
+                            r0, out[r, :, r0])
+
+
 @njit(cache=True)
 def _pi0_score(table: np.ndarray, g: int, pi0: float) -> float:
     total = 0.0
@@ -455,7 +625,9 @@ def idm_sse_serial(starts: np.ndarray, states: np.ndarray, accel: np.ndarray,
                     lead, out[i])
 
 
-__all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "best_initial_role", "first_of_equal", "row_sharing",
+__all__ = ["EMIT_LFG", "EMIT_NOISY", "IDM_NAMES", "PATH_CAP", "best_initial_role",
+           "first_of_equal", "path_loglik", "path_loglik_run", "path_loglik_serial",
+           "row_sharing",
            "boltzmann_log_emission", "hmm_loglik", "hmm_loglik_run", "hmm_loglik_serial",
            "idm_groups", "idm_sse", "idm_sse_serial",
            "smooth_runs", "step_log_emissions"]

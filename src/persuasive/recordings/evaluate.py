@@ -29,9 +29,10 @@ step. Two baselines score them too, ``sigma`` fitted on the training views: cons
 
 **The prediction moment** of a pair: ``after_s`` (1 s) after the first step at which both
 vehicles are within ``near_m`` (40 m) of the conflict point and before it (``-near_m <= s <
-0``). The smoothing (a centred window of 1 s) makes a step's values depend on the half second
-after it, so what is *seen* at the moment is the pair's steps up to ``lag_steps`` (5 = 0.5 s)
-before it: the last step whose smoothed values use no sample after the moment. A pair is left
+0``). The smoothing (a centred window, 0.6 s by default) makes a step's values depend on the
+samples after it, so what is *seen* at the moment is the pair's steps up to ``lag_steps`` (5 =
+0.5 s) before it: no smoothed value seen then uses a sample after the moment (for windows of up
+to 11 samples and the files' speeds). A pair is left
 out, and counted, when both never approach within ``near_m`` together, when its record ends
 before the moment, when the outcome is decided by then (one vehicle has reached the conflict
 point, or is inside its occupancy interval, at the moment) or when it has no first passer

@@ -4,7 +4,7 @@
 From the tidy table of :mod:`persuasive.recordings.formats`, the vehicle tracks (classes
 :data:`~persuasive.recordings.formats.VEHICLE_CLASSES`, at least ``min_track_s`` long) are
 smoothed with a **Savitzky-Golay filter** (a least-squares polynomial over a sliding window;
-``window`` samples, default 11 = 1.0 s at 10 Hz, ``order`` 3; at a track's first and last
+``window`` samples, default 7 = 0.6 s at 10 Hz, ``order`` 3; at a track's first and last
 ``window // 2`` samples, the polynomial of the first and last full window, as
 ``scipy.signal.savgol_filter``'s ``mode="interp"``):
 
@@ -51,7 +51,9 @@ SPEED_SOURCES = ("file", "positions")
 class SmoothingParams:
     """The Savitzky-Golay filter and which tracks are kept."""
 
-    window: int = 11  #: samples in the filter's window (odd; 11 = 1.0 s at 10 Hz) [-]
+    #: samples in the filter's window (odd; 7 = 0.6 s at 10 Hz; chosen by the round trip,
+    #: docs/guide/recordings.md "The round trip, replicated") [-]
+    window: int = 7
     order: int = 3  #: the polynomial's degree [-]
     min_track_s: float = 2.0  #: shorter vehicle tracks are left out [s]
     #: where speed and acceleration come from: "file" (the file's speed, smoothed, and its
