@@ -98,7 +98,7 @@ def _warm_up() -> None:
 
     from .. import packing as slot
     from ..fitting.models import (EMIT_LFG, EMIT_NOISY, hmm_loglik, hmm_loglik_serial,
-                                  idm_sse, idm_sse_serial)
+                                  idm_sse, idm_sse_serial, path_loglik, path_loglik_serial)
 
     starts = np.array([0, 1], np.int64)
     args = (starts, np.zeros(1), np.zeros((1, 2)), np.ones((1, 2)), np.zeros((1, 2, 3)),
@@ -106,6 +106,10 @@ def _warm_up() -> None:
     for kernel in (hmm_loglik, hmm_loglik_serial):
         for kind in (EMIT_LFG, EMIT_NOISY):
             kernel(kind, *args, np.empty((1, 1, 2)))
+    for kernel in (path_loglik, path_loglik_serial):  # recorded logs: over role paths
+        kernel(np.zeros(1, np.int64), starts, np.zeros(1), np.zeros((1, 2)), np.ones((1, 2)),
+               np.array([-1, 0, 1]), np.full((1, 3), 1.0 / 3.0), np.full(1, 0.5), np.ones(1),
+               np.empty((1, 1, 2)))
     P = np.zeros((1, slot.N_SLOTS))
     P[:, slot.U_MIN], P[:, slot.U_MAX], P[:, slot.YIELD_S], P[:, slot.CLEAR_S] = -2, 1, -6, 7
     prm = np.array([[10.0, 1.5, 1.0, 1.5, 4.0, 2.0, 1.0, 0.0]])
@@ -123,13 +127,13 @@ def _notice_compile() -> None:
 
     from ._common import compile_notice
     from ..fitting.evidence import human_views
-    from ..fitting.models import hmm_loglik
+    from ..fitting.models import hmm_loglik, path_loglik
 
     # the fit's kernels live in two files; an edit to either recompiles that file's
     try:
         cached = all(os.path.getmtime(k._cache._cache_file._index_path)  # numba's layout
                      >= os.path.getmtime(k.py_func.__code__.co_filename)
-                     for k in (hmm_loglik, human_views))
+                     for k in (hmm_loglik, path_loglik, human_views))
     except (AttributeError, OSError):
         cached = False
     if cached:

@@ -272,6 +272,7 @@ class Baselines:
                 "right_of_way_hit_rate": self.row_hit, "sumo_rule_hit_rate": self.sumo_hit}
 
 
-__all__ = ["ARRIVED_M", "BASELINES", "BASELINE_NAMES", "Baselines", "CAPS_S", "Features", "LOGISTIC_CAP_S",
+__all__ = ["ARRIVED_M", "BASELINES", "BASELINE_NAMES", "Baselines", "CAPS_S", "Features",
+           "LOGISTIC_CAP_S",
            "RIDGE", "SUMO_GAP_S", "V_FLOOR", "arrival_ca", "arrival_cv", "fit_logistic",
            "fit_scale", "right_of_way", "rule_hit_rate", "rule_probability", "sumo_rule"]

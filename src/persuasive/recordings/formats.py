@@ -440,5 +440,5 @@ def noisy_speed(speed: np.ndarray, rng: np.random.Generator, noise_mps: float) -
 
 __all__ = ["IND_AVERAGE_FRAMES", "INTERACTION_COLUMNS", "IND_COLUMNS", "MAX_SPEED_MPS",
            "RecordingError", "STEP_S", "TIDY_COLUMNS", "TrackFile", "VEHICLE_CLASSES",
-           "find_track_files", "noisy_speed", "read_ind", "read_interaction", "read_tracks",
-           "write_interaction"]
+           "file_head", "find_track_files", "noisy_speed", "read_ind", "read_interaction",
+           "read_tracks", "write_interaction"]
