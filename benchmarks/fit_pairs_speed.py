@@ -2,7 +2,7 @@
 under 60 s; docs/guide/recordings.md, "Speed").
 
     python benchmarks/fit_pairs_speed.py [--pairs 2500] [--files 2] [--tracks 600] [--repeat 3]
-                                         [--intervals] [--per-model]
+                                         [--intervals] [--per-model] [--logs]
 
 Writes the synthetic INTERACTION folder of ``benchmarks/recordings_speed.py`` (``--files``
 recordings of ``--tracks`` tracks each, a busy four-arm junction, 5 cm of position noise),
@@ -15,7 +15,9 @@ the pairs' 1 %/99 % acceleration quantiles), their evidence (``persuasive.fittin
 or with ``--intervals`` the profile intervals too). Prints the median of ``--repeat`` runs in
 one process, after one untimed run that compiles and caches the kernels, and the steps fitted.
 ``--per-model``: also each model fitted alone, once (the ``noisy`` human's time includes the
-``lfg`` fit it starts from).
+``lfg`` fit it starts from). ``--logs``: the views as ``recordings logs`` writes them, the
+tracks' filter in their metadata, so that the fit's measurement model is on (the ``lfg`` and
+``stubborn`` over role paths, ``persuasive.fitting.models.path_loglik``).
 """
 
 from __future__ import annotations
@@ -38,15 +40,44 @@ def synthetic_folder():
     return module.write_folder
 
 
+def recorded_views(pairs):
+    """Both views of every pair as ``recordings logs`` writes them: with the tracks' filter in
+    their metadata, so that the fit scores them through its measurement model (the ``lfg``
+    and ``stubborn`` over role paths). ``pairs``: ``(frame rows, smoothing)`` per pair."""
+    from persuasive import Config
+    from persuasive.fitting.evidence import RunLog
+    from persuasive.recordings.logs import view_log
+
+    base = Config(mode="corrected")
+    out = []
+    for rows, smoothing in pairs:
+        for h in (1, 2):
+            config, log, meta = view_log(rows, h, base, smoothing=smoothing)
+            states = log[["av_meas_s_m", "av_meas_v_mps", "hv_meas_s_m",
+                          "hv_meas_v_mps"]].to_numpy(float)
+            out.append(RunLog(f"pair {meta['seed']} hv{h}", config, int(meta["seed"]), None,
+                              states, log["hv_accel_mps2"].to_numpy(float), meta))
+    return out
+
+
+def views_of(pairs):
+    """The runs a fit of ``pairs`` scores: the held-out evaluation's views
+    (``ViewBuilder``; no measurement model), or :func:`recorded_views` for ``--logs``."""
+    from persuasive.recordings.evaluate import ViewBuilder, speed_cap, vehicle_limits
+
+    if pairs and isinstance(pairs[0], tuple):
+        return recorded_views(pairs)
+    builder = ViewBuilder("corrected", vehicle_limits(pairs, 0.01), speed_cap(pairs, 10.0))
+    return [builder.view(p, h) for p in pairs for h in (1, 2)]
+
+
 def fit_once(pairs, intervals: bool) -> tuple[float, float, int, dict]:
     """Views + evidence, then the fits: ``(seconds to evidence, seconds to fit, steps, BIC)``."""
     from persuasive.fitting import evidence_of, fit_models
     from persuasive.fitting.comparison import MODELS
-    from persuasive.recordings.evaluate import ViewBuilder, speed_cap, vehicle_limits
 
     t0 = time.perf_counter()
-    builder = ViewBuilder("corrected", vehicle_limits(pairs, 0.01), speed_cap(pairs, 10.0))
-    ev = evidence_of([builder.view(p, h) for p in pairs for h in (1, 2)])
+    ev = evidence_of(views_of(pairs))
     t1 = time.perf_counter()
     report = fit_models(ev, list(MODELS), intervals=intervals)
     t2 = time.perf_counter()
@@ -57,10 +88,8 @@ def per_model(pairs, intervals: bool) -> dict[str, float]:
     """Seconds to fit each model alone to the pairs' evidence."""
     from persuasive.fitting import evidence_of, fit_models
     from persuasive.fitting.comparison import MODELS
-    from persuasive.recordings.evaluate import ViewBuilder, speed_cap, vehicle_limits
 
-    builder = ViewBuilder("corrected", vehicle_limits(pairs, 0.01), speed_cap(pairs, 10.0))
-    ev = evidence_of([builder.view(p, h) for p in pairs for h in (1, 2)])
+    ev = evidence_of(views_of(pairs))
     out = {}
     for m in MODELS:
         t0 = time.perf_counter()
@@ -77,6 +106,9 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--intervals", action="store_true")
     parser.add_argument("--per-model", action="store_true")
+    parser.add_argument("--logs", action="store_true",
+                        help="fit the views as recordings logs writes them (the fit's "
+                             "measurement model on), not the held-out evaluation's")
     args = parser.parse_args()
     from persuasive.recordings.evaluate import pairs_of
     from persuasive.recordings.formats import read_tracks
@@ -88,13 +120,21 @@ def main() -> None:
         result = find_pairs(smooth_tracks(read_tracks([Path(tmp)])))
     frame = pairs_frame(result.pairs)
     pairs = pairs_of(frame, "synthetic", False)[:args.pairs]
+    if args.logs:
+        from dataclasses import asdict
+
+        smoothing = asdict(result.tracks.params)
+        keep = {p.pair for p in pairs}
+        pairs = [(rows.sort_values("step"), smoothing)
+                 for pair_id, rows in frame.groupby("pair", sort=True) if pair_id in keep]
     if len(pairs) < args.pairs:
         raise SystemExit(f"only {len(pairs)} pairs in {args.files} x {args.tracks} tracks: "
                          "raise --tracks or --files")
     fit_once(pairs[:20], args.intervals)  # compile and cache, untimed
     runs = [fit_once(pairs, args.intervals) for _ in range(args.repeat)]
     total = [a + b for a, b, _, _ in runs]
-    print(f"{len(pairs)} pairs ({2 * len(pairs)} views, {runs[0][2]} steps), every model "
+    what = "recorded logs, measurement model on" if args.logs else "the evaluation's views"
+    print(f"{len(pairs)} pairs ({2 * len(pairs)} views: {what}; {runs[0][2]} steps), every model "
           f"{'with' if args.intervals else 'without'} intervals: median "
           f"{statistics.median(total):.1f} s of {args.repeat} "
           f"({', '.join(f'{t:.1f}' for t in total)}); evidence "
