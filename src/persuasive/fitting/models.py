@@ -429,6 +429,15 @@ def path_loglik_run(a: int, b: int, accel: np.ndarray, a_raw: np.ndarray, pl: np
         out[g] = logs[g]
 
 
+@njit(cache=True)
+def _path_both_roles(r: int, starts: np.ndarray, accel: np.ndarray, a_raw: np.ndarray,
+                     pl: np.ndarray, off: np.ndarray, W: np.ndarray, p_a: np.ndarray,
+                     sigma: np.ndarray, out: np.ndarray) -> None:
+    for r0 in range(2):
+        path_loglik_run(starts[r], starts[r + 1], accel, a_raw, pl, off, W, p_a, sigma, r0,
+                        out[r, :, r0])
+
+
 @njit(cache=True, parallel=True)
 def path_loglik(runs: np.ndarray, starts: np.ndarray, accel: np.ndarray, a_raw: np.ndarray,
                 pl: np.ndarray, off: np.ndarray, W: np.ndarray, p_a: np.ndarray,
@@ -437,10 +446,7 @@ def path_loglik(runs: np.ndarray, starts: np.ndarray, accel: np.ndarray, a_raw: 
     roles, into ``out[runs[i], :, r0]`` (``out`` as :func:`hmm_loglik`'s); the runs in
     parallel (:func:`path_loglik_serial`: one after the other)."""
     for i in prange(runs.shape[0]):
-        r = runs[i]
-        for r0 in range(2):
-            path_loglik_run(starts[r], starts[r + 1], accel, a_raw, pl, off, W, p_a, sigma,
-                            r0, out[r, :, r0])
+        _path_both_roles(runs[i], starts, accel, a_raw, pl, off, W, p_a, sigma, out)
 
 
 @njit(cache=True)
@@ -449,10 +455,7 @@ def path_loglik_serial(runs: np.ndarray, starts: np.ndarray, accel: np.ndarray,
                        p_a: np.ndarray, sigma: np.ndarray, out: np.ndarray) -> None:
     """:func:`path_loglik` on one thread."""
     for i in range(runs.shape[0]):
-        r = runs[i]
-        for r0 in range(2):
-            path_loglik_run(starts[r], starts[r + 1], accel, a_raw, pl, off, W, p_a, sigma,
-                            r0, out[r, :, r0])
+        _path_both_roles(runs[i], starts, accel, a_raw, pl, off, W, p_a, sigma, out)
 
 
 @njit(cache=True)
