@@ -345,10 +345,10 @@ def evidence_of(logs: Sequence[RunLog]) -> Evidence:
                 P_av, disc, a_role, pl, belief, q, a_first, work)
     filtered = [(i, measurement_band(log)) for i, log in enumerate(logs)]
     filtered = [(i, band) for i, band in filtered if band is not None]
-    band = {}
+    recorded = {}
     if filtered:
         runs = np.array([i for i, _ in filtered], np.int64)
-        reach = max(int(-band[0][0]) for _, band in filtered)
+        reach = max(int(-off[0]) for _, (off, _w) in filtered)
         offsets = np.arange(-reach, reach + 1)
         weights = np.zeros((int(sum(logs[i].n_steps for i in runs)), offsets.size))
         every = np.zeros((n, offsets.size))
@@ -362,13 +362,13 @@ def evidence_of(logs: Sequence[RunLog]) -> Evidence:
         keep = slice(int(used[0]), int(used[-1]) + 1) if used.size else slice(reach, reach + 1)
         is_filtered = np.zeros(len(logs), bool)
         is_filtered[runs] = True
-        band = {"filtered": is_filtered, "a_raw": a_role.copy(),
-                "band_off": np.ascontiguousarray(offsets[keep]),
-                "band_w": np.ascontiguousarray(every[:, keep])}
+        recorded = {"filtered": is_filtered, "a_raw": a_role.copy(),
+                    "band_off": np.ascontiguousarray(offsets[keep]),
+                    "band_w": np.ascontiguousarray(every[:, keep])}
         for arr in (a_role, a_first):
             observe_through(arr, starts, runs, offsets, weights)
     return Evidence(list(logs), starts, accel, a_role, pl, belief, q, a_first, states, P_hv,
-                    P_av, dt, **band)
+                    P_av, dt, **recorded)
 
 
 def measurement_band(log: RunLog) -> tuple[np.ndarray, np.ndarray] | None:
