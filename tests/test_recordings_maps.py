@@ -5,6 +5,7 @@ right-of-way baseline reading it; bad maps and options in one line with exit sta
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -20,7 +21,12 @@ from persuasive.recordings.lanelet_map import (lanelets_at, pair_rule, read_map,
                                                write_map)
 from persuasive.recordings.pairs import read_pairs
 
-lanelet2 = pytest.importorskip("lanelet2", reason="lanelet2 has wheels for Python 3.11-3.13")
+try:
+    import lanelet2  # noqa: F401 - the maps' reader and writer need it
+except ImportError:  # no wheel for this Python (3.14): skipped, but never in CI
+    if os.environ.get("CI"):
+        raise
+    pytest.skip("lanelet2 has wheels for Python 3.11-3.13", allow_module_level=True)
 
 
 @pytest.mark.parametrize("rule", ["av", "hv", "all-way-stop"])

@@ -323,8 +323,10 @@ def path_loglik_run(a: int, b: int, accel: np.ndarray, a_raw: np.ndarray, pl: np
     alpha = np.zeros((cap, G))
     new_alpha = np.zeros((cap, G))
     mu = np.empty(cap)
+    ll = np.empty(cap)
     Tg = np.empty((G, 2, 2))
     T = np.empty((2, 2))
+    feeds = np.zeros((2, 2), np.bool_)
     logs = np.zeros(G)
     npat = 1
     pat[0] = mask if r0 == 1 else 0
@@ -333,21 +335,19 @@ def path_loglik_run(a: int, b: int, accel: np.ndarray, a_raw: np.ndarray, pl: np
     for t in range(n + R2):
         if 0 < t <= n - 1:
             tp = a + t - 1
+            feeds[:, :] = False  # which role changes some row allows at this step
             for g in range(G):
                 role_transition(p_a[g], pl[tp, 0], pl[tp, 1], T)
-                Tg[g, 0, 0], Tg[g, 0, 1], Tg[g, 1, 0], Tg[g, 1, 1] = \
-                    T[0, 0], T[0, 1], T[1, 0], T[1, 1]
+                for rn in range(2):
+                    for r in range(2):
+                        Tg[g, rn, r] = T[rn, r]
+                        feeds[rn, r] = feeds[rn, r] or T[rn, r] > 0.0
             nn = 0
-            for i in range(npat):
+            for i in range(npat):  # every kept path has mass in some row
                 bits = pat[i]
                 r = bits & 1
                 for rn in range(2):
-                    alive = False
-                    for g in range(G):
-                        if Tg[g, rn, r] > 0.0 and alpha[i, g] > 0.0:
-                            alive = True
-                            break
-                    if not alive:
+                    if not feeds[rn, r]:
                         continue
                     nb = ((bits << 1) | rn) & mask
                     j = -1
@@ -399,15 +399,15 @@ def path_loglik_run(a: int, b: int, accel: np.ndarray, a_raw: np.ndarray, pl: np
             for i in range(npat):
                 if alpha[i, g] > 0.0:
                     z = (x - mu[i]) * inv
-                    best = max(best, -0.5 * z * z)
+                    ll[i] = -0.5 * z * z
+                    best = max(best, ll[i])
             if best == -np.inf:
                 logs[g] = -np.inf
                 continue
             tot = 0.0
             for i in range(npat):
                 if alpha[i, g] > 0.0:
-                    z = (x - mu[i]) * inv
-                    alpha[i, g] *= math.exp(-0.5 * z * z - best)
+                    alpha[i, g] *= math.exp(ll[i] - best)
                     tot += alpha[i, g]
             for i in range(npat):
                 alpha[i, g] /= tot
