@@ -227,11 +227,14 @@ class RoleObjective:
         work = ev.n_steps * len(X) * (12 if self.emit == EMIT_NOISY else 1)
         kernel = hmm_loglik if work >= PARALLEL_WORK and ev.n_runs > 1 else hmm_loglik_serial
         sigma = np.ascontiguousarray(np.exp(X[:, LOG_SIGMA]))
-        kernel(self.emit, ev.starts, ev.accel, ev.a_role, ev.pl, ev.q, ev.a_first,
-               np.ascontiguousarray(p), sigma, np.ascontiguousarray(self.beta(X[:, LOG_BETA])),
-               out)
+        paths_only = self.emit == EMIT_LFG and ev.filtered is not None and ev.filtered.all()
+        if not paths_only:
+            kernel(self.emit, ev.starts, ev.accel, ev.a_role, ev.pl, ev.q, ev.a_first,
+                   np.ascontiguousarray(p), sigma,
+                   np.ascontiguousarray(self.beta(X[:, LOG_BETA])), out)
         if self.emit == EMIT_LFG and ev.filtered is not None:
-            # runs recorded through a filter: over role paths (models.path_loglik_run)
+            # runs recorded through a filter: over role paths (models.path_loglik_run; every
+            # run's row of out is written there when every run is filtered)
             runs = np.flatnonzero(ev.filtered).astype(np.int64)
             paths = path_loglik if len(runs) > 1 and work >= PARALLEL_WORK else \
                 path_loglik_serial

@@ -131,13 +131,31 @@ def _boltzmann_weights(q: np.ndarray, q_max: np.ndarray, first: np.ndarray, beta
 
 
 @njit(cache=True, inline="always")
-def _gauss_terms(x: float, a_first: np.ndarray, inv_s: float, phi: np.ndarray) -> None:
+def _gauss_terms(x: float, a_first: np.ndarray, same: np.ndarray, inv_s: float,
+                 phi: np.ndarray) -> None:
     """``phi_c = exp(-z_c^2 / 2)``, ``z_c = (x - a_first[c]) / sigma`` (0 where it
-    underflows)."""
+    underflows); a candidate whose first acceleration equals an earlier one's (``same[c] <
+    c``, :func:`first_equal_candidates`) copies its term."""
     for c in range(a_first.shape[0]):
+        if same[c] < c:
+            phi[c] = phi[same[c]]
+            continue
         z = (x - a_first[c]) * inv_s
         zz = z * z
         phi[c] = math.exp(-0.5 * zz) if zz < 1400.0 else 0.0
+
+
+@njit(cache=True, inline="always")
+def first_equal_candidates(a_first: np.ndarray, same: np.ndarray) -> None:
+    """``same[c]``: the first candidate whose first acceleration equals candidate ``c``'s
+    (``c`` itself where none before it does). Candidates saturated at a vehicle limit share
+    one, so a step has about six distinct values among eleven candidates."""
+    for c in range(a_first.shape[0]):
+        same[c] = c
+        for d in range(c):
+            if a_first[d] == a_first[c]:
+                same[c] = d
+                break
 
 
 @njit(cache=True)
@@ -206,16 +224,18 @@ def hmm_loglik_run(kind: int, a: int, b: int, accel: np.ndarray, a_role: np.ndar
     den = np.empty((n_b, 2))
     q_max = np.empty(2)
     first = np.empty(2, np.int64)
+    same = np.empty(a_first.shape[1], np.int64)
     for k in range(a, b):
         x = accel[k]
         if kind == EMIT_NOISY:
+            first_equal_candidates(a_first[k], same)
             for r in range(2):
                 q_max[r], first[r] = q[k, r, 0], 0
                 for c in range(1, q.shape[2]):
                     if q[k, r, c] > q_max[r]:
                         q_max[r], first[r] = q[k, r, c], c
             for u in range(n_s):
-                _gauss_terms(x, a_first[k], inv_s[s_row[u]], phi[u])
+                _gauss_terms(x, a_first[k], same, inv_s[s_row[u]], phi[u])
             for u in range(n_b):
                 _boltzmann_weights(q[k], q_max, first, beta[b_row[u]], w[u], den[u])
         for g in range(G):
@@ -320,10 +340,14 @@ def path_loglik_run(a: int, b: int, accel: np.ndarray, a_raw: np.ndarray, pl: np
     cap = min(1 << L, PATH_CAP)
     pat = np.empty(cap, np.int64)
     new_pat = np.empty(cap, np.int64)
-    alpha = np.zeros((cap, G))
-    new_alpha = np.zeros((cap, G))
+    # not zeroed (a path's row is set when the path is made): a run would otherwise clear
+    # cap * G entries twice, far more than the few paths it keeps
+    alpha = np.empty((cap, G))
+    new_alpha = np.empty((cap, G))
     mu = np.empty(cap)
     ll = np.empty(cap)
+    ages = np.empty(D, np.int64)
+    term = np.empty((D, 2))
     Tg = np.empty((G, 2, 2))
     T = np.empty((2, 2))
     feeds = np.zeros((2, 2), np.bool_)
@@ -382,13 +406,16 @@ def path_loglik_run(a: int, b: int, accel: np.ndarray, a_raw: np.ndarray, pl: np
         if k < 0:
             continue
         tc = min(t, n - 1)  # the path's last step (it stops growing at the run's end)
+        for j in range(D):  # each tap's term in either role, and its step's bit in a path
+            c = min(max(k + off[j], 0), n - 1)
+            ages[j] = min(tc - c, L - 1)
+            term[j, 0] = W[a + k, j] * a_raw[a + c, 0]
+            term[j, 1] = W[a + k, j] * a_raw[a + c, 1]
         for i in range(npat):
             bits = pat[i]
             acc = 0.0
             for j in range(D):
-                c = min(max(k + off[j], 0), n - 1)
-                age = min(tc - c, L - 1)
-                acc += W[a + k, j] * a_raw[a + c, (bits >> age) & 1]
+                acc += term[j, (bits >> ages[j]) & 1]
             mu[i] = acc
         x = accel[a + k]
         for g in range(G):
@@ -474,47 +501,64 @@ def _pi0_score(table: np.ndarray, g: int, pi0: float) -> float:
 
 
 @njit(cache=True)
-def _pi0_slope(table: np.ndarray, g: int, pi0: float) -> float:
-    """d/d pi0 of the log-likelihood (decreasing in pi0: the log-likelihood is concave)."""
-    total = 0.0
+def _pi0_terms(table: np.ndarray, g: int, A: np.ndarray, B: np.ndarray) -> None:
+    """Each run's likelihoods of row ``g`` under either initial role, relative to the larger
+    (``A_i = exp(a_i - m_i)``, ``B_i = exp(b_i - m_i)``; both 0 where the run is impossible
+    either way): what :func:`_pi0_slope` reads at every point of its bisection."""
     for i in range(table.shape[0]):
         a, b = table[i, g, 0], table[i, g, 1]
         m = a if a > b else b
         if m == -np.inf:
-            continue
-        A, B = math.exp(a - m), math.exp(b - m)
-        d = pi0 * A + (1.0 - pi0) * B
-        if d <= 0.0:
-            return np.inf if A > B else -np.inf
-        total += (A - B) / d
-    return total
+            A[i] = B[i] = 0.0
+        else:
+            A[i], B[i] = math.exp(a - m), math.exp(b - m)
 
 
 @njit(cache=True)
+def _pi0_slope(A: np.ndarray, B: np.ndarray, pi0: float) -> float:
+    """d/d pi0 of the log-likelihood (decreasing in pi0: the log-likelihood is concave), from
+    :func:`_pi0_terms`."""
+    total = 0.0
+    for i in range(A.shape[0]):
+        if A[i] == 0.0 and B[i] == 0.0:  # impossible either way (the larger term is 1)
+            continue
+        d = pi0 * A[i] + (1.0 - pi0) * B[i]
+        if d <= 0.0:
+            return np.inf if A[i] > B[i] else -np.inf
+        total += (A[i] - B[i]) / d
+    return total
+
+
+@njit(cache=True, parallel=True)
 def best_initial_role(table: np.ndarray, pi0_in: np.ndarray, ell: np.ndarray,
                       pi0: np.ndarray) -> None:
     """The log-likelihood of each row ``g`` of ``table`` ``(n_runs, G, 2)``
     (:func:`hmm_loglik`) at ``pi0 = P(r_0 = L)``: at ``pi0_in[g]``, or, where that is NaN,
     at the maximiser over [0, 1]. The log-likelihood ``sum_i log(pi0 L_i(L) + (1 - pi0)
     L_i(F))`` is concave in ``pi0``, so its slope's sign change is found by bisection (60
-    halvings). Writes the log-likelihood into ``ell`` ``(G,)`` and ``pi0`` into ``pi0``
-    ``(G,)``."""
-    for g in range(table.shape[1]):
+    halvings; each run's two likelihoods are exponentiated once per row, not once per
+    halving). Writes the log-likelihood into ``ell`` ``(G,)`` and ``pi0`` into ``pi0``
+    ``(G,)``; the rows in parallel."""
+    n = table.shape[0]
+    for g in prange(table.shape[1]):
         if not math.isnan(pi0_in[g]):
             p = pi0_in[g]
-        elif _pi0_slope(table, g, 0.0) <= 0.0:
-            p = 0.0
-        elif _pi0_slope(table, g, 1.0) >= 0.0:
-            p = 1.0
         else:
-            lo, hi = 0.0, 1.0
-            for _ in range(60):
-                mid = 0.5 * (lo + hi)
-                if _pi0_slope(table, g, mid) > 0.0:
-                    lo = mid
-                else:
-                    hi = mid
-            p = 0.5 * (lo + hi)
+            A, B = np.empty(n), np.empty(n)
+            _pi0_terms(table, g, A, B)
+            if _pi0_slope(A, B, 0.0) <= 0.0:
+                p = 0.0
+            elif _pi0_slope(A, B, 1.0) >= 0.0:
+                p = 1.0
+            else:
+                lo, hi = 0.0, 1.0
+                for _ in range(60):
+                    mid = 0.5 * (lo + hi)
+                    if _pi0_slope(A, B, mid) > 0.0:
+                        lo = mid
+                    else:
+                        hi = mid
+                p = 0.5 * (lo + hi)
         pi0[g] = p
         ell[g] = _pi0_score(table, g, p)
 
