@@ -111,6 +111,59 @@ def test_pairs_without_a_map_are_unknown_and_keep_the_approach_rule(capsys, runs
     assert f.priority is None and f.all_way is None
 
 
+@pytest.mark.parametrize("rule,expected", [("av", ["av", "hv"]), ("hv", ["hv", "av"]),
+                                           ("all-way-stop", ["", ""])])
+def test_replay_takes_the_right_of_way_from_the_map(capsys, runs, tmp_path, monkeypatch, rule,
+                                                    expected):
+    """The map's right of way reaches the responsibility shield of each seat: the replaced
+    vehicle's priority is the AV's (vehicle 1, the exported AV, has it under rule "av")."""
+    from persuasive.recordings import replay as rp
+
+    tracks, pairs = tmp_path / "tracks", tmp_path / "pairs.parquet"
+    assert run(capsys, "recordings", "export", *runs, "--out", str(tracks), "--map-rule",
+               rule)[0] == 0
+    assert run(capsys, "recordings", "pairs", str(tracks), "--map", str(tracks / "map.osm"),
+               "--out", str(pairs))[0] == 0
+    frame, _ = read_pairs(pairs)
+    seen = []
+
+    def spy(config, x0, hv_prm=None, seed=0):
+        seen.append(config.responsibility.right_of_way)
+        return original(config, x0, hv_prm, seed)
+
+    original = rp.run_from
+    monkeypatch.setattr(rp, "run_from", spy)
+    result = rp.replay_pairs(frame, rp.ReplaySettings(shield="responsibility"))
+    n = frame["pair"].nunique()
+    assert n == 2 and [r.seat for r in result.runs] == [1, 2] * n
+    assert [r.right_of_way for r in result.runs] == expected * n
+    assert seen == [x or None for x in expected] * n
+    counts = result.summary()["right_of_way"]
+    assert counts == {"av": expected.count("av") * n, "hv": expected.count("hv") * n,
+                      "neither": expected.count("") * n}
+    monkeypatch.undo()
+    code, out, err = run(capsys, "recordings", "replay", str(pairs), "--shield",
+                         "responsibility")
+    assert code == 0 and err == "", err
+    line = f"the map's right of way: the AV's in {n} runs, the other's in {n}, neither in 0"
+    assert (line in out) == (rule != "all-way-stop")
+
+
+def test_seat_right_of_way_reads_only_a_right_of_way_rule():
+    import pandas as pd
+
+    from persuasive.recordings.replay import seat_right_of_way
+
+    def rows(control, priority):
+        return pd.DataFrame({"control": [control], "priority": [priority]})
+
+    assert [seat_right_of_way(rows("right_of_way", 2), s) for s in (1, 2)] == ["hv", "av"]
+    for control, priority in (("all_way_stop", 0), ("none", 0), ("unknown", 0),
+                              ("right_of_way", 0)):
+        assert seat_right_of_way(rows(control, priority), 1) is None
+    assert seat_right_of_way(pd.DataFrame({"pair": [3]}), 1) is None  # a file before maps
+
+
 def _features(priority=None, all_way=None, arrival=None):
     # pair 0: vehicle 1 heads west, vehicle 2 north (1 comes from 2's right); pair 1: east
     return Features(s=np.array([[-20.0, -10.0], [-10.0, -20.0]]),

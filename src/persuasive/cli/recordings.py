@@ -281,6 +281,11 @@ def _print_replay(info: dict, runs: list) -> None:
     click.echo(f"shield: {info['uncertified_steps']} uncertified steps in "
                f"{info['runs_with_uncertified_steps']} runs; guarantee held in "
                f"{info['guarantee_held']} of {info['runs']} runs")
+    row = info["right_of_way"]
+    if row["av"] or row["hv"]:
+        click.echo(f"the map's right of way: the AV's in {row['av']} runs, the other's in "
+                   f"{row['hv']}, neither in {row['neither']} (the responsibility shield reads "
+                   "it)")
     e = info["envelope"]
     if runs:
         lo, hi = runs[0].u_min_mps2, runs[0].u_max_mps2

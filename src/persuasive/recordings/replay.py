@@ -146,6 +146,9 @@ class SeatRun:
     other_clear_s: float  #: the human's time to clear in the replay [s]
     valid: bool
     invalid_reason: str  #: "" when valid, else :data:`INVALID_YIELDED` / ``REAR_END``
+    #: the map's right of way in this run (:func:`seat_right_of_way`): "av", "hv", or ""
+    #: (the base configuration's: neither)
+    right_of_way: str = ""
     fitted: dict = field(default_factory=dict)  #: the fitted model's parameters, if any
 
 
@@ -224,6 +227,9 @@ def summarise(runs: Sequence[SeatRun], settings: ReplaySettings) -> dict:
                      "runs_beyond": sum(not r.within_envelope for r in runs),
                      "accel_min_mps2": min((r.accel_min_mps2 for r in runs), default=None),
                      "accel_max_mps2": max((r.accel_max_mps2 for r in runs), default=None)},
+        "right_of_way": {"av": sum(r.right_of_way == "av" for r in runs),
+                         "hv": sum(r.right_of_way == "hv" for r in runs),
+                         "neither": sum(r.right_of_way == "" for r in runs)},
         "invalid": reasons, "valid": len(valid),
         "first_replay": firsts, "first_recorded": rec_firsts,
         "av_clear_s_rmean": restricted_mean([r.av_clear_s for r in valid], horizon),
@@ -300,6 +306,20 @@ def edge_steps(rows, human: int, edge: int) -> np.ndarray:
     return (k < edge) | (k + 1 > int(rows[n_track].iloc[0]) - 1 - edge)
 
 
+def seat_right_of_way(rows, seat: int) -> str | None:
+    """The right of way of the run with the AV in vehicle ``seat``'s place, from the pair's
+    map (``control`` and ``priority``, :mod:`persuasive.recordings.lanelet_map`): ``"av"``
+    when the map gives it to the replaced vehicle, ``"hv"`` when to the other, None where the
+    map gives it to neither (``none``, an all-way stop) or no map was read (``unknown``, or a
+    pairs file without the map's columns)."""
+    if "control" not in rows or str(rows["control"].iloc[0]) != "right_of_way":
+        return None
+    priority = int(rows["priority"].iloc[0])
+    if priority not in (1, 2):
+        return None
+    return "av" if priority == seat else "hv"
+
+
 def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: str = "",
              fitted: dict | None = None, edge: int = 0) -> SeatRun:
     """The run of one pair (its rows of the pairs file, in step order) with the AV in vehicle
@@ -315,6 +335,11 @@ def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: st
     overrides = {"av.kind": settings.av, "av.shield": settings.shield,
                  "simulation.n_steps": n - 1 + extra,
                  "simulation.measurement_noise": "none", "simulation.accel_noise_mps2": 0.0}
+    # the map's right of way (None: the base configuration's), which the responsibility
+    # shield reads (docs/method.md §12.13)
+    right_of_way = seat_right_of_way(rows, seat)
+    if right_of_way is not None:
+        overrides["responsibility.right_of_way"] = right_of_way
     # the draw is replaced by the recorded start; a draw without spread never retries
     for who in ("av", "hv"):
         overrides[f"scenario.{who}_s0_halfwidth_m"] = 0.0
@@ -365,7 +390,7 @@ def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: st
         min_gap_m=out.min_gap_m, first_recorded=first_rec, first_replay=first_replay,
         av_clear_s=out.av_time_to_clear_s, recorded_clear_s=recorded_clear,
         other_clear_s=out.hv_time_to_clear_s, valid=not reason, invalid_reason=reason,
-        fitted=params)
+        right_of_way=right_of_way or "", fitted=params)
 
 
 # -- the fitted other ---------------------------------------------------------------------------
@@ -460,4 +485,4 @@ def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | N
 __all__ = ["ENVELOPE_TOL", "FITTED_MODELS", "INVALID_REAR_END", "INVALID_YIELDED", "OTHERS",
            "ReplayResult", "ReplaySettings", "SeatRun", "envelope_excess", "fit_left_out",
            "fitted_overrides", "pair_run_logs", "replay_accelerations", "replay_pairs",
-           "edge_steps", "run_from", "run_seat", "summarise"]
+           "edge_steps", "run_from", "run_seat", "seat_right_of_way", "summarise"]
