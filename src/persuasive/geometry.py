@@ -270,8 +270,13 @@ def zone_interval(path: Path, other: Path, min_dist_m: float, reach_m: float = 1
     pts_other = other.polyline(-reach_m, reach_m, step_m)
     s = np.arange(-reach_m, reach_m + step_m / 2, step_m)
     x, y = path.xy(s)
-    d, _ = cKDTree(pts_other).query(np.stack([x, y], axis=1))
     margin = 2.0 * step_m  # sampled distances over-estimate by at most step/2 on each curve
+    # the same nearest distances, found faster: a tree without compacted nodes (the samples
+    # of a shared lane are collinear with the query points, which made compacted nodes slow
+    # to search: 0.66 s against 0.1 s at the merge), and no search beyond twice the distance
+    # that counts (farther points read inf, and are outside either way)
+    d, _ = cKDTree(pts_other, compact_nodes=False).query(
+        np.stack([x, y], axis=1), distance_upper_bound=2.0 * (min_dist_m + margin))
     inside = np.flatnonzero(d < min_dist_m + margin)
     if inside.size == 0:
         return (math.inf, math.inf)  # never in conflict: an empty window

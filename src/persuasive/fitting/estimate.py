@@ -187,6 +187,9 @@ class ModelFit:
 #: Coordinates of a row: p_a, log sigma, log beta (its upper bound stands for beta = inf, the
 #: LFG's own choice), pi0 (NaN: maximised exactly).
 P_A, LOG_SIGMA, LOG_BETA, PI0 = 0, 1, 2, 3
+#: Newton iterations of each start before the best three are maximised jointly.
+START_ITERS = 3
+
 #: Finite-difference steps and trust-region scales of the coordinates.
 _H = np.array([1e-4, 1e-4, 1e-3, 1e-4])
 _SCALE = np.array([0.1, 0.5, 1.0, 0.1])
@@ -427,7 +430,7 @@ def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
     if start is not None:
         starts = np.vstack([starts, [start["p_a"], math.log(start["sigma"]),
                                      hi[LOG_BETA], np.nan]])
-    xs, fs = obj.maximise(starts, [c for c in free if c != P_A], iters=6, tol=1e-4)
+    xs, fs = obj.maximise(starts, [c for c in free if c != P_A], iters=START_ITERS, tol=1e-4)
     best = np.argsort(-fs)[:3]
     xs, fs = obj.maximise(xs[best], free)
     j = int(np.argmax(fs))
