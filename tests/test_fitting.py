@@ -337,6 +337,45 @@ def test_the_lazy_newton_takes_the_same_steps_and_scores_fewer_rows():
     assert sum(scored) < 0.85 * eager  # 348 of 439 rows
 
 
+def test_the_newton_stops_where_a_steps_gain_is_within_rounding(monkeypatch):
+    """A log-likelihood of a million carries rounding noise of about 1e-9: once a row's next
+    step is predicted to gain less than ``GAIN_TOL`` of its value it stops, instead of
+    shrinking its trust region one rejected step after another; a step onto a bound is
+    still taken."""
+    from persuasive.fitting import optimize
+
+    calls = []
+
+    def f(X):  # maximal at (0.3, -1.0); the noise: a fixed function of the point's bits
+        calls.append(len(X))
+        d = X - np.array([0.3, -1.0])
+        noise = (np.frombuffer(X.tobytes(), np.uint64).reshape(X.shape).sum(axis=1)
+                 % 1009) * 1e-12
+        return 1e6 - 4.0 * d[:, 0] ** 2 - d[:, 1] ** 2 + noise
+
+    lo, hi = np.array([-1.0, -2.0]), np.array([1.0, 2.0])
+    h, scale = np.array([1e-4, 1e-4]), np.array([0.5, 0.5])
+    starts = np.array([[0.0, 0.0], [0.9, 1.9]])
+    x, fx = maximise_rows(f, starts, [0, 1], lo, hi, h, scale, lazy=True)
+    stopped = sum(calls)
+    calls.clear()
+    monkeypatch.setattr(optimize, "GAIN_TOL", 0.0)
+    x0, fx0 = maximise_rows(f, starts, [0, 1], lo, hi, h, scale, lazy=True)
+    np.testing.assert_allclose(x, [[0.3, -1.0]] * 2, atol=1e-3)
+    assert np.all(fx >= fx0 - 1e-5)  # the same maximum, to within what the rule gives up
+    assert stopped < 0.8 * sum(calls)
+    # a maximum on a bound is reached exactly, however small the step's gain (here 4e-13,
+    # which the rule alone would call rounding)
+    monkeypatch.undo()
+
+    def flat(X):
+        return 2e-12 * X[:, 0] - (X[:, 1] + 1.0) ** 2
+
+    x, _ = maximise_rows(flat, np.array([[0.3, -1.0]]), [0, 1], lo, np.array([0.5, 2.0]), h,
+                         scale, lazy=True)
+    assert x[0, 0] == 0.5
+
+
 def test_the_idm_fit_scores_every_row_as_the_simulators_step_does():
     """``idm_sse`` evaluates the car following once per group of rows that differ only in
     the gap parameters (a scan): every row's sum equals the step-by-step replay with
