@@ -248,6 +248,38 @@ def test_a_rear_end_after_a_fair_cut_in_is_the_humans():
                                                                   0.1)).any()
 
 
+def test_a_collision_is_judged_at_its_first_contact_inside_the_step():
+    """Issue 39's pass-through (``test_shield_configs.PASS_THROUGH``, a 1-s step): the human
+    is ahead of the AV at the first overlapping state but was behind it at the first contact,
+    found inside the step as a brute-force scan of 20,000 instants finds it; judged there, the
+    collision is a rear-end by the human, and the run's guarantee held (its steps counted
+    until that contact)."""
+    from test_shield_configs import PASS_THROUGH
+
+    record = simulate(Config(mode="corrected").with_overrides(PASS_THROUGH), 2634)
+    scenario, states, log = record.scenario, record.states, record.log
+    after = states[1:]
+    overlap = scenario.collides(after[:, 0], after[:, 2])
+    k = int(np.argmax(overlap))
+    assert overlap[k] and not overlap[:k].any()
+    # at the first overlapping state the human is ahead: the state alone calls it the AV's
+    assert not measures.rear_end_mask(scenario, after[k:k + 1, 0], after[k:k + 1, 2])[0]
+    dt = record.config.simulation.dt_s
+    t, s_a, s_h = measures.first_contact(scenario, states[k], log["av_accel_mps2"][k],
+                                         log["hv_accel_mps2"][k], dt)
+    av, hv = scenario.av.vehicle, scenario.hv.vehicle
+    grid = np.linspace(0.0, dt, 20_001)[1:]
+    pos = np.array([(saturated_step(states[k, 0], states[k, 1], log["av_accel_mps2"][k], u,
+                                    av.v_min_mps, av.v_max_mps)[0],
+                     saturated_step(states[k, 2], states[k, 3], log["hv_accel_mps2"][k], u,
+                                    hv.v_min_mps, hv.v_max_mps)[0]) for u in grid])
+    first = grid[np.argmax(scenario.collides(pos[:, 0], pos[:, 1]))]
+    assert abs(t - first) <= dt / 20_000 and s_h < s_a  # behind at the first contact
+    o = record.outcome
+    assert o.collision and o.rear_end_by_human and not o.collision_caused_by_av
+    assert o.uncertified_steps == 0 and o.guarantee_held
+
+
 def test_braking_harder_than_the_rule_after_a_fair_entry_is_the_avs():
     _, scenario = merge_conflict(**{"responsibility.front_brake_mps2": 1.0})
     n = 120

@@ -111,7 +111,9 @@ def highway(episodes, planner, seed, shield, as_json, video) -> None:
                    + (f" ({kinds}; largest {s['max_envelope_excess_mps']:.2f} m/s)"
                       if kinds else "")
                    + f"; {s['crash_stops']} vehicle-steps of crash stops between other "
-                     f"vehicles in {s['crash_stop_episodes']} episodes (outside the guarantee)")
+                     f"vehicles in {s['crash_stop_episodes']} episodes (outside the guarantee)"
+                   + f"; {s['wrecks']} other vehicles wrecked in crashes not the ego's, in "
+                     f"{s['wreck_episodes']} episodes (outside the guarantee)")
     for driver, s in report.summary().items():
         cost = "" if driver == DEFAULT_DRIVER else (
             f"; the shield's overrides cost {_num(s['override_mps2_mean'], 3)} m/s^2 per step "
@@ -129,7 +131,8 @@ def highway(episodes, planner, seed, shield, as_json, video) -> None:
         if "collisions_ego_at_fault" in s:
             click.echo(f"responsibility rule ({driver}): {s['collisions_ego_at_fault']} "
                        f"collisions at the ego's fault, {s['collisions_other_at_fault']} at "
-                       f"the other's; {s['duty_breaches']} vehicle-steps in which another "
-                       f"vehicle broke its duty (the guarantee assumes none)")
+                       f"the other's, {s['collisions_wreck_at_fault']} into a wreck "
+                       f"without a certified answer; {s['duty_breaches']} vehicle-steps in "
+                       f"which another vehicle broke its duty (the guarantee assumes none)")
     if video:
         click.echo(f"video of seed {first} ({report.planner}) written to {video}")

@@ -44,7 +44,12 @@ most at its ``ACC_MAX`` and never drives faster than the larger
 of its speed and the speed limit of every lane on its way (:func:`speed_bound`: the IDM clips its
 target to the lane's limit, whatever target ``RegulatedRoad`` sets while it makes a vehicle yield
 and after); every episode checks that every vehicle stayed inside that envelope
-(:class:`EnvelopeCheck`, ``envelope_excesses``). highway-env integrates positions with the speed of
+(:class:`EnvelopeCheck`, ``envelope_excesses``). Two other vehicles that crash are wrecks
+(:func:`is_wreck`), counted per episode (:class:`WreckCount`) and outside the guarantee: no
+drivers any more, they roll on straight, off their lanes, and the shield sees each as a leader
+standing at speed 0 where the footprints it can still take first meet the ego's corridor,
+until it has rolled out of it before the ego could get there (:meth:`Projector.wreck_front`).
+highway-env integrates positions with the speed of
 the step's start (Euler): a braking ego rolls further than the planner's exact step says, by
 ``v dt / 2`` from speed ``v`` plus at most ``b dt^2 / 8`` for the last, partial step of
 deceleration ``b`` (the speed is clipped at 0), and an accelerating one lags behind it. The shield
@@ -120,6 +125,16 @@ DEFAULT_DRIVER = "default"
 TRACK_MARGIN_M = 0.25
 #: Spacing of the lane samples searched for a vehicle's occupancy [m].
 OCCUPANCY_SAMPLE_M = 0.1
+#: How far a wreck still rolls per m/s of its speed [s]: highway-env's crashed vehicle steers
+#: straight and brakes with ``acceleration = -speed`` (``Vehicle.clip_actions``, 1/s), so each
+#: Euler step keeps ``1 - dt`` of its speed and it rolls ``sum_k v (1 - dt)^k dt = v * 1 s``
+#: along its heading, whatever its lane.
+WRECK_ROLL_S = 1.0
+#: Lateral margin of the ego's corridor against a wreck's footprint [m] (as a track's).
+WRECK_MARGIN_M = TRACK_MARGIN_M
+#: Steps searched for when a rolling wreck leaves the ego's corridor (20 s, longer than an
+#: episode; not found: it stays).
+WRECK_CLEAR_STEPS = 200
 
 
 def _import_highway_env():
@@ -406,11 +421,15 @@ class Projector:
     """
 
     def __init__(self, network, ego_lanes: list[tuple], ego_size: tuple[float, float] = (5.0, 2.0),
-                 euler_margin_m: float = 0.0):
+                 euler_margin_m: float = 0.0, ego_v_max_mps: float = math.inf):
         self.network = network
         self.ego = EgoPath.from_lanes(network, ego_lanes)
         self.ego_size = ego_size  #: the ego's (length, width) [m]
         self.euler_margin_m = euler_margin_m  #: widening for Euler steps [m] (module docstring)
+        #: the ego's top speed [m/s]: a wreck that has left its corridor for good before the
+        #: ego can get there at that speed is none of its business (:meth:`wreck_front`;
+        #: ``inf``: every wreck that can still touch the corridor counts)
+        self.ego_v_max_mps = ego_v_max_mps
         self._tracks: dict[int, Track] = {}
         #: vehicles followed in the ego's lane, kept while they turn out of it (module docstring)
         self._leaders: set[int] = set()
@@ -533,7 +552,10 @@ class Projector:
         Vehicles behind the ego in its lane, or whose lanes never come near it, are left out.
         ``stand_ins`` (:func:`spawn_stand_ins`): the same for the vehicles not spawned yet,
         marked ``extra["stand_in"]`` (the shield checks them, the planner does not plan
-        against them)."""
+        against them). A wreck (:func:`is_wreck`) whose footprint can touch the ego's
+        corridor is a leader standing at speed 0 with its rear where it first meets the
+        corridor (:meth:`wreck_front`), keyed ``("wreck", id)`` and marked
+        ``extra["wreck"]`` (no driver: the responsibility rule judges no duty of it)."""
         u_ego = self.ego.coordinates(ego_vehicle.position)[0]
         out = [c for v in vehicles if v is not ego_vehicle
                for c in [self._conflict(v, u_ego)] if c is not None]
@@ -548,6 +570,12 @@ class Projector:
         from .external import CROSSING, FOLLOW, MERGE, Conflict
 
         limits = highway_limits(v)
+        if is_wreck(v):  # a standing obstacle, wherever it drifted: no lane, no driver
+            front = self.wreck_front(v, u_ego)
+            if front is None:
+                return None
+            return Conflict(("wreck", id(v)), FOLLOW, u_ego, front + 0.5 * float(v.LENGTH),
+                            0.0, other=limits, extra={"wreck": True})
         if self.in_ego_lane(v):
             u = self.ego.coordinates(v.position)[0]
             if u <= u_ego:
@@ -572,6 +600,45 @@ class Projector:
         return Conflict(id(track), CROSSING if track.kind == "crossing" else MERGE, s_ego,
                         s_other, float(v.speed), track.ego_occupancy, track.other_occupancy,
                         limits, ego_line_m=line, right_of_way=self.right_of_way(track))
+
+    def _wreck_span(self, v, steps: int | None = 0) -> tuple[float, float] | None:
+        """:func:`corridor_span` of :func:`wreck_region` ``(v, steps)`` in the ego's corridor,
+        ``ego width / 2 +`` :data:`WRECK_MARGIN_M` of its line."""
+        uv = np.array([self.ego.coordinates(p) for p in wreck_region(v, steps)])
+        return corridor_span(uv[:, 0], uv[:, 1], 0.5 * self.ego_size[1] + WRECK_MARGIN_M)
+
+    def wreck_front(self, v, u_ego: float) -> float | None:
+        """Where a wreck (:func:`is_wreck`) first meets the ego's corridor, along the ego's
+        line [m]: the lowest ``u`` of the hull of every footprint it can still take
+        (:func:`wreck_region`) within ``ego width / 2 +`` :data:`WRECK_MARGIN_M` of the line.
+        None when none of it is in the corridor, or all of it is behind the ego's rear, or it
+        rolls out of the corridor for good (:meth:`wreck_clear_s`, a step more) before the
+        ego, at its top speed, could reach that point. The shield takes it as a leader
+        standing with its rear there (module docstring).
+
+        Both tests are kept from step to step: the hull only shrinks as the wreck rolls on
+        (the point only moves away), and the time it needs to leave falls by the step while
+        the ego's least time to the point falls by at most as much (it moves at most ``v_max
+        dt`` a step); a wreck left out is never taken in again."""
+        span = self._wreck_span(v)
+        if span is None or span[1] < u_ego - 0.5 * self.ego_size[0]:
+            return None
+        gap = span[0] - (u_ego + 0.5 * self.ego_size[0])
+        if gap > 0.0 and gap / self.ego_v_max_mps > self.wreck_clear_s(v) + 1.0 / FREQUENCY_HZ:
+            return None
+        return span[0]
+
+    def wreck_clear_s(self, v) -> float:
+        """After how long a rolling wreck has left the ego's corridor for good [s]: the first
+        step ``k`` from which the hull of its footprints (:func:`wreck_region` ``(v, k)``)
+        misses the corridor, times the step (``inf``: it comes to rest in the corridor, or
+        not within :data:`WRECK_CLEAR_STEPS`)."""
+        if self._wreck_span(v, None) is not None:
+            return math.inf
+        for k in range(WRECK_CLEAR_STEPS + 1):
+            if self._wreck_span(v, k) is None:
+                return k / FREQUENCY_HZ
+        return math.inf
 
     def leaving_leader(self, v, u_ego: float) -> float | None:
         """For a followed vehicle turning out of the ego's lane: where to take it on the ego's
@@ -616,6 +683,59 @@ class Projector:
             if self.ego.coordinates(v.position)[0] > u_ego and (best is None or gap < best[0]):
                 best = (float(gap), float(v.speed))
         return best
+
+
+def is_wreck(vehicle) -> bool:
+    """highway-env has marked the vehicle ``crashed`` (``RoadObject.handle_collisions`` sets it
+    on both vehicles of a collision, for good): from then on it drives no more, it brakes and
+    rolls straight on (:data:`WRECK_ROLL_S`)."""
+    return bool(getattr(vehicle, "crashed", False))
+
+
+def wreck_region(vehicle, steps: int | None = 0) -> np.ndarray:
+    """Points (n, 2) [m] whose convex hull holds every footprint a wreck can take from
+    ``steps`` highway-env steps from now on (None: at rest). Its position after ``k`` Euler
+    steps is ``p + v (1 - (1 - dt / T)^k) T`` along its heading (``T`` =
+    :data:`WRECK_ROLL_S`), and the push highway-env has set for its next step (``impact``:
+    the separation of an overlap, applied once) adds to every one after now: the corners of
+    its footprint now, pushed or not, and at rest (``steps = 0``, 16 points), after ``k``
+    steps and at rest (8), or at rest (4)."""
+    d = np.asarray(vehicle.direction, float)
+    n = np.array([-d[1], d[0]])
+    p = np.asarray(vehicle.position, float)
+    corners = np.array([p + 0.5 * sx * vehicle.LENGTH * d + 0.5 * sy * vehicle.WIDTH * n
+                        for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)])
+    roll = float(vehicle.speed) * WRECK_ROLL_S * d
+    impact = getattr(vehicle, "impact", None)
+    push = np.zeros(2) if impact is None else np.asarray(impact, float).reshape(2)
+    if steps is None:
+        shifts = np.array([roll + push])
+    elif steps == 0:
+        shifts = np.array([np.zeros(2), roll, push, roll + push])
+    else:
+        done = 1.0 - (1.0 - 1.0 / (FREQUENCY_HZ * WRECK_ROLL_S)) ** steps
+        shifts = np.array([done * roll + push, roll + push])
+    return (shifts[:, None, :] + corners[None, :, :]).reshape(-1, 2)
+
+
+def corridor_span(u: np.ndarray, lat: np.ndarray, half_m: float) -> tuple[float, float] | None:
+    """The range of ``u`` over the convex hull of the points ``(u, lat)`` within ``|lat| <=
+    half_m`` (None: the hull misses the strip). Exact: the hull's part in the strip is a
+    convex polygon whose vertices are points in the strip or crossings of the hull's edges
+    with ``lat = +-half_m``; the crossings of every pair of points hold those and lie in the
+    hull themselves."""
+    u, lat = np.asarray(u, float), np.asarray(lat, float)
+    found = [u[np.abs(lat) <= half_m]]
+    i, j = np.triu_indices(len(u), 1)
+    for edge in (half_m, -half_m):
+        a, b = lat[i] - edge, lat[j] - edge
+        cross = a * b < 0.0
+        t = a[cross] / (a[cross] - b[cross])
+        found.append(u[i][cross] + t * (u[j][cross] - u[i][cross]))
+    found = np.concatenate(found)
+    if found.size == 0:
+        return None
+    return float(found.min()), float(found.max())
 
 
 def speed_bound(vehicle) -> float:
@@ -715,6 +835,61 @@ class EnvelopeCheck:
         self._last = seen
 
 
+class WreckCount:
+    """The other vehicles wrecked in an episode (:func:`is_wreck`), whatever their speed loss
+    (:attr:`EnvelopeCheck.crash_stops` counts only a loss beyond ``u_min``: two slow cars
+    crash without one), and whether the ego ran into one. A vehicle that crashed together
+    with the ego, and touches no third one, is the ego's collision, not a wreck; a vehicle
+    that crashed in an earlier observation and touches the ego when it crashes is a wreck
+    the ego ran into (:attr:`hit`). Touching: highway-env's own test, the footprints
+    overlapping now or within the step at their velocities (``are_polygons_intersecting``,
+    as ``handle_collisions`` calls it)."""
+
+    def __init__(self, dt_s: float):
+        self.dt_s = dt_s
+        #: per wreck (by id, the vehicle kept so that the id is not reused): the mark handed
+        #: to :meth:`observe` when it was first seen wrecked
+        self._wrecks: dict[int, tuple[Any, Any]] = {}
+        self._pending: list = []  # vehicles the ego touched at the last observation
+        #: the marks of the wrecks the ego ran into (empty: none, or no collision)
+        self.hit: list = []
+
+    @property
+    def wrecks(self) -> int:
+        """Other vehicles wrecked so far."""
+        return len(self._wrecks)
+
+    def _touch(self, a, b) -> bool:
+        from highway_env import utils
+
+        if np.linalg.norm(np.asarray(a.position) - np.asarray(b.position)) > 0.5 * (
+                a.diagonal + b.diagonal) + (abs(a.speed) + abs(b.speed)) * self.dt_s:
+            return False  # highway-env's own pre-check, for both velocities
+        hit, will, _ = utils.are_polygons_intersecting(
+            a.polygon(), b.polygon(), a.velocity * self.dt_s, b.velocity * self.dt_s)
+        return bool(hit or will)
+
+    def observe(self, vehicles: Iterable, ego, mark: Any = None) -> None:
+        """After a step: record the vehicles newly wrecked (with ``mark``) and, if the ego
+        has crashed, the wrecks it ran into."""
+        others = [v for v in vehicles if v is not ego]
+        partners: list = []
+        if ego.crashed:  # a push set at the last step (a collision found ahead) counts too
+            partners = [v for v in others if self._touch(ego, v)] + self._pending
+            if not self.hit:
+                self.hit = [self._wrecks[id(v)][1] for v in partners if id(v) in self._wrecks
+                            and self._wrecks[id(v)][0] is v]
+        else:
+            self._pending = [v for v in others if self._touch(ego, v)]
+        for v in others:
+            if not is_wreck(v) or (id(v) in self._wrecks and self._wrecks[id(v)][0] is v):
+                continue
+            if any(p is v for p in partners) and not any(
+                    self._touch(v, w) for w in others if w is not v):
+                continue  # the ego's collision
+            self._wrecks[id(v)] = (v, mark)
+
+
 #: highway-env spawns vehicles during an episode (``IntersectionEnv._spawn_vehicle``): on an
 #: outer lane ``o{r} -> ir{r}``, ``5 + N(0, 1)`` m along it, at ``8 + N(0, 1)`` m/s, to any other
 #: exit. The stand-ins for the vehicles not spawned yet take that noise up to 5 standard
@@ -761,6 +936,7 @@ class PlannerDriver:
 
         self.config = config
         self.planner = (planner_class or ExternalPlanner)(config, seed)
+        self.planner.duty_slack_m = duty_slack(config)
         self.last_targets = 0  #: vehicles planned against at the last step
         self.interventions = 0  #: steps where the shield overrode the planner
         self.uncertified = 0  #: of which no fallback was certified
@@ -806,6 +982,7 @@ class DefaultJudge:
 
         self.config = config
         self.planner = ExternalPlanner(config, seed)
+        self.planner.duty_slack_m = duty_slack(config)
         self.stand_ins = self.make_stand_ins(env)
         self.steps = 0  #: steps judged
         self.admitted = 0  #: of which the shield admitted the acceleration driven
@@ -883,6 +1060,16 @@ def euler_shift(v_mps: float, a_mps2: float, brake_mps2: float, dt_s: float,
     return v_mps * dt_s - exact + euler_lead(v1, brake_mps2, dt_s)
 
 
+def duty_slack(config: Config) -> float:
+    """How much further highway-env's Euler steps can roll another vehicle braking to rest
+    than the exact stop, at most [m]: ``v_max dt / 2 + b dt^2 / 8`` (:func:`euler_lead`)
+    at its ``v_max`` and strongest braking; the responsibility rule forgives that much of
+    its position against the responsible envelope's stop (``DutyWatch.slack_m``)."""
+    hv = config.vehicle_of("hv")
+    dt = 1.0 / FREQUENCY_HZ
+    return 0.5 * hv.v_max_mps * dt - hv.u_min_mps2 * dt * dt / 8.0
+
+
 def euler_margin(config: Config) -> float:
     """``v_max dt / 2`` [m]: how much further highway-env's Euler step lets the ego roll
     than the exact step, at most (module docstring)."""
@@ -951,11 +1138,16 @@ class EpisodeResult:
     uncertified_steps: int = 0  #: steps where the shield had no certified choice
     #: the worst-case guarantee covered the episode: a planner ego with the worst-case shield,
     #: every step certified, every other vehicle inside the envelope the shield assumed and
-    #: no crash between two other vehicles (:attr:`crash_stops`)
+    #: no crash between two other vehicles (:attr:`crash_stops`, :attr:`wrecks`)
     guarantee_held: bool = False
     #: vehicle-steps in which another vehicle, crashing into a third, lost more speed than
     #: its ``u_min`` allows (not a driver's braking: outside the envelope's assumption)
     crash_stops: int = 0
+    #: other vehicles wrecked in a crash that was not the ego's (:class:`WreckCount`), with
+    #: or without a speed loss beyond ``u_min``: a crash between two other vehicles is
+    #: outside the guarantee's assumptions, and the shield sees each wreck as a standing
+    #: obstacle from then on (:meth:`Projector.wreck_front`)
+    wrecks: int = 0
     #: highway-env's own ego only (None for the planner), judged by the planner's shield it
     #: does not use: its steps, how many of them the shield would have admitted as they were
     #: driven (the acceleration of each step against the conflicts at its start, the
@@ -974,7 +1166,10 @@ class EpisodeResult:
     #: the responsibility rule (``av.shield = "responsibility"``, docs/method.md §12.13),
     #: for the planner and for highway-env's own ego alike: who is at fault for the
     #: episode's collision ("ego" or "other"; None: no collision, or another shield kind),
-    #: and the vehicle-steps in which another vehicle broke its duty under the rule
+    #: and the vehicle-steps in which another vehicle broke its duty under the rule. The ego
+    #: run into a wreck (which owes nothing): "wreck" when some step since that vehicle was
+    #: wrecked had no certified answer (it came into the ego's way too late), "ego" when
+    #: every step was certified against it
     fault: str | None = None
     duty_breaches: int = 0
 
@@ -1018,7 +1213,7 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
         ego_lanes = [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
         veh = u.vehicle
         projector = Projector(network, ego_lanes, (float(veh.LENGTH), float(veh.WIDTH)),
-                              euler_margin(config))
+                              euler_margin(config), config.vehicle_of("av").v_max_mps)
         judge = None
         if driver == DEFAULT_DRIVER:
             install_default_ego(env)
@@ -1032,10 +1227,17 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
         contests: dict[int, _Contest] = {}
         state = {"min_d": math.inf, "min_conflict_d": math.inf, "cross": None}
         envelope = EnvelopeCheck(1.0 / FREQUENCY_HZ)
+        wrecks = WreckCount(1.0 / FREQUENCY_HZ)
+
+        def duty_watch():
+            adapter = planner.planner if planner is not None else getattr(judge, "planner", None)
+            return None if adapter is None else adapter.duties
 
         def observe(k: int) -> list[Projection]:
             ego = u.vehicle
             envelope.observe(u.road.vehicles, ego)
+            watch = duty_watch()  # a wreck's mark: the ego's uncertified steps before it
+            wrecks.observe(u.road.vehicles, ego, 0 if watch is None else watch.ego_breaches)
             projections = []
             for v in u.road.vehicles:
                 if v is ego:
@@ -1074,10 +1276,10 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
                 frames.append(env.render())
             projections = observe(k)
         ego = u.vehicle
-        duties = (planner.planner if planner is not None
-                  else getattr(judge, "planner", None))
-        duties = None if duties is None else duties.duties
+        duties = duty_watch()
         fault = duties.fault() if duties is not None and ego.crashed else None
+        if fault is not None and wrecks.hit:  # a wreck owes nothing (EpisodeResult.fault)
+            fault = "wreck" if duties.ego_breaches > min(wrecks.hit) else "ego"
         ego_first = other_first = contested = 0
         for c in contests.values():
             if not c.contested:
@@ -1111,8 +1313,8 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
             uncertified_steps=0 if planner is None else planner.uncertified,
             guarantee_held=bool(planner is not None and config.shield == "worst-case"
                                 and planner.uncertified == 0 and envelope.excesses == 0
-                                and envelope.crash_stops == 0),
-            crash_stops=envelope.crash_stops,
+                                and envelope.crash_stops == 0 and wrecks.wrecks == 0),
+            crash_stops=envelope.crash_stops, wrecks=wrecks.wrecks,
             judged_steps=None if judge is None else judge.steps,
             judged_admitted=None if judge is None else judge.admitted,
             entry_admitted=None if judge is None else judge.entry_admitted,
@@ -1171,6 +1373,8 @@ class HighwayReport:
                                           for k in EnvelopeCheck.KINDS},
                 "crash_stops": sum(e.crash_stops for e in eps),
                 "crash_stop_episodes": sum(e.crash_stops > 0 for e in eps),
+                "wrecks": sum(e.wrecks for e in eps),
+                "wreck_episodes": sum(e.wrecks > 0 for e in eps),
                 "uncertified_steps": sum(e.uncertified_steps for e in eps),
                 "guarantee_held_episodes": sum(e.guarantee_held for e in eps),
             }
@@ -1178,6 +1382,7 @@ class HighwayReport:
                 out[driver].update({
                     "collisions_ego_at_fault": sum(e.fault == "ego" for e in eps),
                     "collisions_other_at_fault": sum(e.fault == "other" for e in eps),
+                    "collisions_wreck_at_fault": sum(e.fault == "wreck" for e in eps),
                     "duty_breaches": sum(e.duty_breaches for e in eps)})
             judged = [e for e in eps if e.judged_steps is not None]
             if judged:  # highway-env's own ego, judged by the planner's shield

@@ -19,7 +19,7 @@ from .. import packing as slot
 from ..config import Config
 from ..policies import kinds as kd
 from ..policies import policy_params
-from ..record import W_AV_A, WORLD_LOG, setup
+from ..record import W_AV_A, W_HV_A, WORLD_LOG, setup
 from . import measures
 
 
@@ -27,9 +27,9 @@ def run_against(config: Config, accels: np.ndarray, seed: int = 1):
     """The compiled closed loop of ``config``'s AV (its shield included) against a human that
     replays ``accels`` (one per step, within its limits), from seed ``seed``'s initial state:
     ``(scenario, states (n_steps + 1, 4), world log)``."""
-    from ..world import run_loop
+    from ..world import predicted_summary, run_loop
 
-    s = setup(config, seed, None, 0)
+    s = setup(config, seed, None, 0, predict=predicted_summary)  # (foresight, if in force)
     n = config.simulation.n_steps
     av = kd.KINDS[config.av.kind]
     states = np.empty((n + 1, 4))
@@ -53,7 +53,7 @@ def closest_approach(config: Config, accels: np.ndarray, seed: int = 1) -> float
     gaps = measures.min_gap(scenario, states[:, 0], states[:, 2])
     after = states[1:]
     rear = np.r_[False, measures.human_at_fault(scenario, states, world_log[:, W_AV_A],
-                                                config.simulation.dt_s)
+                                                config.simulation.dt_s, world_log[:, W_HV_A])
                  & scenario.collides(after[:, 0], after[:, 2])]
     if rear.any():
         gaps = gaps[:int(np.argmax(rear))]
@@ -67,6 +67,15 @@ def falsify(config: Config, pieces: int = 8, samples: int = 30, elite: int = 6,
     the run, within the human's limits; ``seed`` seeds the search (deterministic),
     ``run_seed`` the runs' initial state."""
     rng = np.random.default_rng(seed)
+    if config.yield_line_choices is not None:
+        # foresight's pick depends on the configuration, the seed and the measured start,
+        # never on the human it meets (its predictions put model humans in the seat): one
+        # pick serves every run of the search, each then the run with that line, bit for bit
+        from ..world import predicted_summary
+
+        line = setup(config, run_seed, predict=predicted_summary).yield_line_m
+        config = config.with_overrides({"av.yield_line_choices_m": [],
+                                         "av.yield_line_m": line})
     veh = config.vehicle_of("hv")
     lo, hi = veh.u_min_mps2, veh.u_max_mps2
     n = config.simulation.n_steps

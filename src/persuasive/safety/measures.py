@@ -26,6 +26,11 @@ point, after which the lane is shared).
 - **collisions by fault**: a collision (a run of overlapping states) is a *rear-end by the
   human* when it starts with the lane shared, the AV past the merge point and ahead of the
   human; every other collision is *caused by the AV* (the shield's target is none of those).
+  Where it starts is judged in continuous time, at the first contact inside the step that
+  led to the collision's first overlapping state (:func:`contact_rear_mask`): with a coarse
+  step or a fast human, the human can go from behind the AV to ahead of it and overlapping
+  between two states, and the first overlapping state then shows it ahead although it drove
+  into the AV from behind.
 """
 
 from __future__ import annotations
@@ -273,8 +278,68 @@ def rear_end_mask(scenario, s_av: np.ndarray, s_hv: np.ndarray) -> np.ndarray:
     return (np.asarray(s_av) >= scenario.av.occupancy[1]) & (np.asarray(s_av) > np.asarray(s_hv))
 
 
-def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float
-                   ) -> np.ndarray:
+#: Sub-steps of a step searched for the first contact, before bisection (:func:`first_contact`).
+CONTACT_SAMPLES = 64
+#: Bisection of the first contact down to this [s].
+CONTACT_TOL_S = 1e-9
+
+
+def first_contact(scenario, x0: np.ndarray, a_av: float, a_hv: float, dt: float
+                  ) -> tuple[float, float, float]:
+    """The first instant of a step at which the footprints overlap, both vehicles moving as
+    the loop moves them (the saturated step from ``x0 = (s_av, v_av, s_hv, v_hv)`` with
+    their realised accelerations): ``(t [s] in (0, dt], s_av, s_hv)`` there; ``dt`` and the
+    step's end positions when no sub-step before the end overlaps. The step is sampled at
+    :data:`CONTACT_SAMPLES` instants, then the first overlapping interval bisected to
+    :data:`CONTACT_TOL_S` (a contact shorter than a sample's span between two samples is not
+    seen: it would not decide who was behind either)."""
+    from ..kinematics import saturated_step
+
+    av, hv = scenario.av.vehicle, scenario.hv.vehicle
+
+    def at(t: float) -> tuple[float, float]:
+        return (saturated_step(x0[0], x0[1], a_av, t, av.v_min_mps, av.v_max_mps)[0],
+                saturated_step(x0[2], x0[3], a_hv, t, hv.v_min_mps, hv.v_max_mps)[0])
+
+    times = dt * np.arange(1, CONTACT_SAMPLES + 1) / CONTACT_SAMPLES
+    pos = np.array([at(float(t)) for t in times])
+    hit = np.flatnonzero(scenario.collides(pos[:, 0], pos[:, 1]))
+    if hit.size == 0:
+        return dt, float(pos[-1, 0]), float(pos[-1, 1])
+    i = int(hit[0])
+    lo, hi = (0.0 if i == 0 else float(times[i - 1])), float(times[i])
+    while hi - lo > CONTACT_TOL_S:
+        mid = 0.5 * (lo + hi)
+        s_a, s_h = at(mid)
+        if scenario.collides(np.array([s_a]), np.array([s_h]))[0]:
+            hi = mid
+        else:
+            lo = mid
+    s_a, s_h = at(hi)
+    return hi, float(s_a), float(s_h)
+
+
+def contact_rear_mask(scenario, states: np.ndarray, accel_av: np.ndarray,
+                      accel_hv: np.ndarray, dt: float) -> np.ndarray:
+    """Per state after each step (``states[1:]``): an overlap there would be a rear-end by
+    the human (:func:`rear_end_mask`), judged for the first state of each collision at the
+    first contact inside the step that led to it (:func:`first_contact`), for the others at
+    the state itself (a collision's cause is its first state: :func:`caused_by_av`)."""
+    after = states[1:]
+    rear = rear_end_mask(scenario, after[:, 0], after[:, 2])
+    if not scenario.lane_shared:
+        return rear
+    overlap = scenario.collides(after[:, 0], after[:, 2])
+    start = np.flatnonzero(overlap & ~np.r_[False, overlap[:-1]])
+    for k in start:
+        _, s_a, s_h = first_contact(scenario, states[k], float(accel_av[k]),
+                                    float(accel_hv[k]), dt)
+        rear[k] = bool(rear_end_mask(scenario, np.array([s_a]), np.array([s_h]))[0])
+    return rear
+
+
+def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float,
+                   accel_hv: np.ndarray | None = None) -> np.ndarray:
     """Per state after each step (``states[1:]``): an overlap there is a rear-end for which the
     human is at fault under the cut-in rule (docs/method.md §12.10). That needs all of: a
     rear-end by geometry (:func:`rear_end_mask`); the AV entered the lane (passed the shield's
@@ -286,9 +351,14 @@ def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float
     the AV's.
 
     ``states`` ``(n + 1, 4)``: the true states ``s_av, v_av, s_hv, v_hv``; ``accel_av``
-    ``(n,)`` [m/s^2]: the AV's realised acceleration of each step (noise included)."""
+    ``(n,)`` [m/s^2]: the AV's realised acceleration of each step (noise included);
+    ``accel_hv``: the human's (given, a collision's rear-end is judged at its first contact
+    inside the step, :func:`contact_rear_mask`; else at its first overlapping state)."""
     after = states[1:]
-    rear = rear_end_mask(scenario, after[:, 0], after[:, 2])
+    if accel_hv is None:
+        rear = rear_end_mask(scenario, after[:, 0], after[:, 2])
+    else:
+        rear = contact_rear_mask(scenario, states, accel_av, accel_hv, dt)
     if not rear.any():
         return rear
     from ..packing import pack
@@ -317,7 +387,8 @@ def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float
     return rear & out
 
 
-__all__ = ["STANDOFF_PROGRESS_M", "STANDOFF_WINDOW_S", "WAIT_SPEED_MPS", "caused_by_av",
+__all__ = ["CONTACT_SAMPLES", "CONTACT_TOL_S", "STANDOFF_PROGRESS_M", "STANDOFF_WINDOW_S",
+           "WAIT_SPEED_MPS", "caused_by_av", "contact_rear_mask", "first_contact",
            "footprint_gaps", "human_at_fault", "min_gap", "min_ttc", "override_cost", "pet",
            "rear_end_mask",
            "restricted_mean", "standoff",

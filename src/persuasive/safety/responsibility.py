@@ -13,11 +13,19 @@ duties over the step ``[t, t + dt]`` are:
 
 - **the other vehicle**: it accelerates at most at the rule's ``C_RESP_ACCEL`` (always, the
   bound of a responsible driver); at a crossing (a shared lane's rule is the cut-in rule,
-  which the shield takes at the worst case), when it owes a response and its response time
-  has run out
-  (``t - t_d >= rho``) it brakes at least at ``C_RESP_BRAKE`` until it stands, then stands,
-  until it is past its interval (judged on whole steps: a step in which its response time
-  runs out is not held against it);
+  which the shield takes at the worst case), when it owes a response, from the instant its
+  response time runs out (``t_d + rho``, in continuous time, also inside a step) it brakes at
+  least at ``C_RESP_BRAKE`` until it stands, then stands, until it is past its interval.
+  This is exactly the human the shield certifies against (``shield.responsible_arrival``:
+  ``C_RESP_ACCEL`` for what is left of the response, then ``C_RESP_BRAKE``), judged on what
+  a step shows: over the step ``[t, t + dt]`` the vehicle's speed at its end may not exceed
+  that of the responsible envelope from its state at ``t`` (the rule's acceleration until the
+  response runs out at ``t + tau``, then its braking), and where the envelope stands within
+  the step, neither may its position (a vehicle holding one acceleration over the step, as
+  the loops move them, then stays behind the envelope at every instant of the step: its
+  speed is a chord under the envelope's concave speed, or it ends standing behind the
+  envelope's stop). A step in which the response runs out is thus held against a vehicle
+  that keeps accelerating through it (the shield assumed braking from ``t + tau``);
 - **the ego**: its step is certified under the rule (the shield's verdict is not
   ``uncertified``; for a driver the shield only judges, the step it drove is admitted). An
   uncertified step also makes the instant dangerous for every vehicle (the response runs on).
@@ -45,6 +53,31 @@ from . import shield as sh
 ACCEL_TOL_MPS2 = 1e-6
 #: A vehicle below this speed stands [m/s].
 STAND_MPS = 1e-3
+#: Tolerance on a position against the responsible envelope's stop [m] (rounding of the
+#: exact step).
+POS_TOL_M = 1e-6
+
+
+def duty_kept(s0: float, v0: float, s1: float, v1: float, dt: float, left: float, rho: float,
+              accel: float, brake: float, owes: bool, v_min: float = 0.0,
+              v_max: float = math.inf, slack_m: float = POS_TOL_M) -> bool:
+    """Whether a vehicle that went from ``(s0, v0)`` to ``(s1, v1)`` over a step of ``dt``
+    kept its duty (module docstring). ``left``: what is left of its response at the step's
+    *end* (``C_RESP_LEFT`` written after the decision at the step's start), so it runs out
+    ``tau = left + dt`` into the step; ``owes``: it owes a response at a crossing and is not
+    past its interval; the response has started (``left < rho``) only after a dangerous
+    instant. Before its response runs out it may accelerate at up to ``accel``; from then on
+    it brakes at ``brake`` (positive) or more until it stands."""
+    tau = left + dt
+    if not (owes and left < rho - 1e-9 and tau < dt - 1e-12):
+        return (v1 - v0) / dt <= accel + ACCEL_TOL_MPS2
+    # the responsible envelope over the step: accel until tau, then braking to a stand
+    # (a speed read above the limits the shield knows is not held against the envelope)
+    s_e, v_e = sh._profile_state(s0, v0, accel, max(tau, 0.0), -brake, math.inf, -brake, dt,
+                                 min(v_min, v0), max(v_max, v0))
+    if v_e <= STAND_MPS:  # the envelope stands by the step's end: so must it, behind it
+        return v1 <= STAND_MPS and s1 <= s_e + slack_m
+    return v1 <= v_e + ACCEL_TOL_MPS2 * dt
 
 
 class DutyWatch:
@@ -55,8 +88,12 @@ class DutyWatch:
     shield's inputs ``(s_H, v_H, C)`` with the state it wrote, and whether the ego's step
     was certified; :meth:`fault` names who broke the rule first."""
 
-    def __init__(self, dt_s: float):
+    def __init__(self, dt_s: float, slack_m: float = POS_TOL_M):
         self.dt_s = float(dt_s)
+        #: how far past the responsible envelope's stop a vehicle's position may read [m]
+        #: (rounding; a simulator whose integration lets a braking vehicle roll further than
+        #: the exact step hands in its own slack)
+        self.slack_m = float(slack_m)
         self._last: dict[Hashable, tuple] = {}
         #: per vehicle, since their last safe instant: when the ego first broke a duty and
         #: when the other did (in decisions; None: not)
@@ -115,18 +152,10 @@ class DutyWatch:
             ego_broke, other_broke = self.broken.get(key, (None, None))
             prev = last.get(key)
             if prev is not None:
-                s0, v0, hi, left0, rho, accel, brake, owed0, shared0 = prev
-                a = (float(v_H[j]) - v0) / dt
-                allowed = accel
-                # dangerous at the step's start (what was left then: left0 + dt) and its
-                # whole step after its response time
-                if owed0 and not shared0 and left0 < rho - 1e-9 and left0 + dt <= 1e-9 \
-                        and s0 <= hi:
-                    if v0 <= STAND_MPS:  # it stands: it stays
-                        allowed = 0.0
-                    else:  # it brakes until it stands
-                        allowed = -brake if float(v_H[j]) > STAND_MPS else math.inf
-                if a > allowed + ACCEL_TOL_MPS2:
+                s0, v0, hi, left0, rho, accel, brake, owed0, shared0, v_min, v_max = prev
+                if not duty_kept(s0, v0, float(s_H[j]), float(v_H[j]), dt, left0, rho, accel,
+                                 brake, bool(owed0) and not shared0 and s0 <= hi, v_min,
+                                 v_max, self.slack_m):
                     if other_broke is None:  # in the step before this decision
                         other_broke = k - 0.5
                     self.other_breaches += 1
@@ -148,7 +177,8 @@ class DutyWatch:
             self._last[key] = (float(s_H[j]), float(v_H[j]), float(c[sh.C_H_HI]), left,
                                float(c[sh.C_RESP_RHO]), float(c[sh.C_RESP_ACCEL]),
                                float(c[sh.C_RESP_BRAKE]), float(c[sh.C_RESP_OWED]),
-                               bool(c[sh.C_SHARED]))
+                               bool(c[sh.C_SHARED]), float(c[sh.C_H_VMIN]),
+                               float(c[sh.C_H_VMAX]))
         for key in list(self.broken):  # vehicles gone from view close their record
             if key not in self._last:
                 del self.broken[key]
@@ -165,4 +195,4 @@ class DutyWatch:
         return "ego"
 
 
-__all__ = ["ACCEL_TOL_MPS2", "DutyWatch", "STAND_MPS"]
+__all__ = ["ACCEL_TOL_MPS2", "POS_TOL_M", "STAND_MPS", "DutyWatch", "duty_kept"]
