@@ -17,6 +17,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from persuasive import Config
+from persuasive.config import LINE_AT_INTERVAL
 from persuasive import packing as slot
 from persuasive.kinematics import saturated_step
 from persuasive.safety import shield as sh
@@ -31,8 +32,11 @@ SCENARIOS = {
 
 
 def config_of(scenario: str, shield: str = "worst-case", **extra) -> Config:
+    """Corrected mode with ``shield`` as it shipped before issue 39's defaults (the line at
+    the interval, no clearance: the numbers by hand below are for that)."""
     return Config(mode="corrected").with_overrides(
-        {"scenario.kind": scenario, "av.shield": shield, **SCENARIOS[scenario], **extra})
+        {"scenario.kind": scenario, "av.shield": shield, **LINE_AT_INTERVAL,
+         **SCENARIOS[scenario], **extra})
 
 
 def conflict_of(config: Config) -> tuple[np.ndarray, object]:
@@ -365,3 +369,53 @@ def test_paper_mode_has_no_shield_and_corrected_mode_has_it():
     log = simulate(Config(), 996).log
     assert np.all(log["shield_verdict"] == -1)
     assert np.array_equal(log["av_accel_mps2"], log["av_proposed_accel_mps2"])
+
+
+# -- it drives through rather than park (issue 39) ---------------------------------------------
+
+
+@settings(max_examples=40, deadline=None)
+@given(scenario=st.sampled_from(["intersection", "crossing", "left-turn"]),
+       kind=st.sampled_from(["worst-case", "responsive"]),
+       back=st.floats(0.0, 10.0), hv_back=st.floats(5.0, 40.0), hv_v0=st.floats(0.0, 8.0),
+       p_brake=st.floats(0.3, 0.9), seed=st.integers(0, 2**31))
+@example(scenario="intersection", kind="worst-case", back=1.88, hv_back=33.81, hv_v0=1.26,
+         p_brake=0.54, seed=988)
+@example(scenario="left-turn", kind="worst-case", back=6.31, hv_back=37.72, hv_v0=7.39,
+         p_brake=0.5, seed=322)
+@example(scenario="crossing", kind="worst-case", back=1.31, hv_back=23.01, hv_v0=2.0,
+         p_brake=0.51, seed=232)
+def test_a_braking_planner_never_parks_inside_its_interval(scenario, kind, back, hv_back,
+                                                           hv_v0, p_brake, seed):
+    """A planner that mostly asks to brake, against a random human: the shield lets it stand
+    before its interval, but inside it (where it blocks the human) braking is admitted only
+    when no way through is certified, so it never ends at rest there (issue 39: a worst-case
+    shield used to admit it wherever GO stayed certified: 19 of 300 such runs ended parked
+    inside); and no step is uncertified, no collision the AV's."""
+    from persuasive.kinematics import saturated_step
+    from persuasive.record import static_setup
+    from persuasive.safety.filter import ShieldFilter
+    from persuasive.safety.measures import caused_by_av, rear_end_mask
+
+    config = Config(mode="corrected").with_overrides(
+        {"scenario.kind": scenario, "av.shield": kind, "scenario.angle_deg": 60.0}
+        if scenario == "crossing" else {"scenario.kind": scenario, "av.shield": kind})
+    sc, P_av, P_hv, _ = static_setup(config)
+    filt = ShieldFilter.closed_loop(P_av, P_hv, 0.1)
+    rng = np.random.default_rng(seed)
+    lo, hi = sc.av.occupancy
+    x = [sc.av.zone[0] - 0.1 - 16.0 / 3.9 - back, 4.0, sc.hv.zone[0] - hv_back, hv_v0]
+    states, verdicts = [list(x)], []
+    for _ in range(150):
+        a, verdict = filt.one(-2.0 if rng.random() < p_brake else 1.0, (x[0], x[1]),
+                              (x[2], x[3]))
+        x[0], x[1] = saturated_step(x[0], x[1], a, 0.1, 0.0, 10.0)
+        x[2], x[3] = saturated_step(x[2], x[3], rng.uniform(-2.0, 1.0), 0.1, 0.0, 10.0)
+        states.append(list(x))
+        verdicts.append(verdict)
+    after = np.array(states)[1:]
+    assert not (x[1] <= 1e-3 and lo <= x[0] <= hi)
+    if kind == "worst-case":
+        assert sh.UNCERTIFIED not in verdicts
+        assert not caused_by_av(sc.collides(after[:, 0], after[:, 2]),
+                                rear_end_mask(sc, after[:, 0], after[:, 2])).any()

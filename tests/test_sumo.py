@@ -265,10 +265,18 @@ def test_shield_many_equals_the_single_shield():
 
 def _many_by_hand(v, a, s_R, s_H, v_H, C):
     """The rule of shield_filter written out: the first of "a then brake", "a then go",
-    "brake", "go" certified against every vehicle with the same fallback."""
+    "brake", "go" certified against every vehicle with the same fallback; inside a crossing's
+    interval it drives through (issue 39): "a then go" (not for a braking proposal, nor
+    standing), "go", then "a then brake", "brake"."""
     u_min, u_max = C[0, sh.C_R_UMIN], C[0, sh.C_R_UMAX]
-    for first, fb, verdict in ((a, u_min, sh.ADMITTED), (a, u_max, sh.ADMITTED),
-                               (u_min, u_min, sh.BRAKE), (u_max, u_max, sh.GO)):
+    order = ((a, u_min, sh.ADMITTED), (a, u_max, sh.ADMITTED), (u_min, u_min, sh.BRAKE),
+             (u_max, u_max, sh.GO))
+    if any(C[j, sh.C_R_LO] <= s_R[j] <= C[j, sh.C_R_HI] for j in range(len(s_R))):
+        through = ((u_max, u_max, sh.GO),) if a < 0.0 or (a <= 0.0 and v <= 0.0) else \
+            ((a, u_max, sh.ADMITTED), (u_max, u_max, sh.GO))
+        order = (*through, (a, u_max, sh.ADMITTED), (u_max, u_max, sh.GO),
+                 (a, u_min, sh.ADMITTED), (u_min, u_min, sh.BRAKE))
+    for first, fb, verdict in order:
         if all(sh.certified(s_R[j], v, first, 0.1, fb, s_H[j], v_H[j], C[j],
                             *sh.human_window(s_H[j], v_H[j], C[j])) for j in range(len(s_R))):
             return first, verdict
@@ -586,8 +594,9 @@ def test_an_out_folder_holding_files_is_refused_before_any_work(capsys, tmp_path
     (full / "sub" / "also.txt").write_text("mine too")
     rc, stdout, err = _run_cli(["--episodes", "1", "--out", str(full)], capsys)
     assert rc == 2 and stdout == ""
-    assert err.strip() == (f"error: results folder {str(full)!r} holds other files; choose "
-                           "another --out or pass --force to replace it")
+    assert err.strip() == (f"error: results folder {str(full)!r} holds other files "
+                           "(keep.txt); choose another --out, or pass --force to replace only "
+                           "this command's own files in it (the others are kept)")
     assert (full / "keep.txt").read_text() == "mine"
     assert (full / "sub" / "also.txt").read_text() == "mine too"
     for here in (".", str(tmp_path)):
@@ -602,7 +611,8 @@ def test_an_out_folder_holding_files_is_refused_before_any_work(capsys, tmp_path
 def test_one_episode_reads_as_one_and_cached_kernels_give_no_notice(capsys, tmp_path):
     """After a first run has cached the planner's kernels, the command says nothing about
     compiling (it used to on every run: it looked at kernels SUMO never uses), and one
-    episode is "1 episode (seed 1)". --force replaces a folder holding files."""
+    episode is "1 episode (seed 1)". --force writes into a folder holding a user's files,
+    keeping them."""
     out = tmp_path / "res"
     out.mkdir()
     (out / "old.txt").write_text("old")
@@ -616,7 +626,7 @@ def test_one_episode_reads_as_one_and_cached_kernels_give_no_notice(capsys, tmp_
     assert cap.err == ""
     assert cap.out.startswith("SUMO intersection: 1 episode (seed 1), 300 veh/h")
     assert "1 worker," in cap.out.splitlines()[0]
-    assert not (out / "old.txt").exists() and (out / "episodes.parquet").is_file()
+    assert (out / "old.txt").read_text() == "old" and (out / "episodes.parquet").is_file()
 
 
 def _leftovers():

@@ -65,7 +65,10 @@ for every true state in it, but a fresh measurement can leave ``S`` (docs/method
 it and can still stand before it, :func:`line_binds`), "``a``, then ``BRAKE``" is certified with
 the AV's interval taken to start at the line (:func:`brake_certified`), and an override first
 tries the gentlest stop at the line (:func:`line_brake`); once committed, an override prefers
-``GO`` to ``BRAKE``. Moving ``R_lo`` back only enlarges the AV's claimed occupancy, so every
+``GO`` to ``BRAKE``, and while the AV is committed before a crossing's interval or inside it, a
+braking proposal (or standing) is admitted only when no way through is certified: it drives
+through rather than stand where it blocks the others (every kind; standing there stays
+certified, but is the last resort). Moving ``R_lo`` back only enlarges the AV's claimed occupancy, so every
 answer is still certified from the current state and ``S`` is unchanged: the line chooses among
 certified answers, never adds one. A line at ``R_lo`` (the default) never binds.
 
@@ -917,12 +920,18 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     # proposal is admitted with BRAKE only after every way through has failed (it would
     # stand there)
     through = False
-    if kind == slot.SHIELD_RESPONSIBILITY and not yielding:
-        # under the rule others stop for an AV in their way, so an AV between a line and its
-        # interval or inside a crossing's interval that brakes (or stays at rest) is admitted
-        # where it blocks them, and standing there would count as safe (docs/method.md
-        # §12.13): it drives through instead; standing is its last resort and a safe instant
-        # only for the vehicles that do not block its way through (below)
+    asked = proposal_ok
+    if not yielding:
+        # an AV between a line and its interval or inside a crossing's interval that brakes
+        # (or stays at rest) would be admitted wherever "a, then GO" stays certified, and
+        # could stand there, where it blocks the others, for as long as GO does (issue 39: 13
+        # of 2,286 random worst-case runs ended at rest inside the interval); under the
+        # responsibility rule others stop for an AV in their way, and standing there would
+        # even count as safe (docs/method.md §12.13). So, whatever the kind, it drives
+        # through instead: a braking proposal there is admitted only when no way through is
+        # certified (the second pass below); for the responsibility kind standing is then
+        # its last resort and a safe instant only for the vehicles that do not block its
+        # way through (below)
         for j in range(n):
             s = s_R[j] + lead[1]
             if C[j, C_SHARED] == 0.0 and (C[j, C_R_LO] <= s <= C[j, C_R_HI] or (
@@ -945,6 +954,11 @@ def shield_filter(kind: float, a: float, v_R: float, dt: float, u_brake: float,
     found, first, verdict, fb, shift, steps, c = _pick(
         (1, 2, 3, 6, 7, 8, 10, 10, 10, 10) if through else order, proposal_ok, a, v_R, dt,
         s_R, s_H, v_H, C, lead, window, u_min, u_max, a_f, a_line, m_a, m_g, yielding, follow)
+    if through and not found and kind != slot.SHIELD_RESPONSIBILITY:
+        # no way through is certified: the proposal as asked, then the fallbacks in order
+        found, first, verdict, fb, shift, steps, c = _pick(
+            order, asked, a, v_R, dt, s_R, s_H, v_H, C, lead, window, u_min, u_max, a_f,
+            a_line, m_a, m_g, yielding, follow)
     if kind == slot.SHIELD_RESPONSIBILITY:
         # the response (docs/method.md §12.13): an answer certified against every
         # responsible human granted its fresh response makes this a safe instant for every
