@@ -7,10 +7,13 @@ BIN := $(VENV)/bin
 
 .PHONY: setup demo test bench clean
 
+# ends by compiling every command's kernels once (persuasive compile), so that demo and test
+# start warm
 $(BIN)/persuasive: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/persuasive compile
 	touch $@
 
 setup: $(BIN)/persuasive

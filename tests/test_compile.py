@@ -3,6 +3,8 @@ package clears the cached kernels, so a function never runs a stale copy of a ca
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import persuasive._compile as comp
 
 
@@ -65,13 +67,46 @@ def test_the_stamp_follows_numba_cache_dir(tmp_path, monkeypatch):
     pkg, cache = tmp_path / "pkg", tmp_path / "cache"
     pkg.mkdir()
     (pkg / "a.py").write_text("@njit\ndef f(): pass\n")
-    stale = cache / "work" / "persuasive" / "k.f-1.py311.nbi"
+    stale = comp._numba_cache_folder(cache, pkg) / "a.f-1.py311.nbi"
     stale.parent.mkdir(parents=True)
     stale.write_bytes(b"cached")
     monkeypatch.setattr(comp, "_PACKAGE", pkg)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
     assert comp.ensure_fresh_cache() is True
     assert not stale.exists() and (cache / comp._STAMP).exists()
+
+
+def test_another_cache_dir_leaves_the_package_s_own_cache_alone(tmp_path, monkeypatch):
+    """A process with ``NUMBA_CACHE_DIR`` set (a test's empty folder) checks and clears only
+    that folder's kernels: the package's ``__pycache__`` ones (the user's cache, which Numba
+    does not read then) survive, and so do other packages' kernels in the same folder."""
+    pkg, cache = tmp_path / "pkg", tmp_path / "cache"
+    pkg.mkdir()
+    caches, keep = _fake_package(pkg)
+    stale = [comp._numba_cache_folder(cache, pkg / "sub") / "b.g-3.py311.nbi"]
+    other = cache / "elsewhere_0123" / "c.h-1.py311.nbi"
+    for c in stale + [other]:
+        c.parent.mkdir(parents=True, exist_ok=True)
+        c.write_bytes(b"cached")
+    monkeypatch.setattr(comp, "_PACKAGE", pkg)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    assert comp.ensure_fresh_cache() is True  # no stamp in the empty cache folder
+    assert not any(c.exists() for c in stale)
+    assert all(c.exists() for c in caches) and keep.exists() and other.exists()
+    assert not (pkg / "__pycache__" / comp._STAMP).exists()
+
+
+def test_the_cache_folders_are_numba_s(tmp_path, monkeypatch):
+    """The folder :func:`persuasive._compile._cache_dirs` clears under ``NUMBA_CACHE_DIR`` is
+    the one Numba writes a kernel of the package to."""
+    from numba.core.caching import _CacheLocator
+
+    from persuasive.safety.shield import shield_filter
+
+    src = shield_filter.py_func.__code__.co_filename
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert comp._numba_cache_folder(tmp_path, Path(src).parent) == \
+        tmp_path / _CacheLocator.get_suitable_cache_subpath(src)
 
 
 def test_first_use_announces_the_compilation_in_one_line(capsys, monkeypatch):

@@ -75,19 +75,20 @@ def test_check_output_file_rejects_folders_and_bad_extensions(tmp_path):
 
 def test_folder_is_written_as_a_set(tmp_path):
     target = tmp_path / "res"
-    with atomic_folder(target) as tmp:
+    with atomic_folder(target, owned=("*.txt",)) as tmp:
         (tmp / "a.txt").write_text("1")
         (tmp / "b.txt").write_text("2")
         assert not target.exists()  # nothing visible before the block ends
     assert sorted(p.name for p in target.iterdir()) == ["a.txt", "b.txt"]
     with pytest.raises(ZeroDivisionError):
-        with atomic_folder(target) as tmp:
+        with atomic_folder(target, owned=("*.txt",)) as tmp:
             (tmp / "a.txt").write_text("new")
             1 / 0
     assert (target / "a.txt").read_text() == "1"
-    with atomic_folder(target) as tmp:
+    with atomic_folder(target, owned=("*.txt",)) as tmp:
         (tmp / "c.txt").write_text("3")
-    assert sorted(p.name for p in target.iterdir()) == ["c.txt"]  # replaced as a whole
+    # only its own files: replaced as a whole
+    assert sorted(p.name for p in target.iterdir()) == ["c.txt"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["res"]
 
 

@@ -3,6 +3,7 @@ imports itself back through others: the package's import graph, every import sta
 counted (deferred ones inside functions too), has no cycle."""
 
 import ast
+import os
 import pkgutil
 import subprocess
 import sys
@@ -15,27 +16,62 @@ MODULES = sorted(m.name for m in pkgutil.walk_packages(persuasive.__path__, "per
                  if m.name != "persuasive.__main__")
 
 
-def test_every_module_imports_on_its_own():
+#: Run in one fresh interpreter: it imports the third-party libraries every module needs (not
+#: the package: numpy, numba, pandas, matplotlib, the extras...), then forks one child per
+#: module, which imports it: each child starts with no module of the package loaded, as a
+#: fresh interpreter would, without paying those imports again (70 s for the package with one
+#: process per module).
+_IMPORTER = """
+import importlib, os, sys, traceback
+import numpy, numba, pandas, pyarrow, scipy.optimize, click, tqdm
+for lib in ("matplotlib.pyplot", "imageio", "distributed", "gymnasium", "highway_env",
+            "starlette.applications", "uvicorn", "lanelet2"):
+    try:  # the optional extras too, where installed
+        importlib.import_module(lib)
+    except ImportError:
+        pass
+for name in sys.argv[1:]:
+    pid = os.fork()
+    if pid == 0:
+        try:
+            importlib.import_module(name)
+        except BaseException as exc:
+            print(name + "\t" + (traceback.format_exception_only(exc)[-1].strip()),
+                  flush=True)
+            os._exit(1)
+        os._exit(0)
+    _, status = os.waitpid(pid, 0)
+    if status != 0:
+        print(name + "\tstatus " + str(status), flush=True)
+"""
+
+
+def test_every_module_imports_on_its_own(tmp_path):
     assert "persuasive.cli" in MODULES and "persuasive.cli.plots" in MODULES
-    procs = {}
+    # the bytecode the children compile goes to a folder of the test's, where the next child
+    # finds it (with PYTHONDONTWRITEBYTECODE every child compiled every source again)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPYCACHEPREFIX"] = str(tmp_path / "pycache")
+    env["MPLBACKEND"] = "Agg"
+    half = len(MODULES) // 2  # two interpreters, one per core
+    procs = [subprocess.Popen([sys.executable, "-c", _IMPORTER, *names], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for names in (MODULES[:half], MODULES[half:])]
     failures = {}
-    for name in MODULES:  # a few at a time: each start pays the numpy/numba import
-        procs[name] = subprocess.Popen([sys.executable, "-c", f"import {name}"],
-                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                       text=True)
-        if len(procs) >= 4:
-            _drain(procs, failures)
-    while procs:
-        _drain(procs, failures)
+    for proc in procs:
+        out, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err[-2000:]
+        for line in out.splitlines():
+            name, _, why = line.partition("\t")
+            failures.setdefault(name, why)
     assert failures == {}
 
 
-def _drain(procs, failures):
-    name = next(iter(procs))
-    proc = procs.pop(name)
-    _, err = proc.communicate(timeout=120)
-    if proc.returncode != 0:
-        failures[name] = err.strip().splitlines()[-1]
+def test_a_module_that_cannot_import_is_named():
+    """The importer has teeth: a module that raises at import is reported with its error."""
+    out = subprocess.run([sys.executable, "-c", _IMPORTER, "persuasive", "persuasive.nope"],
+                         capture_output=True, text=True, timeout=120).stdout
+    assert out.startswith("persuasive.nope\tModuleNotFoundError") and "persuasive\t" not in out
 
 
 # -- no import cycles, counting every import -----------------------------------------------------

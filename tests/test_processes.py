@@ -199,7 +199,7 @@ def _one_error_line(stderr: str) -> str:
 def test_ctrl_c_during_a_kernel_compile_stops_at_once(tmp_path):
     """With an empty kernel cache the command compiles for many seconds; Ctrl-C there ends
     it at once (an interrupt raised inside the compile would be swallowed by LLVM's
-    callbacks or end in a traceback)."""
+    callbacks or end in a traceback), with the same line as anywhere else."""
     noticed: list[float] = []
 
     def compiling(err: str) -> bool:  # 3 s after the notice: inside the first compile
@@ -210,7 +210,7 @@ def test_ctrl_c_during_a_kernel_compile_stops_at_once(tmp_path):
     code, took, err, _, temp = _interrupt(tmp_path, ["simulate", "--seed", "3"], compiling,
                                           {"NUMBA_CACHE_DIR": str(tmp_path / "empty-cache")})
     assert code == 130 and took < 5.0, (code, took)
-    assert _one_error_line(err) == "error: interrupted during a kernel compile"
+    assert _one_error_line(err) == "error: interrupted"
     assert list(temp.iterdir()) == []
 
 

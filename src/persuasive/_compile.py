@@ -1,8 +1,11 @@
 """The compiled kernels' on-disk cache: is it warm, and is it up to date?
 
-The kernels are compiled with ``cache=True``: the first process compiles them (about 25 s on
-the 2-core machine CI uses) and writes them next to the sources (or into
-``NUMBA_CACHE_DIR``); every later process loads them.
+The kernels are compiled with ``cache=True``: the first process that calls one compiles it and
+writes it next to the sources (or into ``NUMBA_CACHE_DIR``); every later process loads it.
+``persuasive compile`` (``make setup`` runs it) compiles every kernel any command calls at
+once, about 3 minutes of one core; afterwards a command only loads them (1 to 2 s).
+:func:`compile_seconds` counts the time this process spent compiling, so that a command
+reports it apart from its own time (:class:`StudyClock`).
 
 Numba checks a cached function against its own source file only. A cached function carries
 the code of every function it calls, so after an edit in a *called* function in another file
@@ -18,6 +21,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import re
+import time
 from pathlib import Path
 
 _PACKAGE = Path(__file__).resolve().parent
@@ -29,13 +34,17 @@ _SUFFIXES = (".nbi", ".nbc")
 _CONSTANT_MODULES = ("packing.py", "policies/kinds.py")
 
 
+#: A compiled function's decorator, at the start of a line (this module names it, and is none).
+_DECORATOR = re.compile(rb"^[ \t]*@(numba\.)?njit\b", re.MULTILINE)
+
+
 def kernel_sources() -> list[Path]:
     """The sources the compiled kernels are made of: every module that compiles functions,
     and the modules of constants they read."""
     out = []
     for path in sorted(_PACKAGE.rglob("*.py")):
         rel = path.relative_to(_PACKAGE).as_posix()
-        if rel in _CONSTANT_MODULES or b"@njit" in path.read_bytes():
+        if rel in _CONSTANT_MODULES or _DECORATOR.search(path.read_bytes()):
             out.append(path)
     return out
 
@@ -49,12 +58,26 @@ def sources_digest() -> str:
     return h.hexdigest()
 
 
+def _numba_cache_folder(root: Path, folder: Path) -> Path:
+    """Where Numba caches the kernels of the sources in ``folder`` under a user cache folder
+    ``root`` (``NUMBA_CACHE_DIR``): one flat folder per source folder, named after it and a
+    hash of its absolute path (numba.core.caching's ``get_suitable_cache_subpath``)."""
+    path = os.path.abspath(folder)
+    return root / f"{os.path.basename(path)}_{hashlib.sha1(path.encode()).hexdigest()}"
+
+
 def _cache_dirs() -> list[Path]:
-    dirs = [p for p in _PACKAGE.rglob("__pycache__") if p.is_dir()]
+    """The folders holding this package's cached kernels: its ``__pycache__`` folders, or with
+    ``NUMBA_CACHE_DIR`` set only that folder's subfolders for the package's source folders
+    (Numba then never reads the ``__pycache__`` ones, so a process using another cache never
+    touches the user's)."""
+    folders = sorted({p.parent for p in _PACKAGE.rglob("*.py")} | {_PACKAGE})
     custom = os.environ.get("NUMBA_CACHE_DIR")
-    if custom and Path(custom).is_dir():
-        dirs += [p for p in Path(custom).rglob("*") if p.is_dir() and "persuasive" in str(p)]
-    return dirs
+    if custom:
+        dirs = [_numba_cache_folder(Path(custom), f) for f in folders]
+    else:
+        dirs = [f / "__pycache__" for f in folders]
+    return [d for d in dirs if d.is_dir()]
 
 
 def _stamp_path() -> Path:
@@ -142,3 +165,63 @@ def warm_up() -> None:
 
     simulate(Config().with_overrides({"simulation.n_steps": 1}), 1)
     simulate(Config().with_overrides({"simulation.n_steps": 1, "av.kind": "lfg"}), 1)
+
+
+class _Compiles:
+    """Time this process spent in Numba's compiler (its ``numba:compile`` events, the
+    outermost only: a kernel's callees compile inside it). Loading a cached kernel is not a
+    compile and is not counted."""
+
+    seconds = 0.0
+    depth = 0
+    start = 0.0
+    installed = False
+
+    @classmethod
+    def install(cls) -> None:
+        if cls.installed:
+            return
+        from numba.core import event
+
+        class Listener(event.Listener):
+            def on_start(self, _event) -> None:
+                if cls.depth == 0:
+                    cls.start = time.perf_counter()
+                cls.depth += 1
+
+            def on_end(self, _event) -> None:
+                cls.depth = max(0, cls.depth - 1)
+                if cls.depth == 0:
+                    cls.seconds += time.perf_counter() - cls.start
+
+        event.register("numba:compile", Listener())
+        cls.installed = True
+
+
+def compile_seconds() -> float:
+    """Seconds this process has spent compiling kernels since the first call (which starts
+    the count: call it before the work whose compiles should be counted)."""
+    _Compiles.install()
+    running = time.perf_counter() - _Compiles.start if _Compiles.depth else 0.0
+    return _Compiles.seconds + running
+
+
+class StudyClock:
+    """A study's wall time without the kernel compiles that happened in it: ``seconds`` is the
+    time since the clock started less ``compile_s``, the compiles of this process since then
+    (a first run's compile is said apart: "compiled the numerical kernels in 158.2 s", then
+    "16000 runs in 58.3 s")."""
+
+    def __init__(self) -> None:
+        self._c0 = compile_seconds()
+        self._t0 = time.perf_counter()
+
+    @property
+    def compile_s(self) -> float:
+        """Seconds spent compiling kernels since the clock started."""
+        return compile_seconds() - self._c0
+
+    @property
+    def seconds(self) -> float:
+        """Seconds since the clock started, compiles excluded."""
+        return max(0.0, time.perf_counter() - self._t0 - self.compile_s)

@@ -1,4 +1,5 @@
-"""Writing result files and folders atomically, with one-line errors that name the user's path.
+"""Writing result files and folders atomically, one writer at a time, with one-line errors
+that name the user's path.
 
 - :func:`check_output_file` checks a file target before any work: a known extension, an
   existing parent folder that is a folder (missing folders are *not* created for a file
@@ -6,9 +7,47 @@
 - :func:`atomic_write` writes a file through a unique temporary sibling (``mkstemp`` in the
   target folder, so two threads or processes never share one), fsyncs it, then renames it
   into place; a failure leaves the target as it was and removes the temporary file.
-- :func:`atomic_folder` writes a whole results folder as a set: every file into a temporary
-  sibling folder, then one rename (an existing folder is swapped out and removed only after
-  the new one is in place).
+- :func:`atomic_folder` writes a whole results folder: every file into a temporary sibling
+  folder, then into place (below).
+- :func:`writer_lock` makes a command the only writer of its target (below).
+
+**What a command owns, and what ``--force`` means.** No command deletes a file it did not
+write, with or without ``--force``. Every command that writes a folder knows its own files by
+name: a fixed set of names or patterns per command (``owned``, glob patterns of the folder's
+top-level file names: ``summary.json``, ``vehicle_tracks_*.csv``, ...; a sweep's
+``manifest.json``, ``runs/part-*.parquet`` and ``failed/failed-*.json``, see
+:mod:`persuasive.sweep.store`). Names, not a manifest, so that folders written before this
+rule are recognised too; a user's file that bears one of those names is taken for the
+command's (the ``--force`` help of each command lists them). ``--force`` means the same in
+every command: *replace this command's own earlier results in that folder*; every other entry
+(a user's ``notes.txt``, a subfolder) is kept. Without ``--force`` a folder written as a whole
+that holds anything is refused, before any work, in one line naming the folder and one of its
+files (:func:`check_replaceable_folder`). With ``--force``, :func:`atomic_folder` swaps the
+folder as a whole when it holds only the command's own files (readers see the old set or the
+new one, never a mix); when it holds anything else it moves each new file into place with
+``os.replace`` (each atomic), then removes the command's own files that the new result no
+longer has, and leaves everything else where it is.
+
+**One writer per target.** :func:`writer_lock` takes an advisory lock (``flock``,
+``LOCK_EX | LOCK_NB``) on a lock file *beside* the target, ``.<name>.persuasive.lock`` in the
+target's parent folder, for a folder and a file alike, and holds it for the whole command
+(the CLI enters it once its checks pass, before any work, and leaves it when the command
+ends: ``persuasive.cli._common.lock_output``). A second command writing the same target is
+refused in one line naming it and the holder's pid (:class:`OutputError`, exit status 2).
+Beside, not inside: a folder written as a whole is renamed into place from a temporary
+sibling, which would carry a lock file inside it away (and a lock inside would be one more
+file in the folder to tell apart from the results); the parent is never renamed, so the lock
+outlives the swap. Missing parent folders are made for the lock (the command would make them
+anyway) and removed again at the end if they are still empty. The lock file is removed when
+the command ends, while still held; a taker checks that the file it locked is still the one
+at that name (same inode), so a file removed under it is never shared. A process that dies
+releases its lock with it (the kernel drops ``flock`` locks when the last descriptor closes:
+the descriptor is close-on-exec, and workers are started from the fork server, not forked
+from the command), and a lock file a killed command left behind is taken over by the next
+one. Only where the parent takes no new files (``--out`` is a writable folder in a read-only
+one) does the lock go inside the folder, as ``.persuasive.lock``; lock files never count as
+results or as a user's files (:func:`is_lock_file`). A file system without ``flock`` support
+leaves the command unlocked rather than failing it.
 
 Every failure raises :class:`OutputError`, a :class:`~persuasive.config.ConfigError` whose
 one-line message names the path the user gave and the reason, never a temporary name. The
@@ -21,6 +60,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fnmatch
 import os
 import re
 import shutil
@@ -176,29 +216,97 @@ def check_output_folder(path: str | Path, what: str = "results folder") -> Path:
     return path
 
 
+#: The lock file of :func:`writer_lock` inside a folder (only where its parent takes no files).
+INSIDE_LOCK = ".persuasive.lock"
+#: What a writer lock's file is called beside its target: ``.<name>`` + this.
+LOCK_SUFFIX = ".persuasive.lock"
+_LOCK_NAME = re.compile(r"\.(?:.+\.)?persuasive\.lock")
+
+
+def is_lock_file(name: str) -> bool:
+    """Whether ``name`` is the name of a :func:`writer_lock` file (``.persuasive.lock``,
+    ``.<target>.persuasive.lock``): neither a result nor a user's file."""
+    return _LOCK_NAME.fullmatch(name) is not None
+
+
+def owns(name: str, owned: Sequence[str]) -> bool:
+    """Whether a top-level file ``name`` is one a command writes: it matches one of the glob
+    patterns ``owned`` (see the module docstring)."""
+    return any(fnmatch.fnmatchcase(name, pattern) for pattern in owned)
+
+
+def folder_entries(path: str | Path, owned: Sequence[str]) -> tuple[list[str], list[str],
+                                                                     list[str]]:
+    """The entries of the existing folder ``path``, sorted, in three lists: the command's own
+    files (regular files whose names match ``owned``), lock files (:func:`is_lock_file`) and
+    the others (a user's files, subfolders: never deleted, see the module docstring)."""
+    own, locks, other = [], [], []
+    for child in sorted(Path(path).iterdir()):
+        if is_lock_file(child.name):
+            locks.append(child.name)
+        elif owns(child.name, owned) and child.is_file() and not child.is_symlink():
+            own.append(child.name)
+        else:
+            other.append(child.name + ("/" if child.is_dir() else ""))
+    return own, locks, other
+
+
 def check_replaceable_folder(path: str | Path, force: bool = False,
-                             what: str = "results folder") -> Path:
-    """Check, before any work, a folder that a command writes as a whole (replacing it):
-    :func:`check_output_folder`, and it must not hold the current folder (it could not be
-    replaced) nor, without ``force``, any file (which the command would delete)."""
+                             what: str = "results folder",
+                             owned: Sequence[str] = ()) -> Path:
+    """Check, before any work, a folder that a command writes as a whole
+    (:func:`atomic_folder` with the same ``owned``): :func:`check_output_folder`, and it must
+    not hold the current folder (it could not be replaced) nor, without ``force``, any entry
+    but lock files (the message names the folder and one entry: another file first, else
+    one of the command's earlier results). With ``force`` the command's own files will be
+    replaced and every other entry kept."""
     path = check_output_folder(path, what)
     here = Path.cwd().resolve()
     if path.exists() and path.resolve() in (here, *here.parents):
         raise OutputError(f"{what} {str(path)!r} cannot be replaced: it holds the current "
                           "folder; name a new or empty folder")
-    if not force and path.is_dir() and any(path.iterdir()):
-        raise OutputError(f"{what} {str(path)!r} holds other files; choose another --out or "
-                          "pass --force to replace it")
+    if not force and path.is_dir():
+        own, _, other = folder_entries(path, owned)
+        if other:
+            raise OutputError(f"{what} {str(path)!r} holds other files ({other[0]}); choose "
+                              "another --out, or pass --force to replace only this command's "
+                              "own files in it (the others are kept)")
+        if own:
+            raise OutputError(f"{what} {str(path)!r} holds earlier results ({own[0]}); "
+                              "choose another --out or pass --force to replace them")
     return path
 
 
-@contextlib.contextmanager
-def atomic_folder(path: str | Path, what: str = "results folder") -> Iterator[Path]:
-    """Yield a temporary folder; on success it replaces ``path`` as a whole.
+def _merge(tmp: Path, path: Path, owned: Sequence[str], what: str) -> None:
+    """Move every file of ``tmp`` into the existing folder ``path`` (one ``os.replace``
+    each), then remove the files of ``owned`` names that the new set lacks; nothing else in
+    ``path`` is touched."""
+    new = sorted(child.name for child in tmp.iterdir())
+    own, _, _ = folder_entries(path, owned)
+    for name in new:  # refused before anything moves: a name the command does not own
+        target = path / name
+        if (target.exists() or target.is_symlink()) and name not in own:
+            raise OutputError(f"{what} {str(path)!r} holds {name!r}, which this command did "
+                              "not write; move it or choose another --out")
+    for name in new:
+        os.replace(tmp / name, path / name)
+    for name in set(own) - set(new):
+        (path / name).unlink(missing_ok=True)
 
-    Files are written into a hidden sibling of ``path``; when the block ends without error,
-    the sibling is fsynced and renamed to ``path`` (an existing ``path`` is first renamed
-    aside, then removed). On error the temporary folder is removed and ``path`` is untouched.
+
+@contextlib.contextmanager
+def atomic_folder(path: str | Path, what: str = "results folder",
+                  owned: Sequence[str] = ()) -> Iterator[Path]:
+    """Yield a temporary folder for a command's files; on success they replace the command's
+    earlier files in ``path`` (see the module docstring).
+
+    Files are written into a hidden sibling of ``path``, then fsynced. A new ``path``, or
+    one that holds only files matching the glob patterns ``owned``, is then replaced as a
+    whole: the old one renamed aside, the new one renamed into place, the old one removed.
+    A ``path`` holding anything else (a user's file, a subfolder, a lock file) keeps it: each
+    new file is renamed into place, then the ``owned`` files the new set lacks are removed.
+    With ``owned`` empty nothing in an existing ``path`` is the command's, and nothing is
+    removed. On error the temporary folder is removed and ``path`` is untouched.
     """
     path = Path(path)
     check_output_folder(path, what)
@@ -216,6 +324,11 @@ def atomic_folder(path: str | Path, what: str = "results folder") -> Iterator[Pa
             if child.is_file():
                 with open(child, "rb") as fh:
                     os.fsync(fh.fileno())
+        if path.is_dir():
+            _, locks, other = folder_entries(path, owned)
+            if locks or other:
+                _merge(tmp, path, owned, what)
+                return
         old = None
         if path.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old",
@@ -233,3 +346,121 @@ def atomic_folder(path: str | Path, what: str = "results folder") -> Iterator[Pa
         raise OutputError(f"{what} {str(path)!r} cannot be written: {_reason(exc)}") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+# -- one writer per target -----------------------------------------------------------------
+
+
+def _make_folders(folder: Path) -> list[Path]:
+    """Make ``folder`` and its missing parents; return those made, outermost first."""
+    missing = []
+    for f in (folder, *folder.parents):
+        if f.exists():
+            break
+        missing.append(f)
+    folder.mkdir(parents=True, exist_ok=True)
+    return missing[::-1]
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for f in reversed(folders):  # innermost first; one that holds anything stays
+        try:
+            f.rmdir()
+        except OSError:
+            return
+
+
+def _holder(lock: Path) -> str:
+    """``" (pid N)"`` of the process a lock file names, or nothing when it names none yet."""
+    try:
+        text = lock.read_text(encoding="ascii", errors="replace").split()
+    except OSError:
+        return ""
+    return f" (pid {text[0]})" if text and text[0].isdigit() else ""
+
+
+def _lock_file(target: Path, what: str, shown: str) -> Path:
+    """Where the lock of ``target`` lives: beside it, or inside an existing folder whose
+    parent takes no new files (the module docstring)."""
+    parent = Path(os.path.realpath(target.parent))
+    if not target.name:  # the root folder has no parent to hold it
+        return parent / INSIDE_LOCK
+    if os.access(parent, os.W_OK | os.X_OK):
+        return parent / f".{target.name}{LOCK_SUFFIX}"
+    if target.is_dir() and not target.is_symlink() and os.access(target, os.W_OK | os.X_OK):
+        return Path(os.path.realpath(target)) / INSIDE_LOCK
+    why = unwritable_reason(parent) or f"{str(parent)!r} is not writable"
+    raise OutputError(f"{what} {shown!r} cannot be written: {why}")
+
+
+def _open_lock(lock: Path) -> int:
+    try:
+        return os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+    except PermissionError:  # another user's lock file: flock needs no write access
+        return os.open(lock, os.O_RDONLY | os.O_CLOEXEC)
+
+
+@contextlib.contextmanager
+def writer_lock(path: str | Path, what: str = "output") -> Iterator[Path]:
+    """Hold the one-writer lock of the file or folder ``path`` (the module docstring) for the
+    block; yield the lock file's path.
+
+    Raises :class:`OutputError` (``"<what> '<path>' is being written by another persuasive
+    command (pid N); wait until it ends or write elsewhere"``) at once when another holder,
+    in this process or another, has it; nothing is written then. Missing parent folders of
+    ``path`` are made, and removed at the end if still empty. The lock file is removed at
+    the end, while still held.
+    """
+    shown = str(path)
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no advisory locks to take
+        yield Path(path)
+        return
+    target = Path(os.path.abspath(path))
+    made: list[Path] = []
+    fd = None
+    try:
+        for _ in range(1000):  # a releasing holder may remove the file, or the folders, between
+            try:
+                made += [f for f in _make_folders(target.parent) if f not in made]
+                lock = _lock_file(target, what, shown)
+                fd = _open_lock(lock)
+            except FileNotFoundError:
+                continue
+            except OSError as exc:
+                raise OutputError(f"{what} {shown!r} cannot be written: "
+                                  f"{_reason(exc)}") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                fd = None
+                raise OutputError(f"{what} {shown!r} is being written by another persuasive "
+                                  f"command{_holder(lock)}; wait until it ends or write "
+                                  "elsewhere") from None
+            except OSError:  # a file system without flock: go on unlocked
+                os.close(fd)
+                fd = None
+                break
+            try:  # still the file at that name? (a holder removes it before letting go)
+                same = os.stat(lock).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                with contextlib.suppress(OSError):  # the pid is for messages only
+                    os.ftruncate(fd, 0)
+                    os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+                break
+            os.close(fd)
+            fd = None
+        else:
+            raise OutputError(f"{what} {shown!r} cannot be locked: its lock file keeps "
+                              "changing")
+        yield lock if fd is not None else target
+    finally:
+        if fd is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(lock)
+            os.close(fd)
+        _remove_empty(made)

@@ -27,7 +27,7 @@ import numpy as np
 from ._version import __version__
 from ._compile import warm_up
 from ._processes import context
-from ._files import OutputError, atomic_folder, atomic_write
+from ._files import OutputError, atomic_folder, atomic_write, is_lock_file
 from .config import Config, ConfigError
 from .simulation import simulate
 from .sweep.grid import SEED_MAX
@@ -331,7 +331,7 @@ def check_folder(folder: str | Path, settings, force: bool = False) -> None:
         return
     if not folder.is_dir():
         raise OutputError(f"results folder {str(folder)!r} cannot be written: it is a file")
-    if not any(folder.iterdir()):
+    if not any(not is_lock_file(p.name) for p in folder.iterdir()):
         return
     if isinstance(settings, Grid):
         try:
@@ -554,13 +554,19 @@ def reproduce(table: str = "all", seeds: int = 1000, workers: int | None = None,
                         skipped, ran)
 
 
+#: The files :func:`save` writes into a folder of its own (:func:`persuasive._files.atomic_folder`
+#: replaces these and keeps every other file).
+SAVED_FILES = ("runs.parquet", "summary.json", "summary.md", "config.toml")
+
+
 def save(result: Reproduction, table: str, out: str | Path, force: bool = True) -> Path:
     """Write ``table``'s summary (JSON, Markdown), configuration (TOML) and, when the runs are
     not there already, the runs (Parquet) into the folder ``out``, each file atomically.
 
     Without ``force``, a folder holding results made with other settings is refused
-    (:func:`check_folder`). After :func:`reproduce` with ``out``, the folder is already the
-    table's sweep folder (its runs in ``runs/``) and this adds the summary beside them.
+    (:func:`check_folder`); with it, the files of :data:`SAVED_FILES` are replaced and every
+    other file in ``out`` is kept. After :func:`reproduce` with ``out``, the folder is already
+    the table's sweep folder (its runs in ``runs/``) and this adds the summary beside them.
     """
     out = Path(out)
     summary = result.summaries[table]
@@ -568,7 +574,7 @@ def save(result: Reproduction, table: str, out: str | Path, force: bool = True) 
     if not own:
         check_folder(out, summary.get("config_hash", ""), force)
         runs = result.runs[result.runs["table"] == table]
-        with atomic_folder(out) as tmp:
+        with atomic_folder(out, owned=SAVED_FILES) as tmp:
             runs.to_parquet(tmp / "runs.parquet", index=False)
             _write_summary(tmp, summary)
         return out

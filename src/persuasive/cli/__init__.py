@@ -32,6 +32,7 @@ def cli() -> None:
 def _register() -> None:
     from .bench import bench
     from .compare import compare
+    from .compile import compile_command
     from .drive import drive
     from .fit import fit
     from .highway import highway
@@ -48,6 +49,7 @@ def _register() -> None:
     cli.add_command(fit)
     cli.add_command(sumo)
     cli.add_command(recordings)
+    cli.add_command(compile_command)
     plot.add_command(plot_sweep)
     plot.add_command(plot_compare)
 
@@ -89,13 +91,12 @@ def _on_interrupt(signum, frame) -> None:
     """Ctrl-C: a KeyboardInterrupt, which every command turns into one line and exit 130
     (its workers killed at once, its temporary files removed). Inside a kernel compile (which
     would swallow the interrupt in LLVM's callbacks, or break half-way with a traceback) and
-    at a second Ctrl-C, the command ends at once instead: one line, its scratch folder
+    at a second Ctrl-C, the command ends at once instead: the same line, its scratch folder
     removed, exit 130 (its workers end with it; the kernel cache is written atomically, so
     an interrupted compile only compiles again next time)."""
     _on_interrupt.count = getattr(_on_interrupt, "count", 0) + 1
     if _on_interrupt.count > 1 or _Compiling.depth > 0:
-        during = " during a kernel compile" if _Compiling.depth > 0 else ""
-        sys.stderr.write(f"\nerror: interrupted{during}\n")
+        sys.stderr.write("\nerror: interrupted\n")
         sys.stderr.flush()
         from .._processes import remove_scratch
 

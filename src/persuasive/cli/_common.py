@@ -1,4 +1,5 @@
-"""What every command shares: building the configuration, the run options, output checks.
+"""What every command shares: building the configuration, the run options, output checks
+and the one-writer lock of an output (:func:`lock_output`).
 
 Precedence, the same for every command: an explicit option (``--mode``, ``--av``, ``--pa``,
 ...) beats ``--set section.field=value``, which beats ``--config FILE.toml``, which beats the
@@ -359,13 +360,67 @@ def check_workers(workers: int | None, n_tasks: int) -> int:
     return max(1, min(workers, n_tasks))
 
 
-def compile_notice(*kernels) -> None:
+def lock_output(path, what: str = "output") -> None:
+    """Make this command the only writer of the file or folder ``path`` until it ends
+    (:func:`persuasive._files.writer_lock`, released when the command's click context
+    closes, also on error): a command writing it already makes this one stop here, in one
+    line with exit status 2. Call it once the checks pass, before any work."""
+    from .._files import writer_lock
+
+    click.get_current_context().with_resource(writer_lock(path, what))
+
+
+def check_input_files(*configs: Config) -> None:
+    """Read the files the configurations name (the replay human's log, ``hv.replay.file``)
+    before any work: a missing or unreadable one is refused at once, in one line, not after
+    a compile."""
+    from ..policies import load_replay
+
+    for config in configs:
+        if config.hv.kind == "replay":
+            load_replay(config)
+
+
+def check_readable(paths: Iterable[str], what: str) -> None:
+    """Refuse, in one line naming it, the first of ``paths`` that cannot be opened for reading
+    (missing, a folder, no permission): every input file of a command is checked before any
+    of them is read and before any compile."""
+    for path in paths:
+        try:
+            with open(path, "rb"):
+                pass
+        except OSError as exc:
+            reason = (exc.strerror or type(exc).__name__).lower()
+            raise ConfigError(f"{what} {str(path)!r} cannot be read: {reason}") from None
+
+
+#: The first line of :func:`compile_notice`, and of :func:`compile_report`'s line.
+COMPILE_NOTICE = "compiling the numerical kernels once"
+COMPILED = "compiled the numerical kernels in"
+
+
+def compile_notice(*kernels) -> bool:
     """One line on stderr when the compiled kernels the command uses (default: the closed
-    loop's; see :func:`persuasive._compile.kernels_cached`) are not cached yet (first use)."""
+    loop's; see :func:`persuasive._compile.kernels_cached`) are not cached yet (first use);
+    True when it said so. Call it once the command's inputs are checked: a bad input is
+    refused at once, not after a compile."""
     from .._compile import kernels_cached
 
-    if not kernels_cached(*kernels):
-        click.echo("compiling the numerical kernels once (about 25 s; cached for later runs)",
+    if kernels_cached(*kernels):
+        return False
+    click.echo(f"{COMPILE_NOTICE} (cached for later runs; 'persuasive compile' compiles every "
+               "command's)", err=True)
+    sys.stderr.flush()
+    return True
+
+
+def compile_report(clock) -> None:
+    """One line on stderr when the command compiled kernels (a
+    :class:`persuasive._compile.StudyClock` started at its beginning): their time, which the
+    time the command prints leaves out."""
+    if clock.compile_s > 0.0:
+        sys.stdout.flush()
+        click.echo(f"{COMPILED} {clock.compile_s:.1f} s (left out of the time reported)",
                    err=True)
         sys.stderr.flush()
 

@@ -9,8 +9,8 @@ import click
 from ..config import AV_KINDS, ROLES, SHIELD_KINDS, SIMULATED_HV_KINDS, Config
 from ..studies.compare import DEFAULT_HV_KINDS
 from ._common import (INTERACTIONS_HELP, KIND_OPTIONS, SEED_MAX, Count, build_config,
-                      check_workers, compile_notice, config_options, kinds_text, progress_bar,
-                      scenario_option, workers_type)
+                      check_workers, compile_notice, config_options, kinds_text, lock_output,
+                      progress_bar, scenario_option, workers_type)
 
 #: The human kinds left out by default (they need more than a configuration, e.g. replay's
 #: recording), named in the help.
@@ -56,7 +56,10 @@ def check_hv_role(hv_role: str | None, base: Config, avs, hvs) -> None:
 @config_options
 @click.option("--out", type=click.Path(file_okay=False), default=None,
               help="Comparison folder [results/compare-<grid hash>/]; rerunning resumes.")
-@click.option("--force", is_flag=True, help="Replace a folder holding another comparison.")
+@click.option("--force", is_flag=True,
+              help="Replace this command's own earlier results in the folder (another "
+                   "comparison's manifest.json, runs/part-*.parquet, failed/failed-*.json, "
+                   "summary.json, summary.md); other files are kept.")
 @click.option("--timing-seeds", type=Count(1, 1000), default=3, show_default=True,
               help="Seeds per pair whose AV decisions are timed (in this process; never more "
                    "than --seeds).")
@@ -96,6 +99,7 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
                    "the AV draws (the lfg AV does), so those runs are not paired", err=True)
     grid = cmp.comparison_grid(cmp.comparison_base(base), avs, hvs, seeds,
                                shield_list)  # checks it all
+    lock_output(out if out is not None else cmp.default_folder(grid), "comparison folder")
     workers = check_workers(workers, max(1, len(grid) // 25))
     compile_notice()
     progress = progress_bar(quiet)

@@ -4,7 +4,8 @@ Binds to loopback (``127.0.0.1``) unless ``--host`` says otherwise. Any other ad
 token: one is generated (``secrets.token_urlsafe``), printed in the URL, and required on every
 request and websocket (403 without it); a warning says the page is reachable from the network.
 The study's configurations are checked and the planner's kernels loaded before the URL is
-printed. Ctrl-C stops the server cleanly: open trials are saved as ``-partial``.
+printed. Ctrl-C stops the server cleanly: open trials are saved as ``-partial``, and the
+command exits with status 130, as every command stopped by Ctrl-C does.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import sys
 
 import click
 
-from ._common import SEED_MAX, Count, compile_notice, shield_option
+from ._common import SEED_MAX, Count, compile_notice, lock_output, shield_option
 
 #: Where trials go unless ``--out`` says otherwise.
 DEFAULT_OUT = "results/drive"
@@ -68,6 +69,7 @@ def drive(host: str, port: int, study_file: str | None, out: str, seed: int | No
     if shield is not None:
         study = study.with_shield(shield)
     out_dir = check_output_folder(out, "output folder")
+    lock_output(out_dir, "output folder")  # one server per folder, until it stops
     loopback = is_loopback(host)
     token = None if loopback else secrets.token_urlsafe(24)
     sock = bind(host, port)  # a bad host or a port in use fails here, before anything is made
@@ -101,11 +103,14 @@ def drive(host: str, port: int, study_file: str | None, out: str, seed: int | No
                    "(add participant=ID to the query to fill in the ID); Ctrl-C stops")
         sys.stdout.flush()
         server = uvicorn_server(app)
+        interrupted = False
         try:
             asyncio.run(server.serve(sockets=[sock]))
-        except KeyboardInterrupt:
-            pass  # uvicorn re-raises the Ctrl-C it handled, after a clean shutdown
+        except KeyboardInterrupt:  # uvicorn re-raises the Ctrl-C it handled, after a clean
+            interrupted = True     # shutdown (open trials saved as -partial)
     finally:
         sock.close()
     files = sorted(p.name for p in Path(out_dir).glob("*.parquet"))
     click.echo(f"stopped; {len(files)} trial file{'s' * (len(files) != 1)} in {out_dir}")
+    if interrupted:  # as every command stopped by Ctrl-C: exit status 130
+        click.get_current_context().exit(130)

@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import json
 import math
-import time
 
 import click
 
+from .._compile import StudyClock
 from ..config import SCENARIO_KINDS
+from ._common import check_readable, compile_report, lock_output
 
 MODEL_CHOICES = ("lfg", "stubborn", "noisy", "idm", "all")
 
@@ -91,41 +92,15 @@ def _fit(ev, models, sigma_min: float, intervals: str, group: str | None = None)
     return FitReport(ev, fits, selected, role_model, p_leader, group, sigma_min)
 
 
-def _warm_up() -> None:
-    """Compile every kernel a fit may call (the parallel ones are chosen by the data's size)
-    on a one-step run, so that a later, larger fit never compiles silently."""
-    import numpy as np
-
-    from .. import packing as slot
-    from ..fitting.models import (EMIT_LFG, EMIT_NOISY, hmm_loglik, hmm_loglik_serial,
-                                  idm_sse, idm_sse_serial, path_loglik, path_loglik_serial)
-
-    starts = np.array([0, 1], np.int64)
-    args = (starts, np.zeros(1), np.zeros((1, 2)), np.ones((1, 2)), np.zeros((1, 2, 3)),
-            np.zeros((1, 3)), np.full(1, 0.5), np.ones(1), np.ones(1))
-    for kernel in (hmm_loglik, hmm_loglik_serial):
-        for kind in (EMIT_LFG, EMIT_NOISY):
-            kernel(kind, *args, np.empty((1, 1, 2)))
-    for kernel in (path_loglik, path_loglik_serial):  # recorded logs: over role paths
-        kernel(np.zeros(1, np.int64), starts, np.zeros(1), np.zeros((1, 2)), np.ones((1, 2)),
-               np.array([-1, 0, 1]), np.full((1, 3), 1.0 / 3.0), np.full(1, 0.5), np.ones(1),
-               np.empty((1, 1, 2)))
-    P = np.zeros((1, slot.N_SLOTS))
-    P[:, slot.U_MIN], P[:, slot.U_MAX], P[:, slot.YIELD_S], P[:, slot.CLEAR_S] = -2, 1, -6, 7
-    prm = np.array([[10.0, 1.5, 1.0, 1.5, 4.0, 2.0, 1.0, 0.0]])
-    states = np.array([[-20.0, 4.0, -20.0, 4.0]])
-    for kernel in (idm_sse, idm_sse_serial):
-        kernel(starts, states, np.zeros(1), P, P, np.full(1, 0.1), prm, np.zeros(1, np.int64),
-               np.empty((1, 1)))
-
-
 def _notice_compile() -> None:
     """The compile notice (its usual line) when the closed loop's or the fit's kernels are not
-    cached yet, and then the fit's kernels compiled at once: a first fit takes about 30 s
-    more on the 2-core machine CI uses."""
+    cached yet, and then the fit's kernels compiled at once
+    (:func:`persuasive.fitting.estimate.warm_up`). Called once the inputs are read: a bad
+    input is refused before any compile."""
     import os
 
     from ._common import compile_notice
+    from ..fitting.estimate import warm_up
     from ..fitting.evidence import human_views
     from ..fitting.models import hmm_loglik, path_loglik
 
@@ -139,9 +114,8 @@ def _notice_compile() -> None:
     if cached:
         compile_notice()
         return
-    click.echo("compiling the numerical kernels once (about 30 s; cached for later runs)",
-               err=True)
-    _warm_up()
+    compile_notice(hmm_loglik, path_loglik, human_views)
+    warm_up()
 
 
 def _mean_first(report) -> float:
@@ -240,6 +214,7 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
                         "others")
     if out:
         check_output_file(out, (".json",), "evaluation report")
+        lock_output(out, "evaluation report")
     if holdout is not None:
         split = Split("holdout", fraction=holdout)
     elif test_site is not None:
@@ -248,18 +223,19 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
         split = Split("folds", k=folds)
     models = MODELS if model == "all" else (model,)
     params = EvalParams(seed=seed if seed is not None else 0, sigma_min=sigma_min)
+    clock = StudyClock()
     try:
         sites = read_sites(paths)
         _notice_compile()
-        t0 = time.perf_counter()
         result = evaluate(sites, split, models, params)
     except RecordingError as exc:
         raise _BadInput(str(exc)) from None
-    elapsed = time.perf_counter() - t0
+    elapsed = clock.seconds
     payload = result.to_dict()
     payload["seconds"] = round(elapsed, 3)
     if out:
         write_json(out, payload)
+    compile_report(clock)
     if as_json:
         click.echo(json.dumps(payload, allow_nan=False))
         return
@@ -314,6 +290,7 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
     from ..fitting.evidence import check_distinct
     from ..recordings.evaluate import is_pairs_file
 
+    check_readable(logs, "log file")  # every input, before any is read or compiled for
     kinds = [is_pairs_file(p) for p in logs]
     if any(kinds):
         if not all(kinds):
@@ -331,15 +308,17 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
                             "FILE.parquet'), not to logs")
 
     ext = check_output_file(out, OUT_EXTENSIONS, "fit") if out else None
-    _notice_compile()
-    t0 = time.perf_counter()
-    runs = load_logs(logs, scenario)
+    if out:
+        lock_output(out, "fit")
+    clock = StudyClock()
+    runs = load_logs(logs, scenario)  # reads and checks every log, compiles nothing
     if per_participant:
         for log in runs:
             if log.participant is None:
                 raise ConfigError(f"--per-participant: log file {log.source!r} is not a drive "
                                   "trial (it names no participant: 'persuasive drive' stores "
                                   "one in each trial it writes)")
+    _notice_compile()
     models = MODELS if model == "all" else (model,)
     ev = evidence_of(runs)
     if per_participant:
@@ -350,7 +329,7 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
                    for name, idx in sorted(groups.items())]
     else:
         reports = [_fit(ev, models, sigma_min, intervals)]
-    elapsed = time.perf_counter() - t0
+    elapsed = clock.seconds
     payload = report_dict(reports)
     payload["seconds"] = round(elapsed, 3)
     if out:
@@ -358,6 +337,7 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
             write_json(out, payload)
         else:
             write_fit_parquet(out, reports, payload)
+    compile_report(clock)
     if as_json:
         click.echo(json.dumps(payload, allow_nan=False))
         return

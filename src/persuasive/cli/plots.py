@@ -6,7 +6,8 @@ except that ``--seed`` defaults to the run the authors show in their Figs. 2 and
 and the simulation are imported inside the commands, so ``persuasive --help`` stays fast and the
 command line never pulls matplotlib in unless a figure is drawn; the Agg backend is forced there,
 as no window is ever opened. Every file is checked for a known extension before any work, and
-written to a temporary sibling first, then renamed.
+written to a temporary sibling first, then renamed; a second command writing the same file
+meanwhile is refused (:func:`persuasive.cli._common.lock_output`).
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ from typing import Callable
 import click
 from click.core import ParameterSource
 
-from ._common import (PAPER_SEED, Count, check_kind_options, compile_notice, config_of,
-                      run_options)
+from ._common import (PAPER_SEED, Count, check_input_files, check_kind_options,
+                      check_readable, compile_notice, config_of, lock_output, run_options)
 
 _SEED_HELP = f"Run seed [{PAPER_SEED}: the run shown in the paper's Figs. 2 and 3]."
 
@@ -52,10 +53,13 @@ def _check_from(source: str | None) -> None:
                                "run has its own seed and configuration")
 
 
-def _runs(single: bool, run: dict):
-    """The run the options describe (``single``), the run saved in ``--from``, or the LFG-AV
-    and persuasive-AV runs of Figs. 2-3. ``--pa``, ``--pa-hat`` or ``--hv-role`` that none of
-    the runs reads is refused (:func:`persuasive.cli._common.check_kind_options`)."""
+def _runs(single: bool, run: dict) -> Callable[[], tuple]:
+    """Check the runs to plot, then return what makes them: the run the options describe
+    (``single``), the run saved in ``--from``, or the LFG-AV and persuasive-AV runs of Figs.
+    2-3. Everything is checked here, before matplotlib is imported or a kernel compiled:
+    ``--from`` a file that cannot be read, options it overrides, and ``--pa``, ``--pa-hat`` or
+    ``--hv-role`` that none of the runs reads
+    (:func:`persuasive.cli._common.check_kind_options`) are refused."""
     from ..simulation import load_record, simulate
 
     source = run.pop("source", None)
@@ -67,12 +71,13 @@ def _runs(single: bool, run: dict):
     if source is not None:
         from ..fitting.output import is_fit_file, load_fitted_run
 
+        check_readable([source], "run file")
         if is_fit_file(source):  # a fit's runs, with the human's smoothed role
-            return (load_fitted_run(source, 0 if fit_run is None else fit_run),)
+            return lambda: (load_fitted_run(source, 0 if fit_run is None else fit_run),)
         if fit_run is not None:
             raise click.UsageError("--run applies only to a fit's file (persuasive fit --out "
                                    "FILE.parquet)")
-        return (load_record(source),)
+        return lambda: (load_record(source),)
     if single:
         configs = [config_of(run)]
     elif run.get("av") is not None:
@@ -82,8 +87,13 @@ def _runs(single: bool, run: dict):
         configs = [config_of({**run, "av": kind}) for kind in ("lfg", "persuasive")]
     # an option is refused only when neither run reads it (--pa-hat: the persuasive AV's)
     check_kind_options(run, configs)
-    compile_notice()
-    return tuple(simulate(config, run["seed"]) for config in configs)
+    check_input_files(*configs)
+
+    def make() -> tuple:
+        compile_notice()
+        return tuple(simulate(config, run["seed"]) for config in configs)
+
+    return make
 
 
 def _out_option(help_text: str) -> Callable:
@@ -124,9 +134,11 @@ def _fit_run_option(func: Callable) -> Callable:
 @_out_option("Figure file: .png, .svg or .pdf.")
 def profile(single, out, **run) -> None:
     """Roles, beliefs, speeds and accelerations over time (the paper's Fig. 2)."""
+    make = _runs(single, run)
     plots = _plots()
     plots.check_figure_path(out)
-    runs = _runs(single, run)
+    lock_output(out, "figure")
+    runs = make()
     fig = plots.profile_single(*runs) if len(runs) == 1 else plots.profile_figure(*runs)
     click.echo(f"wrote {plots.save_figure(fig, out)}")
 
@@ -140,9 +152,11 @@ def profile(single, out, **run) -> None:
 @_out_option("Figure file: .png, .svg or .pdf.")
 def topview(single, every_s, out, **run) -> None:
     """The intersection from above with vehicle snapshots (the paper's Fig. 3)."""
+    make = _runs(single, run)
     plots = _plots()
     plots.check_figure_path(out)
-    runs = _runs(single, run)
+    lock_output(out, "figure")
+    runs = make()
     fig = (plots.topview_single(*runs, every_s=every_s) if len(runs) == 1
            else plots.topview_figure(*runs, every_s=every_s))
     click.echo(f"wrote {plots.save_figure(fig, out)}")
@@ -158,6 +172,7 @@ def table(results: str, out: str) -> None:
 
     plots = _plots()
     plots.check_figure_path(out)
+    lock_output(out, "figure")
     fig = plots.table_figure(load_summary(Path(results)))
     click.echo(f"wrote {plots.save_figure(fig, out)}")
 
@@ -173,6 +188,7 @@ def plot_compare(results: str, out: str) -> None:
 
     plots = _plots()
     plots.check_figure_path(out)
+    lock_output(out, "figure")
     summary = load_summary(Path(results))
     runs = sweep.load(Path(results))
     fig = plots.compare_figure(summary, runs)
@@ -187,9 +203,11 @@ def plot_compare(results: str, out: str) -> None:
 @_out_option("Animation file: .mp4 or .gif.")
 def animate(fps, out, **run) -> None:
     """Animate one run: the top view, with the beliefs and roles shown live."""
+    make = _runs(True, run)
     plots = _plots()
     plots.check_animation_path(out)
-    (record,) = _runs(True, run)
+    lock_output(out, "animation")
+    (record,) = make()
     path = plots.animate(record, out, fps=fps)
     click.echo(f"wrote {path} ({len(record.log['step'])} frames at {fps} fps)")
 

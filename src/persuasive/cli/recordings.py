@@ -12,7 +12,9 @@
 
 Every input and output is checked before any work; bad input ends the command with one line
 (``error: ...``) and exit status 2, nothing written. Files are written atomically, folders as
-a whole.
+a whole; ``--force`` replaces only the files of the names a folder command writes
+(:data:`LOGS_FILES`, :data:`EXPORT_FILES`) and keeps every other file. A second command
+writing the same output meanwhile is refused (:func:`persuasive.cli._common.lock_output`).
 """
 
 from __future__ import annotations
@@ -23,6 +25,12 @@ import math
 import click
 
 from ..config import AV_KINDS, MODES, SHIELD_KINDS, ConfigError
+from ._common import lock_output
+
+#: The files ``recordings logs`` writes (``<kind>-<angle>-p<pair>-hv<1|2>.parquet``).
+LOGS_FILES = ("*-p*-hv[12].parquet",)
+#: The files ``recordings export`` writes.
+EXPORT_FILES = ("vehicle_tracks_*.csv", "vehicle_ids_*.csv", "map.osm")
 
 
 class _BadInput(click.ClickException):
@@ -127,6 +135,9 @@ def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, spe
         from ..plots.files import check_figure_path
 
         _guard(check_figure_path, figure)
+    for path, what in ((out, "pairs"), (figure, "figure")):
+        if path:
+            _guard(lock_output, path, what)
     params = _guard(PairParams, angle_range_deg=(angle_min, angle_max), near_m=near_m)
     smoothing = _guard(SmoothingParams, window=window, speed=speed_from)
     road_map = None
@@ -175,7 +186,9 @@ def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, spe
 @click.argument("pairs_file", type=click.Path(dir_okay=False))
 @click.option("--out", type=click.Path(file_okay=False), required=True,
               help="Folder of the logs (written as a whole).")
-@click.option("--force", is_flag=True, help="Replace a folder that holds other files.")
+@click.option("--force", is_flag=True,
+              help="Replace this command's own earlier logs in the folder "
+                   "(<kind>-<angle>-p<pair>-hv<1|2>.parquet); other files are kept.")
 @click.option("--mode", type=click.Choice(list(MODES)), default="corrected",
               show_default=True, help="The logs' configuration mode (docs/method.md §9).")
 @click.option("--angle-step", type=float, default=5.0, show_default=True, metavar="DEG",
@@ -191,10 +204,11 @@ def logs_command(pairs_file, out, force, mode, angle_step) -> None:
     if not (math.isfinite(angle_step) and 0.0 <= angle_step <= 45.0):
         raise _BadInput(f"--angle-step = {angle_step:g} is out of range; allowed: [0, 45] "
                         "degrees")
-    _guard(check_replaceable_folder, out, force, "logs folder")
+    _guard(check_replaceable_folder, out, force, "logs folder", LOGS_FILES)
+    _guard(lock_output, out, "logs folder")
     frame, _ = _guard(read_pairs, pairs_file)
     base = Config(mode=mode)
-    with atomic_folder(out, "logs folder") as tmp:
+    with atomic_folder(out, "logs folder", LOGS_FILES) as tmp:
         written = _guard(write_logs, frame, tmp, base, angle_step)
     n_pairs = len({w.pair for w in written})
     click.echo(f"{len(written)} logs of {n_pairs} pairs (each driver's view) in {out}")
@@ -222,7 +236,9 @@ def logs_command(pairs_file, out, force, mode, angle_step) -> None:
               help="Also write map.osm, the runs' scenario as a Lanelet2 map with this rule: "
                    "'av' or 'hv' (who has the right of way), 'all-way-stop' (runs only; needs "
                    "persuasive[maps]).")
-@click.option("--force", is_flag=True, help="Replace a folder that holds other files.")
+@click.option("--force", is_flag=True,
+              help="Replace this command's own earlier files in the folder "
+                   "(vehicle_tracks_*.csv, vehicle_ids_*.csv, map.osm); other files are kept.")
 def export_command(inputs, out, noise_m, noise_mps, seed, types, map_rule, force) -> None:
     """Write simulate --out runs (.parquet; track 1 the AV, track 2 the HV) or SUMO
     --fcd-output files (.xml) as INTERACTION track files, vehicle_tracks_NNN.csv, one per
@@ -248,9 +264,10 @@ def export_command(inputs, out, noise_m, noise_mps, seed, types, map_rule, force
                         f"{', '.join(MAP_RULES)}")
     if map_rule is not None and all(fcd):
         raise _BadInput("--map-rule is written for simulate --out runs (.parquet) only")
-    _guard(check_replaceable_folder, out, force, "tracks folder")
+    _guard(check_replaceable_folder, out, force, "tracks folder", EXPORT_FILES)
+    _guard(lock_output, out, "tracks folder")
     # every input is read before anything is written; a failure removes the temporary folder
-    with atomic_folder(out, "tracks folder") as tmp:
+    with atomic_folder(out, "tracks folder", EXPORT_FILES) as tmp:
         if all(fcd):
             names = _guard(export_fcd, inputs, tmp, noise_m, seed, types, noise_mps)
         else:
@@ -355,6 +372,7 @@ def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, an
                       angle_step_deg=angle_step)
     if out:
         _guard(check_output_file, out, (".parquet", ".csv"), "replay table")
+        _guard(lock_output, out, "replay table")
     frame, _ = _guard(read_pairs, pairs_file)
     result = _guard(replay_pairs, frame, settings, Config(mode=mode), str(pairs_file))
     if out:

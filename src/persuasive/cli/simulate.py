@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import json
-import time
 
 import click
 
+from .._compile import StudyClock
 from ..config import ROLES
-from ._common import (INTERACTIONS_HELP, KIND_OPTIONS, Count, check_kind_options,
-                      compile_notice, config_of, ignored_fields, run_options,
-                      unread_options)
+from ._common import (INTERACTIONS_HELP, KIND_OPTIONS, Count, check_input_files,
+                      check_kind_options, compile_notice, compile_report, config_of,
+                      ignored_fields, lock_output, run_options, unread_options)
 
 #: Per-step log formats ``--out`` writes, by extension.
 LOG_EXTENSIONS = (".parquet", ".csv")
@@ -47,6 +47,7 @@ def simulate(out, as_json, interactions, **run) -> None:
 
     config = config_of(run)
     check_kind_options(run, [config])
+    check_input_files(config)
     if interactions is not None:
         config = config.with_overrides({"simulation.interactions": interactions})
     if (config.simulation.interactions or 1) > 1:
@@ -58,13 +59,15 @@ def simulate(out, as_json, interactions, **run) -> None:
         return
     if out:
         check_output_file(out, LOG_EXTENSIONS, "log")  # before any work
+        lock_output(out, "log")
     compile_notice()
-    t0 = time.perf_counter()
+    clock = StudyClock()
     record = simulate_run(config, run["seed"])
-    elapsed = time.perf_counter() - t0
+    elapsed = clock.seconds
     if out:
         write_log(record, out)
     summary = record.summary()
+    compile_report(clock)
     if as_json:
         click.echo(json.dumps(json_summary(summary, config)))
         return
@@ -97,10 +100,11 @@ def _interactions(config, seed: int, as_json: bool) -> None:
     """K interactions with the human of ``seed``: one line each (or one JSON object)."""
     from ..simulation import ARRIVAL_LABELS, BY_INTERACTION, simulate_interactions
 
-    t0 = time.perf_counter()
+    clock = StudyClock()
     records = simulate_interactions(config, seed)
-    elapsed = time.perf_counter() - t0
+    elapsed = clock.seconds
     summaries = [r.summary() for r in records]
+    compile_report(clock)
     if as_json:
         out = json_summary(summaries[-1], config)
         out["interactions"] = len(records)

@@ -10,15 +10,21 @@ the planner's first episode from those logs. SUMO comes with the ``sumo`` extra.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import click
 
+from .._compile import StudyClock
 from .._files import check_replaceable_folder
 from ..config import AV_KIND_ALIASES, AV_KINDS, SHIELD_KINDS
 from ..envs.sumo import MAX_EPISODES, SCENARIOS
-from ._common import (Count, check_workers, compile_notice, kinds_text, progress_bar,
-                      workers_type)
+from ._common import (Count, check_workers, compile_notice, compile_report, kinds_text,
+                      lock_output, progress_bar, workers_type)
+
+#: The files ``--out`` writes: with --force these are replaced and every other file is kept.
+OUT_FILES = ("episodes.parquet", "steps.parquet", "decisions.parquet", "net.nod.xml",
+             "net.edg.xml", "net.net.xml", "summary.json", "summary.md")
 
 
 def _num(value, digits: int = 2) -> str:
@@ -68,8 +74,10 @@ def summary_lines(report) -> list[str]:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--out", type=click.Path(file_okay=False), default=None,
               help="Write episodes, per-step logs and the summary into this folder (a new or "
-                   "empty one, or one to replace with --force).")
-@click.option("--force", is_flag=True, help="Replace an --out folder that holds other files.")
+                   "empty one; with --force, one holding an earlier run's results).")
+@click.option("--force", is_flag=True,
+              help="Replace this command's own earlier results in the --out folder ("
+                   + ", ".join(OUT_FILES) + "); other files are kept.")
 @click.option("--video", type=click.Path(dir_okay=False), default=None,
               help="Draw the planner's first episode as .mp4 or .gif (the folder must exist).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
@@ -85,13 +93,17 @@ def sumo(scenario, episodes, seed, planner, shields, flow, ignore_foes, workers,
     shield_list = tuple(s.strip() for s in shields.split(",") if s.strip())
     S.check_study(scenario, episodes, seed, flow, ignore_foes, planner, shield_list, workers)
     if out:
-        check_replaceable_folder(out, force)
+        check_replaceable_folder(out, force, owned=OUT_FILES)
     if video:
         check_animation_path(video)
+    for path, what in ((out, "results folder"), (video, "video")):
+        if path:
+            lock_output(path, what)
     S.sumo_binaries()  # the extra, before any work
     workers = check_workers(workers, episodes)
     compile_notice(*S.planner_kernels())
     progress = progress_bar(quiet, unit="seed")
+    clock = StudyClock()
     try:
         report, outputs, folder = S.run_study(scenario, episodes, seed, flow, ignore_foes,
                                               planner, shield_list, workers,
@@ -99,6 +111,8 @@ def sumo(scenario, episodes, seed, planner, shields, flow, ignore_foes, workers,
     finally:
         if progress is not None:
             progress.close()  # type: ignore[attr-defined]
+    # the study's own time: a first run's compile is said apart (compile_report)
+    report = replace(report, wall_time_s=max(0.0, report.wall_time_s - clock.compile_s))
     try:
         if video:
             _video(report, outputs, folder, video)
@@ -106,6 +120,7 @@ def sumo(scenario, episodes, seed, planner, shields, flow, ignore_foes, workers,
             _write(report, outputs, folder, out)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+    compile_report(clock)
     if as_json:
         data = report.to_dict()
         data.update({"out": out, "video": video})
@@ -157,7 +172,7 @@ def _write(report, outputs, folder: Path, out: str) -> None:
     from ..envs import sumo as S
 
     frames = S.frames_of(outputs)
-    with atomic_folder(out) as tmp:
+    with atomic_folder(out, owned=OUT_FILES) as tmp:
         pd.DataFrame([e.to_dict() for e in report.episodes]).to_parquet(
             tmp / "episodes.parquet", index=False)
         frames["steps"].to_parquet(tmp / "steps.parquet", index=False)

@@ -4,13 +4,15 @@ sweep`` (a metric of a sweep over one or two axes, with 95 % intervals)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import click
 
-from ._common import (Count, check_workers, compile_notice, progress_bar, shield_option,
-                      workers_type)
+from .._compile import StudyClock
+from ._common import (Count, check_workers, compile_notice, compile_report, lock_output,
+                      progress_bar, shield_option, workers_type)
 
 #: Most runs in one chunk: a chunk's rows are held in one worker's memory until its part is
 #: written (the default is at most 250).
@@ -32,7 +34,9 @@ The runs are written in chunks to OUT/runs/part-*.parquet (one row per run; read
 persuasive.sweep.load(OUT) or pandas.read_parquet(OUT/runs)), failed runs to
 OUT/failed/*.json. Rerunning the same command resumes: finished chunks are skipped and chunks
 with failed runs are retried. A different grid into the same folder is refused unless
---force. Exit status 1 when a run failed, 2 for bad input.
+--force, which replaces only the sweep's own files (other files are kept). A second command
+writing the same folder meanwhile is refused. Exit status 1 when a run failed, 2 for bad
+input.
 """
 
 
@@ -54,12 +58,15 @@ def _default_out(grid_path: str, digest: str) -> Path:
               help="Runs per chunk, one Parquet part each [about 32 chunks of 1 to 250 "
                    "runs; when resuming, the folder's].")
 @click.option("--force", is_flag=True,
-              help="Replace a folder holding another sweep (clears its parts).")
+              help="Replace this command's own earlier results in the folder (another "
+                   "sweep's manifest.json, runs/part-*.parquet, failed/failed-*.json); other "
+                   "files are kept.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @shield_option
 def sweep(grid_file, out, workers, scheduler, chunk, force, as_json, quiet, shield) -> None:
     from .. import sweep as sw
+    from .._files import check_output_folder
     from ..config import ConfigError
 
     # validated whole before anything runs; --shield sets the base's av.shield
@@ -68,17 +75,23 @@ def sweep(grid_file, out, workers, scheduler, chunk, force, as_json, quiet, shie
         raise ConfigError("--workers applies to the local cluster only; the workers of "
                           "--scheduler are those started with 'dask worker'")
     folder = Path(out) if out else _default_out(grid_file, grid.digest)
+    check_output_folder(folder, "sweep folder")
+    lock_output(folder, "sweep folder")
     if scheduler is None:
         n_chunks = -(-len(grid) // (chunk or sw.store.default_chunk(len(grid))))
         workers = check_workers(workers, n_chunks)
         compile_notice()
     progress = progress_bar(quiet)
+    clock = StudyClock()
     try:
         summary = sw.run(grid, folder, workers=workers, scheduler=scheduler, chunk=chunk,
                          force=force, progress=progress)
     finally:
         if progress is not None:
             progress.close()  # type: ignore[attr-defined]
+    # the sweep's own time: a first run's compile is said apart (compile_report)
+    summary = replace(summary, wall_time_s=max(0.0, summary.wall_time_s - clock.compile_s))
+    compile_report(clock)
     if as_json:
         click.echo(json.dumps(summary.to_dict()))
     else:
@@ -147,6 +160,7 @@ def plot_sweep(folder, x, y, metric, where, out) -> None:
     from ..sweep.metrics import metric_grid
 
     check_figure_path(out)  # before any work
+    lock_output(out, "figure")
     data = metric_grid(folder, metric, x, y, _parse_where(where))
     click.echo(f"wrote {save_figure(sweep_figure(data), out)}")
 

@@ -529,7 +529,33 @@ def fit_role_model(ev: Evidence, model: str, sigma_min: float = SIGMA_MIN,
                     notes)
 
 
+def warm_up() -> None:
+    """Load (compiling them once when they are not cached) every kernel a fit may call, the
+    parallel ones too (chosen by the data's size, so a small fit would not reach them), on
+    one step: a later, larger fit never compiles silently."""
+    from .. import packing as slot
+    from .models import idm_sse, idm_sse_serial
+
+    starts = np.array([0, 1], np.int64)
+    args = (starts, np.zeros(1), np.zeros((1, 2)), np.ones((1, 2)), np.zeros((1, 2, 3)),
+            np.zeros((1, 3)), np.full(1, 0.5), np.ones(1), np.ones(1))
+    for kernel in (hmm_loglik, hmm_loglik_serial):
+        for kind in (EMIT_LFG, EMIT_NOISY):
+            kernel(kind, *args, np.empty((1, 1, 2)))
+    for kernel in (path_loglik, path_loglik_serial):  # recorded logs: over role paths
+        kernel(np.zeros(1, np.int64), starts, np.zeros(1), np.zeros((1, 2)), np.ones((1, 2)),
+               np.array([-1, 0, 1]), np.full((1, 3), 1.0 / 3.0), np.full(1, 0.5), np.ones(1),
+               np.empty((1, 1, 2)))
+    P = np.zeros((1, slot.N_SLOTS))
+    P[:, slot.U_MIN], P[:, slot.U_MAX], P[:, slot.YIELD_S], P[:, slot.CLEAR_S] = -2, 1, -6, 7
+    prm = np.array([[10.0, 1.5, 1.0, 1.5, 4.0, 2.0, 1.0, 0.0]])
+    states = np.array([[-20.0, 4.0, -20.0, 4.0]])
+    for kernel in (idm_sse, idm_sse_serial):
+        kernel(starts, states, np.zeros(1), P, P, np.full(1, 0.1), prm, np.zeros(1, np.int64),
+               np.empty((1, 1)))
+
+
 __all__ = ["AT_BOUND_TOL", "BETA_MAX", "BETA_MIN", "Estimate", "MODELS", "ModelFit",
            "RoleObjective", "SIGMA_MIN", "SIGMA_MIN_RANGE", "bound_side", "check_sigma_min",
            "fit_role_model", "from_log", "initial_sigma", "interval_method",
-           "profile_interval"]
+           "profile_interval", "warm_up"]

@@ -158,6 +158,11 @@ class Comparison:
     failures: int  #: runs that raised (see the sweep folder's ``failed/``)
 
 
+def default_folder(grid) -> Path:
+    """``results/compare-<grid digest>``: where a comparison goes without ``out``."""
+    return Path("results") / f"compare-{grid.digest[:10]}"
+
+
 def run_comparison(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str],
                    seeds: int = 200, out: str | Path | None = None, workers: int | None = None,
                    force: bool = False, timing_seeds: int = 3,
@@ -171,7 +176,7 @@ def run_comparison(base: Config, av_kinds: Sequence[str], hv_kinds: Sequence[str
 
     base = comparison_base(base)
     grid = comparison_grid(base, av_kinds, hv_kinds, seeds, shields)
-    folder = Path(out) if out is not None else Path("results") / f"compare-{grid.digest[:10]}"
+    folder = Path(out) if out is not None else default_folder(grid)
     k = n_interactions(base)
     if progress is not None and k > 1:  # a grid row is one seed's k interactions
         rows_progress = progress

@@ -21,20 +21,26 @@ part exists and it has no failure file; for a chunk with failures the failure fi
 before the part and removed only after a retry succeeds, so a process killed at any moment
 leaves every chunk either finished, to be retried, or not started, never half-written.
 Temporary files a kill leaves behind (hidden names) are removed when the sweep resumes.
+
+A sweep's own files are those of the names above: ``manifest.json``, ``runs/part-*.parquet``
+and ``failed/failed-*.json`` (the studies on top add their summaries). Replacing another
+sweep (``force``) removes only those, and ``runs/`` and ``failed/`` once empty; anything else
+in the folder or in those two (a user's ``notes.txt``, a subfolder) is kept
+(:mod:`persuasive._files`: one meaning of ``--force``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import re
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, NamedTuple
 
 from .._version import __version__
-from .._files import OutputError, atomic_write, check_output_folder
+from .._files import OutputError, atomic_write, check_output_folder, is_lock_file
 from ..config import ConfigError
 from .grid import Grid
 
@@ -210,15 +216,17 @@ class SweepStore:
         folder = check_output_folder(Path(folder), what)
         old = None
         replace = False
-        # a manifest being written when a process was killed does not count
-        if folder.is_dir() and any(not _MANIFEST_TMP.fullmatch(p.name) for p in folder.iterdir()):
+        # a manifest being written when a process was killed, or a lock file, does not count
+        found = sorted(p.name for p in folder.iterdir() if not _MANIFEST_TMP.fullmatch(p.name)
+                       and not is_lock_file(p.name)) if folder.is_dir() else []
+        if found:
             try:
                 old = read_manifest(folder)
             except ConfigError:
                 if not force:
-                    raise OutputError(f"{what} {str(folder)!r} holds other files; choose "
-                                      "another --out or pass --force to write into it") \
-                        from None
+                    raise OutputError(f"{what} {str(folder)!r} holds other files ({found[0]}); "
+                                      "choose another --out, or pass --force to write into it "
+                                      "(they are kept)") from None
             if old is not None:
                 same = (old.get("grid_digest") == grid.digest
                         and old.get("version") == __version__
@@ -273,11 +281,18 @@ class SweepStore:
 
     @staticmethod
     def _clear(folder: Path, what: str = "sweep folder") -> None:
+        """Remove another sweep's own files (the module docstring); keep everything else."""
         try:
             (folder / MANIFEST).unlink(missing_ok=True)
-            for name in (RUNS, FAILED):
-                if (folder / name).is_dir():
-                    shutil.rmtree(folder / name)
+            for name, pattern in ((RUNS, "part-*.parquet"), (FAILED, "failed-*.json")):
+                if not (folder / name).is_dir():
+                    continue
+                for path in (folder / name).glob(pattern):
+                    if path.is_file() and not path.is_symlink():
+                        path.unlink()
+                _remove_temporaries(folder / name)
+                with contextlib.suppress(OSError):  # one that holds other files stays
+                    (folder / name).rmdir()
         except OSError as exc:
             raise OutputError(f"{what} {str(folder)!r} cannot be cleared: "
                               f"{(exc.strerror or str(exc)).lower()}") from None
