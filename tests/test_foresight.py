@@ -16,13 +16,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from persuasive import Config
-from persuasive.config import ConfigError
+from persuasive.config import (DEFAULT_SHIELD_MARGIN_M, DEFAULT_YIELD_LINE_CHOICES_M,
+                               LINE_AT_INTERVAL, ConfigError)
 from persuasive.record import load_record, static_setup
 from persuasive.safety import foresight
 from persuasive.simulation import simulate
 
-#: 20-s runs at the paper's intersection, the worst-case shield (corrected mode).
-BASE = Config(mode="corrected").with_overrides({"simulation.n_steps": 200})
+#: 20-s runs at the paper's intersection, the worst-case shield (corrected mode), as corrected
+#: mode shipped before foresight was its default (the named ablation: the line at the
+#: interval, no clearance)
+BASE = Config(mode="corrected").with_overrides({"simulation.n_steps": 200, **LINE_AT_INTERVAL})
 #: the line at the interval, and one 8 m before it (outside the human's 7.5 m circle)
 CHOICES = [0.0, 8.0]
 #: seeds whose run with the line at the interval ends in a standoff with the paper's human
@@ -41,12 +44,11 @@ def with_choices(config: Config = BASE, choices=CHOICES) -> Config:
 
 
 @pytest.mark.parametrize("value, words", [
-    ([], "1 to 8 numbers in [0, 100]"),
-    ([0, -1], "1 to 8 numbers in [0, 100]"),
-    ([0, 101], "1 to 8 numbers in [0, 100]"),
-    ([0, True], "1 to 8 numbers in [0, 100]"),
-    (list(range(9)), "1 to 8 numbers in [0, 100]"),
-    ("0,8", "1 to 8 numbers in [0, 100]"),
+    ([0, -1], "0 to 8 numbers in [0, 100]"),
+    ([0, 101], "0 to 8 numbers in [0, 100]"),
+    ([0, True], "0 to 8 numbers in [0, 100]"),
+    (list(range(9)), "0 to 8 numbers in [0, 100]"),
+    ("0,8", "0 to 8 numbers in [0, 100]"),
 ])
 def test_bad_choices_are_named_with_their_range(value, words):
     with pytest.raises(ConfigError, match=r"av\.yield_line_choices_m") as err:
@@ -63,11 +65,43 @@ def test_choices_need_a_shield_a_fixed_p_a_and_no_fixed_line():
         BASE.with_overrides({"av.yield_line_choices_m": [0, 8], "mpc.p_a_hat": "online"})
 
 
-def test_unset_choices_leave_the_configuration_text_and_digest_alone():
-    assert "yield_line_choices_m" not in BASE.to_toml()
+def test_unset_choices_leave_the_configuration_text_alone():
+    assert "yield_line_choices_m" not in Config(mode="corrected").to_toml()
     set_ = with_choices()
     assert set_.av.yield_line_choices_m == (0.0, 8.0)
     assert Config.from_dict(set_.to_dict()) == set_ and set_.digest() != BASE.digest()
+
+
+def test_corrected_mode_defaults_to_foresight_and_a_clearance_where_they_apply():
+    """Issue 39: the measured best is the default (docs/method.md §12.14): foresight over
+    [0, 3.75, 8] m and a 0.1 m clearance in corrected mode with a shield; paper mode keeps
+    neither; a fixed line, an online p_a, no shield or ``[]`` turn foresight off; the
+    resolved defaults enter the runs' digest (a folder of runs made under the old ones is not
+    resumed), except where nothing reads them (paper mode, no shield)."""
+    corrected, paper = Config(mode="corrected"), Config()
+    assert corrected.yield_line_choices == DEFAULT_YIELD_LINE_CHOICES_M == (0.0, 3.75, 8.0)
+    assert corrected.shield_margin_m == DEFAULT_SHIELD_MARGIN_M > 0.0
+    assert paper.yield_line_choices is None and paper.shield_margin_m == 0.0
+    assert paper.with_overrides({"av.shield": "worst-case"}).yield_line_choices is None
+    for off in ({"av.yield_line_m": 4.5}, {"mpc.p_a_hat": "online"}, {"av.shield": "off"},
+                {"av.yield_line_choices_m": []}):
+        assert corrected.with_overrides(off).yield_line_choices is None, off
+    assert corrected.with_overrides({"av.shield_margin_m": 0.0}).shield_margin_m == 0.0
+    assert corrected.digest() != corrected.with_overrides(LINE_AT_INTERVAL).digest()
+    off = corrected.with_overrides({"av.shield": "off"})
+    assert off.digest() == off.with_overrides({"av.shield_margin_m": 0.0}).digest() or \
+        off.resolved_defaults() == ""
+    assert paper.resolved_defaults() == "" and off.resolved_defaults() == ""
+
+
+def test_the_default_runs_are_the_runs_with_those_settings_spelled_out():
+    default = Config(mode="corrected").with_overrides({"simulation.n_steps": 200})
+    spelled = default.with_overrides({"av.yield_line_choices_m": [0.0, 3.75, 8.0],
+                                      "av.shield_margin_m": 0.1})
+    for seed in STANDOFF_SEEDS:
+        a, b = simulate(default, seed), simulate(spelled, seed)
+        assert a.yield_line_m == b.yield_line_m and np.array_equal(a.states, b.states)
+        assert a.outcome.both_cleared and not a.outcome.deadlock  # the standoff is gone
 
 
 @pytest.mark.parametrize("line", [0.0, 2.5, 3.75, 8.0])
@@ -166,7 +200,7 @@ def test_the_pick_is_saved_with_the_run_and_read_back(tmp_path):
     run.save(tmp_path / "run.parquet")
     back = load_record(tmp_path / "run.parquet")
     assert back.yield_line_m == 8.0 and back.summary()["yield_line_m"] == 8.0
-    assert "yield_line_m" not in simulate(BASE, 1).summary()  # only foresight runs carry it
+    assert simulate(BASE, 1).summary()["yield_line_m"] is None  # no pick without foresight
 
 
 def test_both_loops_pick_alike_and_drive_alike():
@@ -231,11 +265,39 @@ def test_a_setup_without_a_way_to_predict_refuses_foresight():
     assert setup(BASE, 1).yield_line_m is None
 
 
-def test_outside_simulators_refuse_foresight():
+def test_outside_simulators_refuse_foresight_and_leave_its_default_out():
     from persuasive.envs.external import ExternalPlanner
 
     with pytest.raises(ConfigError, match="yield_line_choices_m"):
         ExternalPlanner(with_choices())
+    planner = ExternalPlanner(Config(mode="corrected"))  # the default: not applied there
+    assert planner.config.yield_line_choices is None
+    assert planner.config.shield_margin_m == DEFAULT_SHIELD_MARGIN_M
+
+
+@pytest.mark.parametrize("seed", [*STANDOFF_SEEDS, *PERSUADED_SEEDS])
+def test_the_planner_foresees_as_the_run_does(seed):
+    """``Planner(config, seed)`` picks at its first decision the line ``simulate(config,
+    seed)`` picks, from the same measured states and the same predictions' stream, and then
+    drives the run bit for bit (a user's own loop with the library call); ``reset`` makes the
+    next encounter pick again."""
+    from persuasive import Planner
+    from persuasive.kinematics import saturated_step
+
+    config = with_choices(choices=[0.0, 3.75, 8.0])
+    run = simulate(config, seed)
+    planner = Planner(config, seed=seed)
+    av, hv = config.vehicle_of("av"), config.vehicle_of("hv")
+    x = run.states[0].copy()
+    for k in range(config.simulation.n_steps):
+        plan = planner.plan(av=(x[0], x[1]), hv=(x[2], x[3]))
+        assert plan.accel_mps2 == run.log["av_accel_mps2"][k]
+        x[0], x[1] = saturated_step(x[0], x[1], plan.accel_mps2, 0.1, av.v_min_mps,
+                                    av.v_max_mps)
+        x[2], x[3] = run.states[k + 1, 2], run.states[k + 1, 3]
+    assert planner.yield_line_m == run.yield_line_m
+    planner.reset()
+    assert planner.yield_line_m is None
 
 
 @settings(max_examples=6, deadline=None)

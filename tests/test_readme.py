@@ -41,7 +41,11 @@ def test_command_line_examples_run(tmp_path, monkeypatch, capsys):
     assert len(commands) >= 6
     for command in commands:
         argv = shlex.split(command)[1:]
+        capsys.readouterr()
         assert main(argv) == 0, command
+        if argv[0] == "fit":  # the fit the bullet quotes, as the tour prints it
+            quoted = re.search(r"`(p_a = [^`]*)`", README.split("- **fit**", 1)[1]).group(1)
+            assert quoted in capsys.readouterr().out
     capsys.readouterr()
     for made in ("run.parquet", "profile.pdf", "run.mp4"):
         assert (tmp_path / made).stat().st_size > 0, made

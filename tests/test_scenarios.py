@@ -344,6 +344,6 @@ def test_a_start_that_cannot_stand_before_the_interval_is_refused():
                        r"-12\.38 m in the left-turn scenario .* allowed: below -16\.38 m"):
         build_scenario(Config(mode="corrected").with_overrides(
             {"scenario.kind": "left-turn", "scenario.turn_radius_m": 80.0,
-             "scenario.av_s0_m": -14.0}))
+             "scenario.av_s0_m": -14.0, "av.shield_margin_m": 0.0}))
     # the same start where the interval lies inside the zone is taken
     build_scenario(Config(mode="corrected").with_overrides({"scenario.av_s0_m": -14.0}))

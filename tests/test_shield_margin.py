@@ -15,7 +15,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from persuasive import Config
-from persuasive.config import ConfigError
+from persuasive.config import DEFAULT_SHIELD_MARGIN_M, LINE_AT_INTERVAL, ConfigError
 from persuasive.kinematics import saturated_step
 from persuasive.record import static_setup
 from persuasive.safety import measures
@@ -25,18 +25,32 @@ from persuasive.simulation import simulate
 
 
 def config(margin: float | None = None, **over) -> Config:
+    """Corrected mode as it shipped before issue 39's defaults (the line at the interval, no
+    clearance: the named ablation), with the clearance ``margin`` (None: none)."""
     extra = {} if margin is None else {"av.shield_margin_m": margin}
-    return Config(mode="corrected").with_overrides({**extra, **over})
+    return Config(mode="corrected").with_overrides({**LINE_AT_INTERVAL, **extra, **over})
 
 
 def test_no_margin_is_the_shield_as_before():
     for margin in (None, 0.0):
         sc = build_scenario(config(margin))
         assert sc.av.shield_occupancy is None and sc.av.shield_interval == sc.av.occupancy
+    sc = build_scenario(Config(mode="paper").with_overrides({"av.shield": "worst-case"}))
+    assert sc.av.shield_occupancy is None  # paper mode's default: none
     _, P0, H0, _ = static_setup(config())
     C = np.empty(sh.N_CONFLICT)
     sh.conflict_vector(P0, H0, C)
     assert C[sh.C_GAP] == 5.0 and C[sh.C_R_LO] == pytest.approx(-3.75)
+
+
+def test_corrected_mode_keeps_its_default_clearance():
+    """Corrected mode's default clearance (``DEFAULT_SHIELD_MARGIN_M``, issue 39) is the
+    clearance set explicitly: the same intervals and gap."""
+    default = build_scenario(Config(mode="corrected"))
+    spelled = build_scenario(Config(mode="corrected").with_overrides(
+        {"av.shield_margin_m": DEFAULT_SHIELD_MARGIN_M}))
+    assert default.av.shield_interval == spelled.av.shield_interval != default.av.occupancy
+    assert default.av.shield_interval[0] == pytest.approx(-3.75 - DEFAULT_SHIELD_MARGIN_M)
 
 
 def test_the_margin_widens_the_shields_intervals_and_gap_by_hand():

@@ -55,6 +55,18 @@ DEFAULT_P_A_GRID = 21
 #: Smallest accepted chance-constraint level ``mpc.epsilon``.
 EPSILON_MIN = 1e-12
 
+#: Corrected mode's default liveness and clearance (issue 39: the defaults are the measured
+#: best, docs/method.md §12.14). The yield lines foresight picks one of per run [m]
+#: (``av.yield_line_choices_m``; with a shield on, no fixed ``av.yield_line_m`` and a fixed
+#: ``mpc.p_a_hat``), and the shield's clearance between the footprints [m]
+#: (``av.shield_margin_m``; with a shield on). Paper mode keeps neither (the published runs).
+DEFAULT_YIELD_LINE_CHOICES_M = (0.0, 3.75, 8.0)
+DEFAULT_SHIELD_MARGIN_M = 0.1
+#: The named ablation of those defaults: corrected mode as it shipped before them, the
+#: shield's line at the interval and no clearance (``--set "av.yield_line_choices_m=[]"
+#: --set av.shield_margin_m=0``; docs/results.md keeps its tables under this name).
+LINE_AT_INTERVAL = {"av.yield_line_choices_m": [], "av.shield_margin_m": 0.0}
+
 
 def _fail(name: str, value: Any, allowed: str) -> None:
     raise ConfigError(f"{name} = {value!r} is out of range; allowed: {allowed}")
@@ -409,11 +421,15 @@ class AVParams:
     #: stand there it commits and prefers driving through; unset: 0, at the interval
     yield_line_m: float | None = None
     #: foresight: candidate yield lines [m], one picked per run by predicting the run with the
-    #: AV's own model of the human for each (docs/method.md §12.12); unset: off
+    #: AV's own model of the human for each (docs/method.md §12.12); ``[]``: off (a line at
+    #: the interval, unless ``yield_line_m``); unset: [0, 3.75, 8] in corrected mode with a
+    #: shield on, no ``yield_line_m`` and a fixed ``mpc.p_a_hat``, else off
+    #: (:attr:`Config.yield_line_choices`)
     yield_line_choices_m: tuple[float, ...] | None = None
     #: the shield's clearance between the two footprints [m]: kept in its occupancy test and
     #: the follower's gap, so that a position error up to it does not turn a certified state
-    #: into contact (docs/method.md §12.2); unset: 0
+    #: into contact (docs/method.md §12.2); unset: 0.1 in corrected mode, 0 in paper mode
+    #: (:attr:`Config.shield_margin_m`)
     shield_margin_m: float | None = None
     vehicle: VehicleOverrides = field(default_factory=VehicleOverrides)
 
@@ -432,11 +448,12 @@ class AVParams:
             _in_range("av.yield_line_m", self.yield_line_m, 0.0, 100.0)
         if self.yield_line_choices_m is not None:
             lines = self.yield_line_choices_m
-            if (not isinstance(lines, (tuple, list)) or not 1 <= len(lines) <= 8
+            if (not isinstance(lines, (tuple, list)) or not 0 <= len(lines) <= 8
                     or any(isinstance(x, bool) or not isinstance(x, (int, float))
                            or not 0.0 <= x <= 100.0 for x in lines)):
-                _fail("av.yield_line_choices_m", lines, "1 to 8 numbers in [0, 100]")
-            if self.yield_line_m is not None:
+                _fail("av.yield_line_choices_m", lines,
+                      "0 to 8 numbers in [0, 100] (none: foresight off)")
+            if self.yield_line_m is not None and len(lines) > 0:
                 raise ConfigError("av.yield_line_choices_m and av.yield_line_m are exclusive: "
                                   "set one line, or the lines to choose among")
             object.__setattr__(self, "yield_line_choices_m", tuple(float(x) for x in lines))
@@ -705,7 +722,7 @@ class Config:
                     f"[{v.v_min_mps:g}, {v.v_max_mps:g}] with its half-width {hw:g} "
                     f"(the {who.upper()}'s speed limits)",
                 )
-        if self.av.yield_line_choices_m is not None:
+        if self.av.yield_line_choices_m:  # set explicitly (the default never conflicts)
             if self.shield == "off":
                 raise ConfigError("av.yield_line_choices_m chooses the shield's yield line: it "
                                   "needs av.shield = worst-case, responsive or responsibility")
@@ -764,6 +781,30 @@ class Config:
         if self.av.shield is not None:
             return self.av.shield
         return "off" if self.mode == "paper" else "worst-case"
+
+    @property
+    def yield_line_choices(self) -> tuple[float, ...] | None:
+        """The yield lines foresight picks among, in force (docs/method.md §12.12), or None
+        (foresight off): ``av.yield_line_choices_m`` as set (``[]``: off); unset, corrected
+        mode's default :data:`DEFAULT_YIELD_LINE_CHOICES_M` where foresight applies (a shield
+        on, no fixed ``av.yield_line_m``, a fixed ``mpc.p_a_hat``), else off. Outside
+        simulators never run it (``persuasive.envs.external``)."""
+        lines = self.av.yield_line_choices_m
+        if lines is not None:
+            return lines if lines else None
+        if (self.mode == "corrected" and self.shield != "off"
+                and self.av.yield_line_m is None and not self.p_a_online):
+            return DEFAULT_YIELD_LINE_CHOICES_M
+        return None
+
+    @property
+    def shield_margin_m(self) -> float:
+        """The shield's clearance in force [m]: ``av.shield_margin_m`` as set, else
+        :data:`DEFAULT_SHIELD_MARGIN_M` in corrected mode and 0 in paper mode (only a shield
+        reads it)."""
+        if self.av.shield_margin_m is not None:
+            return self.av.shield_margin_m
+        return DEFAULT_SHIELD_MARGIN_M if self.mode == "corrected" else 0.0
 
     @property
     def confidence_filter(self) -> bool:
@@ -851,10 +892,23 @@ class Config:
         Equal configurations (and extras) give equal digests, in any process and version of
         Python.
         """
-        h = hashlib.sha256(self.to_toml().encode("utf-8"))
+        h = hashlib.sha256(self.to_toml().encode("utf-8") + self.resolved_defaults().encode())
         for item in extra:
             h.update(b"\0" + repr(item).encode("utf-8"))
         return h.hexdigest()[:10]
+
+    def resolved_defaults(self) -> str:
+        """The mode's defaults that an unset field stands for and that its text does not
+        say (corrected mode's foresight and clearance, issue 39), as canonical text for the
+        identities of runs (:meth:`digest`, a sweep's grid): empty in paper mode, so that
+        its digests (and the published runs' folders) are those from before these defaults
+        existed, and a results folder of corrected-mode runs made under the old defaults is
+        not resumed under the new ones."""
+        if self.mode == "paper" or self.shield == "off":  # (nothing reads them then)
+            return ""
+        lines = self.yield_line_choices
+        return (f"\0defaults: yield_line_choices_m={list(lines) if lines else []}, "
+                f"shield_margin_m={self.shield_margin_m!r}")
 
     def with_overrides(self, overrides: dict[str, Any]) -> Config:
         """A copy with ``{"section.field": value}`` (or ``{"mode": ...}``) applied.
@@ -952,6 +1006,9 @@ _MOVED = {"av": "av.kind", "hv_role": "hv.role"}
 
 
 __all__ = [
+    "DEFAULT_SHIELD_MARGIN_M",
+    "DEFAULT_YIELD_LINE_CHOICES_M",
+    "LINE_AT_INTERVAL",
     "AVParams",
     "Config",
     "ConfigError",

@@ -183,7 +183,7 @@ def pack(config, scenario) -> tuple[np.ndarray, np.ndarray]:
     shared[CONF_STD] = mpc.confidence_accel_std_mps2
     shared[CONF_SWITCH] = mpc.confidence_switch
     shared[ACCEL_NOISE] = config.simulation.accel_noise_mps2
-    shared[SHIELD_MARGIN] = config.av.shield_margin_m or 0.0
+    shared[SHIELD_MARGIN] = config.shield_margin_m
     shared[RESP_RHO], shared[RESP_ACCEL], shared[RESP_BRAKE], shared[RESP_FRONT_BRAKE] = (
         config.responsibility_rule)
     shared[RIGHT_OF_WAY] = RIGHT_OF_WAY_IDS[config.responsibility.right_of_way]

@@ -79,11 +79,20 @@ class Planner:
         All parameters; default ``Config(mode="corrected")``. ``config.av.kind`` selects the
         planner: persuasive, passive, cv, yield or lfg; ``config.scenario`` the geometry.
     seed : int, optional
-        Seed of the planner's own uniforms (only the ``lfg`` kind draws: its role changes).
+        Seed of the planner's own uniforms (only the ``lfg`` kind draws: its role changes),
+        and of foresight's predictions (below; unset: 0).
     p_a_prior : array, optional
         With ``mpc.p_a_hat = "online"`` (persuasive planner): the prior masses over the grid
         :attr:`p_a_grid` in place of the Beta prior ``mpc.p_a_prior``, e.g. a
         :attr:`p_a_posterior` saved after earlier encounters with the same human.
+
+    **Foresight** (``Config.yield_line_choices``: corrected mode's default, [0, 3.75, 8] m,
+    docs/method.md §12.12): at the first decision of an encounter (after :meth:`reset`) the
+    planner picks its shield's yield line among those by predicting the run from the states
+    it is given, as ``simulate(config, seed)`` does from its run's first measurement (the
+    predictions' random stream is that of ``seed``: with the run's seed and state, the same
+    line); :attr:`yield_line_m` says which (about 15 model runs once, some 0.1 s, not in the
+    per-decision budget).
 
     With ``mpc.p_a_hat = "online"`` the planner keeps a posterior over the human's ``p_a``
     (docs/method.md §13.9) and plans with its mean (:attr:`p_a_hat`). :meth:`reset` starts a
@@ -97,6 +106,10 @@ class Planner:
         self._spec = kind_of(self.config, kd.AV)
         self._scenario = build_scenario(self.config)
         self._P_av, self._P_hv = pack(self.config, self._scenario)
+        self._P_av0 = self._P_av
+        self._seed = 0 if seed is None else int(seed)
+        #: the yield line foresight picked for this encounter [m] (None: not yet, or off)
+        self.yield_line_m: float | None = None
         self._disc = discounts(self.config)
         self._prm = policy_params(self.config, kd.AV, p_a_prior)
         n, n_traj = self.config.library.n_samples, self.config.library.n_traj
@@ -132,6 +145,25 @@ class Planner:
             self._prm[:] = self._prm0
         policy_init(self._spec.kind, self._prm, self._state, float(self._P_av[slot.PRIOR_L]))
         self._k = 0
+        if self.yield_line_m is not None:  # the next encounter picks its own line
+            self._P_av, self.yield_line_m = self._P_av0, None
+            self._shield = ShieldFilter.closed_loop(self._P_av, self._P_hv,
+                                                    self.config.simulation.dt_s)
+
+    def _foresee(self, x_R: State, x_H: State) -> None:
+        """Foresight at an encounter's first decision (class docstring): pick the line and
+        set it in the planner's parameters and shield."""
+        from .packing import place_yield_line
+        from .safety.foresight import choose_line
+        from .world import predicted_summary
+
+        x0 = np.array([x_R[0], x_R[1], x_H[0], x_H[1]], dtype=np.float64)
+        line = choose_line(self.config, self._seed, x0, predicted_summary)
+        self._P_av = self._P_av0.copy()  # the packed vector is shared: never changed
+        place_yield_line(self._P_av, line)
+        self._shield = ShieldFilter.closed_loop(self._P_av, self._P_hv,
+                                                self.config.simulation.dt_s)
+        self.yield_line_m = line
 
     @property
     def kind(self) -> str:
@@ -204,6 +236,9 @@ class Planner:
     def _step(self, x_R: State, x_H: State, role: int) -> float:
         """One decision, before the shield: the proposed acceleration; advances the kept
         state."""
+        if self._k == 0 and self.yield_line_m is None and \
+                self.config.yield_line_choices is not None:
+            self._foresee(x_R, x_H)
         if self._spec.needs_game:
             predict_buffers(x_H[0], x_H[1], x_R[0], x_R[1], self._P_hv, self._P_av, self._disc,
                             *self._hv, *self._av, self._idx, self._q_values, self.work)

@@ -86,7 +86,9 @@ class RunOutcome:
     shield_interventions: int  #: steps where the shield overrode the AV's policy
     av_max_brake_mps2: float  #: the AV's strongest braking [m/s^2] (0: it never braked)
     #: steps where the shield had no certified choice (verdict "uncertified": the state was
-    #: outside its invariant set; 0 with the shield off)
+    #: outside its invariant set; 0 with the shield off), counted until a contact by the human
+    #: (a rear-end by it): the simulation has no contact, and the states after it are none
+    #: the shield answers for
     uncertified_steps: int = 0
     #: the worst-case guarantee covered the whole run (docs/method.md §12.2): the worst-case
     #: shield was on, every step certified (so the run started in the invariant set) and no
@@ -182,8 +184,9 @@ class RunRecord:
             out["interaction"] = self.interaction
             hat = self.log.get("av_p_a_hat")
             out["pa_hat_final"] = float(hat[-1]) if hat is not None and len(hat) else None
-        if c.av.yield_line_choices_m is not None:  # only foresight runs carry this key
-            out["yield_line_m"] = self.yield_line_m
+        # the line foresight picked (None without foresight): every run carries the key, so
+        # that a sweep mixing runs with and without it reads each back as it was
+        out["yield_line_m"] = self.yield_line_m
         out["quirks"] = dict(vars(c.effective_quirks))
         out["config_hash"] = c.digest()
         out["version"] = self.version
@@ -353,7 +356,7 @@ def setup(config: Config, seed: int, k_av: int | None = None,
             x_hv = (rec.s0_m, rec.v0_mps)
         x0 = np.array([*streams.x_av, *x_hv], dtype=np.float64)
     line = None
-    if config.av.yield_line_choices_m is not None:  # foresight picks the run's yield line
+    if config.yield_line_choices is not None:  # foresight picks the run's yield line
         from .packing import place_yield_line
         from .safety.foresight import choose_line
 
@@ -474,13 +477,19 @@ def outcome(scenario: Scenario, states: np.ndarray, log: dict[str, np.ndarray]) 
         times[f"{who}_rms_jerk_mps3"] = _rms(np.diff(accel) / dt)
     overlap = scenario.collides(after[:, 0], after[:, 2])
     caused = measures.caused_by_av(overlap, measures.human_at_fault(
-        scenario, states, log["av_accel_mps2"], dt))
+        scenario, states, log["av_accel_mps2"], dt, log["hv_accel_mps2"]))
+    # a contact by the other vehicle (a rear-end by the human) ends what the shield is
+    # judged on: the simulation has no contact, so the human drives on through the AV and
+    # the states after it are no state the shield could keep (docs/method.md §12.2)
+    contact = np.flatnonzero(overlap & ~caused)
+    judged = int(contact[0]) + 1 if contact.size else len(after)
     occ_av, occ_hv = scenario.av.occupancy, scenario.hv.occupancy
     verdicts = log.get("shield_verdict")
     accel = log["av_accel_mps2"]
     from .safety.shield import UNCERTIFIED
 
-    uncertified = int(np.sum(verdicts == UNCERTIFIED)) if verdicts is not None else 0
+    uncertified = (int(np.sum(verdicts[:judged] == UNCERTIFIED)) if verdicts is not None
+                   else 0)
     cleared_av = scenario.cleared("av", states[:, 0])
     cleared_hv = scenario.cleared("hv", states[:, 2])
     both = bool(cleared_av[-1] and cleared_hv[-1])

@@ -241,11 +241,14 @@ def simulate(config, seed: int) -> dict[str, np.ndarray]:
     (:func:`persuasive.record.setup`).
     """
     from .record import setup
+    from .world import predicted_summary
 
     if config.hv.kind not in ("lfg", "stubborn") or config.av.kind not in (
             "lfg", "persuasive", "passive"):
         raise ValueError("the reference loop covers the LFG human and the LFG or MPC AV")
-    s = setup(config, seed)
+    # foresight's pick (if in force) is made before the first step, from the compiled
+    # predictions: the loop below is the reference for the steps, not for that choice
+    s = setup(config, seed, predict=predicted_summary)
     st = s.streams
     P_av, P_hv, disc = s.P_av, s.P_hv, s.disc
     meas, accel_noise, noisy = st.meas_noise, st.accel_noise, st.noisy

@@ -48,7 +48,7 @@ from ..config import Config, ConfigError
 from ..packing import RIGHT_OF_WAY_IDS, SHIELD_KIND_IDS
 from ..safety import shield as sh
 from ..safety.filter import ShieldFilter
-from ..safety.responsibility import DutyWatch
+from ..safety.responsibility import POS_TOL_M, DutyWatch
 
 #: Kinds of conflict: the paths cross once; the other joins the ego's lane (a merge); the
 #: other is ahead in the ego's lane (follow).
@@ -91,7 +91,8 @@ class Conflict:
     #: (highway-env's spawns), which the shield checks and the planner does not plan against;
     #: ``"placeholder": True`` one that stands for vehicles still to be inserted (SUMO's
     #: entries), planned against but, like a stand-in, no driver with duties under the
-    #: responsibility rule (``persuasive.safety.responsibility``)
+    #: responsibility rule (``persuasive.safety.responsibility``); ``"wreck": True`` a
+    #: crashed vehicle, a standing obstacle with no duty either (highway-env's)
     extra: dict = field(default_factory=dict, compare=False)
     #: the ego's yield line relative to the conflict point [m]: where the shield makes it
     #: stand when it yields (docs/method.md §12.8; e.g. before a junction's polygon); None:
@@ -119,7 +120,7 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
     # the clearance: in the follower's gap; the occupancy intervals are the simulator's own
     # projection's, which keeps its own margins (SUMO: 0.5 m laterally, 1.6 m along the
     # path; highway-env: 0.25 m laterally and the Euler step's), not counted twice
-    margin = config.av.shield_margin_m or 0.0
+    margin = config.shield_margin_m
     s_R, s_H, v_H, rows = [], [], [], []
     for c in conflicts:
         o = c.other if c.other is not None else human
@@ -178,10 +179,12 @@ class ExternalPlanner:
     """
 
     def __init__(self, config: Config, seed: int = 0, plan_horizon_s: float | None = None):
-        if config.av.yield_line_choices_m is not None:
+        if config.av.yield_line_choices_m:
             raise ConfigError("av.yield_line_choices_m (foresight) predicts a run of our own "
                               "simulator; an outside simulator's traffic is not our model: "
                               "set av.yield_line_m instead")
+        if config.yield_line_choices is not None:  # corrected mode's default: not here
+            config = config.with_overrides({"av.yield_line_choices_m": []})
         self.config = config
         self.seed = seed
         self.plan_horizon_s = plan_horizon_s
@@ -196,6 +199,10 @@ class ExternalPlanner:
         #: the responsibility rule's duties and response clocks per vehicle
         #: (docs/method.md §12.13; None for the other shield kinds)
         self.duties: DutyWatch | None = None
+        #: how far past the responsible envelope's stop the duties forgive a vehicle's
+        #: position [m] (``DutyWatch.slack_m``: a simulator whose integration rolls a braking
+        #: vehicle further than the exact step sets its own)
+        self.duty_slack_m = POS_TOL_M
         from ..record import static_setup
 
         self._clear_m = float(static_setup(config)[0].hv.clear_s)
@@ -276,7 +283,7 @@ class ExternalPlanner:
         watch = None
         if self._shield.kind == SHIELD_KIND_IDS["responsibility"]:
             if self.duties is None:
-                self.duties = DutyWatch(dt_s)
+                self.duties = DutyWatch(dt_s, self.duty_slack_m)
             watch = self.duties
             keys = [c.key for c in conflicts]
             watch.restore(keys, C)
@@ -288,8 +295,8 @@ class ExternalPlanner:
         if watch is not None:
             watch.step(keys, s_H, v_H, C, verdict == "admitted" if driven
                        else verdict != "uncertified",
-                       [not (c.extra.get("stand_in") or c.extra.get("placeholder"))
-                        for c in conflicts])
+                       [not (c.extra.get("stand_in") or c.extra.get("placeholder")
+                             or c.extra.get("wreck")) for c in conflicts])
         return a, verdict
 
 

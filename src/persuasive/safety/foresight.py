@@ -103,7 +103,7 @@ def choose_line(config: Config, seed: int, x0_measured: np.ndarray, predict,
     ``persuasive.world.predicted_summary``, the compiled loop's)."""
     run_s = config.simulation.n_steps * config.simulation.dt_s
     best, pick = None, None
-    for line in config.av.yield_line_choices_m:
+    for line in config.yield_line_choices:
         value = line_value([score(predict(model_config(config, line, kind, role),
                                           prediction_seed(seed), interaction, x0_measured),
                                   run_s)

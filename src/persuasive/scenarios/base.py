@@ -234,7 +234,7 @@ def with_occupancies(paths: dict, occupancies: Callable[[dict], dict], config: C
     from dataclasses import replace
 
     occ = occupancies(paths)
-    margin = config.av.shield_margin_m or 0.0
+    margin = config.shield_margin_m
     shield = None
     if margin > 0.0:
         shield = occupancies({k: p.inflated(0.5 * margin) for k, p in paths.items()})

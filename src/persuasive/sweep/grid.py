@@ -382,7 +382,7 @@ class Grid:
     def _compute_digest(self) -> str:
         data = self.to_dict()
         # the base enters as its canonical TOML so that equal configurations hash equally
-        data["base"] = self.base.to_toml()
+        data["base"] = self.base.to_toml() + self.base.resolved_defaults()
         data["axes"] = [[name, list(values)] for name, values in self.axes]
         if self.cases:
             data["cases"] = [sorted(c.items()) for c in self.cases]
