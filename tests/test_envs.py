@@ -17,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from _highway import intersection_after_reset
 
 import persuasive.envs  # noqa: F401  (registers the ids)
 from persuasive import Config, ConfigError, Planner, simulate
@@ -308,17 +309,8 @@ def test_planner_through_the_env_reproduces_simulate_bit_for_bit(mode, seed):
 @pytest.fixture(scope="module")
 def crossing():
     """highway-env's intersection after reset, with the ego's :class:`Projector`."""
-    from persuasive.envs.highway import (DESTINATION, Projector, make_highway_env,
-                                         planner_config)
-
-    env = make_highway_env(planner_config())
-    env.reset(seed=1)
-    u = env.unwrapped
-    network = u.road.network
-    start = u.vehicle.lane_index
-    nodes = network.shortest_path(start[1], DESTINATION)
-    lanes = [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
-    yield u, Projector(network, lanes)
+    env, u, projector = intersection_after_reset(sized=False)
+    yield u, projector
     env.close()
 
 

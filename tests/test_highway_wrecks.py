@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from _highway import intersection_after_reset
 
 pytest.importorskip("highway_env")
 
@@ -16,18 +17,8 @@ pytest.importorskip("highway_env")
 @pytest.fixture(scope="module")
 def intersection():
     """highway-env's intersection after reset (seed 1), with the ego's ``Projector``."""
-    from persuasive.envs.highway import (DESTINATION, Projector, make_highway_env,
-                                         planner_config)
-
-    env = make_highway_env(planner_config())
-    env.reset(seed=1)
-    u = env.unwrapped
-    network = u.road.network
-    start = u.vehicle.lane_index
-    nodes = network.shortest_path(start[1], DESTINATION)
-    lanes = [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
-    veh = u.vehicle
-    yield u, Projector(network, lanes, (float(veh.LENGTH), float(veh.WIDTH)))
+    env, u, projector = intersection_after_reset(sized=True)
+    yield u, projector
     env.close()
 
 

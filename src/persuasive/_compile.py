@@ -167,6 +167,22 @@ def warm_up() -> None:
     simulate(Config().with_overrides({"simulation.n_steps": 1, "av.kind": "lfg"}), 1)
 
 
+def listen(kind: str, on_start, on_end) -> None:
+    """Call ``on_start()`` and ``on_end()`` at every start and end of Numba's event ``kind``
+    (``numba.core.event``: ``"numba:compile"``, ``"numba:compiler_lock"``), in the thread
+    where it happens."""
+    from numba.core import event
+
+    class Listener(event.Listener):
+        def on_start(self, _event) -> None:
+            on_start()
+
+        def on_end(self, _event) -> None:
+            on_end()
+
+    event.register(kind, Listener())
+
+
 class _Compiles:
     """Time this process spent in Numba's compiler (its ``numba:compile`` events, the
     outermost only: a kernel's callees compile inside it). Loading a cached kernel is not a
@@ -178,24 +194,22 @@ class _Compiles:
     installed = False
 
     @classmethod
+    def _started(cls) -> None:
+        if cls.depth == 0:
+            cls.start = time.perf_counter()
+        cls.depth += 1
+
+    @classmethod
+    def _ended(cls) -> None:
+        cls.depth = max(0, cls.depth - 1)
+        if cls.depth == 0:
+            cls.seconds += time.perf_counter() - cls.start
+
+    @classmethod
     def install(cls) -> None:
-        if cls.installed:
-            return
-        from numba.core import event
-
-        class Listener(event.Listener):
-            def on_start(self, _event) -> None:
-                if cls.depth == 0:
-                    cls.start = time.perf_counter()
-                cls.depth += 1
-
-            def on_end(self, _event) -> None:
-                cls.depth = max(0, cls.depth - 1)
-                if cls.depth == 0:
-                    cls.seconds += time.perf_counter() - cls.start
-
-        event.register("numba:compile", Listener())
-        cls.installed = True
+        if not cls.installed:
+            listen("numba:compile", cls._started, cls._ended)
+            cls.installed = True
 
 
 def compile_seconds() -> float:

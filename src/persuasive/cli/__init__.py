@@ -69,22 +69,22 @@ class _Compiling:
     installed = False
 
     @classmethod
+    def _started(cls) -> None:
+        if threading.current_thread() is threading.main_thread():
+            cls.depth += 1
+
+    @classmethod
+    def _ended(cls) -> None:
+        if threading.current_thread() is threading.main_thread():
+            cls.depth = max(0, cls.depth - 1)
+
+    @classmethod
     def install(cls) -> None:
-        if cls.installed:
-            return
-        from numba.core import event
+        if not cls.installed:
+            from .._compile import listen
 
-        class Listener(event.Listener):
-            def on_start(self, _event) -> None:
-                if threading.current_thread() is threading.main_thread():
-                    cls.depth += 1
-
-            def on_end(self, _event) -> None:
-                if threading.current_thread() is threading.main_thread():
-                    cls.depth = max(0, cls.depth - 1)
-
-        event.register("numba:compiler_lock", Listener())
-        cls.installed = True
+            listen("numba:compiler_lock", cls._started, cls._ended)
+            cls.installed = True
 
 
 def _on_interrupt(signum, frame) -> None:
