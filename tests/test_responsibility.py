@@ -58,16 +58,23 @@ def responsible_accel(draw: float, v: float, s: float, C: np.ndarray, dt: float 
     return u_min + draw * (u_max - u_min)
 
 
+def _start(config: Config, dt: float):
+    """A closed-loop shield of step ``dt`` for ``config``'s scenario, at its initial state:
+    ``(scenario, filter, its conflict vector, AV vehicle, HV vehicle, [s_av, v_av, s_hv,
+    v_hv])``."""
+    scenario, P_av, P_hv, _ = static_setup(config)
+    filt = ShieldFilter.closed_loop(P_av, P_hv, dt)
+    av, hv = scenario.av.vehicle, scenario.hv.vehicle
+    x = [config.scenario.av_s0_m, config.scenario.av_v0_mps, config.scenario.hv_s0_m,
+         config.scenario.hv_v0_mps]
+    return scenario, filt, filt._buf[:sh.N_CONFLICT], av, hv, x
+
+
 def run_responsible(config: Config, proposals, draws, clear_clock: bool = False):
     """The AV's ``proposals`` through the shield against the responsible human of ``draws``
     (:func:`responsible_accel`), both vehicles moved exactly: ``(scenario, states (n+1, 4),
     verdicts (n,))``. ``clear_clock``: the shield forgets its state every step."""
-    scenario, P_av, P_hv, _ = static_setup(config)
-    filt = ShieldFilter.closed_loop(P_av, P_hv, DT)
-    C = filt._buf[:sh.N_CONFLICT]
-    av, hv = scenario.av.vehicle, scenario.hv.vehicle
-    x = [config.scenario.av_s0_m, config.scenario.av_v0_mps, config.scenario.hv_s0_m,
-         config.scenario.hv_v0_mps]
+    scenario, filt, C, av, hv, x = _start(config, DT)
     states, verdicts = [list(x)], []
     for a, d in zip(proposals, draws):
         if clear_clock:
@@ -407,12 +414,7 @@ def run_judged(config: Config, proposals, draws, human):
     (:class:`DutyWatch`, as the adapters watch them) until the first overlap: ``(scenario,
     states, verdicts, the watch, its fault at the first overlap or None)``."""
     dt = config.simulation.dt_s
-    scenario, P_av, P_hv, _ = static_setup(config)
-    filt = ShieldFilter.closed_loop(P_av, P_hv, dt)
-    C = filt._buf[:sh.N_CONFLICT]
-    av, hv = scenario.av.vehicle, scenario.hv.vehicle
-    x = [config.scenario.av_s0_m, config.scenario.av_v0_mps, config.scenario.hv_s0_m,
-         config.scenario.hv_v0_mps]
+    scenario, filt, C, av, hv, x = _start(config, dt)
     watch = DutyWatch(dt)
     states, verdicts, fault = [list(x)], [], None
     for a, d in zip(proposals, draws):
