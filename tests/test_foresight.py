@@ -74,8 +74,10 @@ def test_unset_choices_leave_the_configuration_text_alone():
 
 def test_corrected_mode_defaults_to_foresight_and_a_clearance_where_they_apply():
     """Issue 39: the measured best is the default (docs/method.md §12.14): foresight over
-    [0, 3.75, 8] m and a 0.1 m clearance in corrected mode with a shield; paper mode keeps
-    neither; a fixed line, an online p_a, no shield or ``[]`` turn foresight off; the
+    [0, 3.75, 8] m and a 0.1 m clearance in corrected mode with the worst-case shield, where
+    they were measured best; paper mode keeps neither, nor do the shields that trust the human
+    to respond (measured worse there); a fixed line, an online p_a, no shield or ``[]`` turn
+    foresight off; the
     resolved defaults enter the runs' digest (a folder of runs made under the old ones is not
     resumed), except where nothing reads them (paper mode, no shield)."""
     corrected, paper = Config(mode="corrected"), Config()
@@ -87,6 +89,10 @@ def test_corrected_mode_defaults_to_foresight_and_a_clearance_where_they_apply()
                 {"av.yield_line_choices_m": []}):
         assert corrected.with_overrides(off).yield_line_choices is None, off
     assert corrected.with_overrides({"av.shield_margin_m": 0.0}).shield_margin_m == 0.0
+    for trusting in ("responsive", "responsibility"):
+        other = corrected.with_overrides({"av.shield": trusting})
+        assert other.yield_line_choices is None and other.shield_margin_m == 0.0
+        assert other.with_overrides({"av.shield_margin_m": 0.1}).shield_margin_m == 0.1
     assert corrected.digest() != corrected.with_overrides(LINE_AT_INTERVAL).digest()
     off = corrected.with_overrides({"av.shield": "off"})
     assert off.digest() == off.with_overrides({"av.shield_margin_m": 0.0}).digest() or \

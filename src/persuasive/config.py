@@ -786,13 +786,16 @@ class Config:
     def yield_line_choices(self) -> tuple[float, ...] | None:
         """The yield lines foresight picks among, in force (docs/method.md §12.12), or None
         (foresight off): ``av.yield_line_choices_m`` as set (``[]``: off); unset, corrected
-        mode's default :data:`DEFAULT_YIELD_LINE_CHOICES_M` where foresight applies (a shield
-        on, no fixed ``av.yield_line_m``, a fixed ``mpc.p_a_hat``), else off. Outside
-        simulators never run it (``persuasive.envs.external``)."""
+        mode's default :data:`DEFAULT_YIELD_LINE_CHOICES_M` where it was measured best and
+        applies (the worst-case shield, no fixed ``av.yield_line_m``, a fixed
+        ``mpc.p_a_hat``), else off: under the shields that trust the human to respond it
+        was measured worse (docs/method.md §12.14: against the `aggressive` human the
+        `responsibility` shield with foresight collided in 13 of 200 runs, without it in
+        none). Outside simulators never run it (``persuasive.envs.external``)."""
         lines = self.av.yield_line_choices_m
         if lines is not None:
             return lines if lines else None
-        if (self.mode == "corrected" and self.shield != "off"
+        if (self.mode == "corrected" and self.shield == "worst-case"
                 and self.av.yield_line_m is None and not self.p_a_online):
             return DEFAULT_YIELD_LINE_CHOICES_M
         return None
@@ -800,11 +803,15 @@ class Config:
     @property
     def shield_margin_m(self) -> float:
         """The shield's clearance in force [m]: ``av.shield_margin_m`` as set, else
-        :data:`DEFAULT_SHIELD_MARGIN_M` in corrected mode and 0 in paper mode (only a shield
-        reads it)."""
+        :data:`DEFAULT_SHIELD_MARGIN_M` under corrected mode's worst-case shield, where it
+        was measured best, and 0 otherwise (paper mode; the shields that trust the human to
+        respond, where it was measured worse: docs/method.md §12.14; only a shield reads
+        it)."""
         if self.av.shield_margin_m is not None:
             return self.av.shield_margin_m
-        return DEFAULT_SHIELD_MARGIN_M if self.mode == "corrected" else 0.0
+        if self.mode == "corrected" and self.shield == "worst-case":
+            return DEFAULT_SHIELD_MARGIN_M
+        return 0.0
 
     @property
     def confidence_filter(self) -> bool:
