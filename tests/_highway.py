@@ -5,17 +5,12 @@ def intersection_after_reset(sized: bool):
     """highway-env's intersection after ``reset(seed=1)``: ``(env, env.unwrapped, projector)``,
     the ego's :class:`persuasive.envs.highway.Projector` along its route (with the ego's
     length and width when ``sized``). The caller closes ``env``."""
-    from persuasive.envs.highway import (DESTINATION, Projector, make_highway_env,
-                                         planner_config)
+    from persuasive.envs.highway import Projector, ego_route, make_highway_env, planner_config
 
     env = make_highway_env(planner_config())
     env.reset(seed=1)
     u = env.unwrapped
-    network = u.road.network
-    start = u.vehicle.lane_index
-    nodes = network.shortest_path(start[1], DESTINATION)
-    lanes = [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
-    veh = u.vehicle
+    network, lanes, veh = u.road.network, ego_route(u), u.vehicle
     projector = (Projector(network, lanes, (float(veh.LENGTH), float(veh.WIDTH))) if sized
                  else Projector(network, lanes))
     return env, u, projector

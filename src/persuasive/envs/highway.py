@@ -335,6 +335,14 @@ class Projection:
     track: Track = field(repr=False, compare=False)
 
 
+def ego_route(u) -> list[tuple]:
+    """The ego's lanes from where it stands to :data:`DESTINATION` in highway-env's
+    intersection ``u`` (an unwrapped env after reset): its lane, then the shortest path's."""
+    network, start = u.road.network, u.vehicle.lane_index
+    nodes = network.shortest_path(start[1], DESTINATION)
+    return [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
+
+
 def lane_sequence(vehicle, network) -> list[tuple]:
     """The lanes a vehicle will drive: the one it follows now, then the rest of its route."""
     current = getattr(vehicle, "target_lane_index", None) or vehicle.lane_index
@@ -1208,9 +1216,7 @@ def run_episode(seed: int, driver: str = "persuasive", config: Config | None = N
         env.reset(seed=seed)
         u = env.unwrapped
         network = u.road.network
-        start = u.vehicle.lane_index
-        nodes = network.shortest_path(start[1], DESTINATION)
-        ego_lanes = [tuple(start)] + [(a, b, 0) for a, b in zip(nodes[:-1], nodes[1:])]
+        ego_lanes = ego_route(u)
         veh = u.vehicle
         projector = Projector(network, ego_lanes, (float(veh.LENGTH), float(veh.WIDTH)),
                               euler_margin(config), config.vehicle_of("av").v_max_mps)
