@@ -237,7 +237,7 @@ def test_a_rear_end_after_a_fair_cut_in_is_the_humans():
                        [1.0] * n)
     overlap = scenario.collides(states[1:, 0], states[1:, 2])
     assert overlap.any()
-    fault = measures.human_at_fault(scenario, states, a_R, 0.1)
+    fault = measures.human_at_fault(scenario, states, a_R, 0.1, np.ones(n))
     assert not measures.caused_by_av(overlap, fault).any()
     # the same entry 12 m ahead: unfair, the AV's
     states, a_R = _run(scenario, -1.0, 4.0, [0.0] * 5 + [-1.0] * (n - 5), -13.0, 10.0,
@@ -245,7 +245,7 @@ def test_a_rear_end_after_a_fair_cut_in_is_the_humans():
     overlap = scenario.collides(states[1:, 0], states[1:, 2])
     assert overlap.any()
     assert measures.caused_by_av(overlap, measures.human_at_fault(scenario, states, a_R,
-                                                                  0.1)).any()
+                                                                  0.1, np.ones(n))).any()
 
 
 def test_a_collision_is_judged_at_its_first_contact_inside_the_step():
@@ -288,7 +288,7 @@ def test_braking_harder_than_the_rule_after_a_fair_entry_is_the_avs():
     overlap = scenario.collides(states[1:, 0], states[1:, 2])
     assert overlap.any()
     assert measures.caused_by_av(overlap, measures.human_at_fault(scenario, states, a_R,
-                                                                  0.1)).any()
+                                                                  0.1, np.ones(n))).any()
 
 
 # -- closed loops -------------------------------------------------------------------------------

@@ -339,7 +339,7 @@ def contact_rear_mask(scenario, states: np.ndarray, accel_av: np.ndarray,
 
 
 def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float,
-                   accel_hv: np.ndarray | None = None) -> np.ndarray:
+                   accel_hv: np.ndarray) -> np.ndarray:
     """Per state after each step (``states[1:]``): an overlap there is a rear-end for which the
     human is at fault under the cut-in rule (docs/method.md §12.10). That needs all of: a
     rear-end by geometry (:func:`rear_end_mask`); the AV entered the lane (passed the shield's
@@ -352,13 +352,10 @@ def human_at_fault(scenario, states: np.ndarray, accel_av: np.ndarray, dt: float
 
     ``states`` ``(n + 1, 4)``: the true states ``s_av, v_av, s_hv, v_hv``; ``accel_av``
     ``(n,)`` [m/s^2]: the AV's realised acceleration of each step (noise included);
-    ``accel_hv``: the human's (given, a collision's rear-end is judged at its first contact
-    inside the step, :func:`contact_rear_mask`; else at its first overlapping state)."""
+    ``accel_hv`` the human's (a collision's rear-end is judged at its first contact inside
+    the step, :func:`contact_rear_mask`)."""
     after = states[1:]
-    if accel_hv is None:
-        rear = rear_end_mask(scenario, after[:, 0], after[:, 2])
-    else:
-        rear = contact_rear_mask(scenario, states, accel_av, accel_hv, dt)
+    rear = contact_rear_mask(scenario, states, accel_av, accel_hv, dt)
     if not rear.any():
         return rear
     from ..packing import pack
