@@ -36,6 +36,7 @@ def _register() -> None:
     from .drive import drive
     from .fit import fit
     from .highway import highway
+    from .junction import junction
     from .plots import animate, plot, plot_compare
     from .recordings import recordings
     from .reproduce import reproduce
@@ -48,6 +49,7 @@ def _register() -> None:
     cli.add_command(highway)
     cli.add_command(fit)
     cli.add_command(sumo)
+    cli.add_command(junction)
     cli.add_command(recordings)
     cli.add_command(compile_command)
     plot.add_command(plot_sweep)

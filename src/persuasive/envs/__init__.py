@@ -6,6 +6,9 @@
   (:data:`persuasive.scenarios.SCENARIOS`; :data:`ENV_IDS`), its kind in CamelCase:
   ``persuasive/Intersection-v0``, ``persuasive/Crossing-v0``, ``persuasive/LeftTurn-v0``,
   ``persuasive/Merge-v0``; a new scenario gets its id with no edit here.
+- :mod:`~persuasive.envs.junction`: the four-way junction with N vehicles
+  (``persuasive.many``): a PettingZoo ``ParallelEnv`` (any vehicles are agents) and the
+  gymnasium id ``persuasive/Junction-v0`` (one agent, ``n_vehicles`` and ``variant``).
 - :mod:`~persuasive.envs.highway`: the planner driving highway-env's ego at its intersection,
   against highway-env's own traffic (``persuasive highway``).
 
@@ -34,6 +37,9 @@ ENV_IDS = {scenario: env_id(scenario) for scenario in SCENARIOS}
 
 #: Where the environment class lives (gymnasium imports it when an id is first made).
 ENTRY_POINT = "persuasive.envs.conflict:ConflictEnv"
+#: The four-way junction with N vehicles, one of them the agent (:mod:`.junction`; its
+#: PettingZoo ``ParallelEnv`` is :class:`persuasive.envs.junction.JunctionParallelEnv`).
+JUNCTION_ID = "persuasive/Junction-v0"
 
 
 def register_envs() -> None:
@@ -43,6 +49,8 @@ def register_envs() -> None:
     for scenario, env_id in ENV_IDS.items():
         if env_id not in registry:
             register(id=env_id, entry_point=ENTRY_POINT, kwargs={"scenario": scenario})
+    if JUNCTION_ID not in registry:
+        register(id=JUNCTION_ID, entry_point="persuasive.envs.junction:JunctionEnv")
 
 
 def __getattr__(name: str):
@@ -58,4 +66,4 @@ try:
 except ImportError:  # gymnasium is not installed: nothing to register with
     pass
 
-__all__ = ["ENV_IDS", "ConflictEnv", "env_id", "register_envs"]
+__all__ = ["ENV_IDS", "JUNCTION_ID", "ConflictEnv", "env_id", "register_envs"]

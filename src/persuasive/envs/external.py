@@ -300,11 +300,15 @@ class ExternalPlanner:
         return a, verdict
 
 
-def idm_follow(config: Config, v: float, leader: tuple[float, float]) -> float:
-    """IDM acceleration [m/s^2] behind a leader ``(bumper gap [m], speed [m/s])`` with the
-    parameters of ``config.hv.idm`` and the ego's ``v_max`` as desired speed."""
+def idm_follow(config: Config, v: float, leader: tuple[float, float] | None,
+               desired_mps: float | None = None) -> float:
+    """IDM acceleration [m/s^2] behind a leader ``(bumper gap [m], speed [m/s])`` (None: the
+    free road) with the parameters of ``config.hv.idm`` and the ego's ``v_max`` as desired
+    speed (``desired_mps``: another)."""
     p = config.hv.idm
-    v0 = config.vehicle_of("av").v_max_mps
+    v0 = config.vehicle_of("av").v_max_mps if desired_mps is None else desired_mps
+    if leader is None:
+        return p.max_accel_mps2 * (1.0 - (v / v0) ** p.delta)
     gap, v_lead = leader
     s_star = p.jam_gap_m + max(0.0, v * p.time_gap_s + v * (v - v_lead) / (
         2.0 * math.sqrt(p.max_accel_mps2 * p.comfort_decel_mps2)))

@@ -1,0 +1,386 @@
+"""A four-way unsignalised junction as data (docs/method.md §15.1).
+
+Four arms, ``0`` east, ``1`` north, ``2`` west, ``3`` south, each with ``lanes`` (1 or 2)
+lanes in each direction, right-hand traffic. A route is an arm, a movement (``left``,
+``straight``, ``right``) and an inbound lane; its centre line (:class:`Route`) runs along the
+inbound lane for ``approach_m``, through the junction's square box (its half side is the
+road's half width, ``lanes * lane_width_m``), and out along the exit lane for ``exit_m``. In
+the box a straight route is a segment and a turn a cubic Bezier curve tangent to both lanes.
+With two lanes, left turns use the inner lane, right turns the outer, straight movements
+either (drawn); a route keeps its lane index through the box.
+
+The arrivals (:func:`arrivals`) are drawn from the run's seed alone: every vehicle's arm,
+movement, lane, distance to the stop line and speed; the AV's arm and movement are set
+(:attr:`JunctionSpec.av_arm`, :attr:`JunctionSpec.av_movement`). Vehicles in one lane are
+placed one behind the other, each a drawn gap behind the one ahead; a spec whose vehicles do
+not fit on its approaches is refused.
+
+The right of way of two vehicles on crossing or merging routes
+(:func:`right_of_way`, ``+1``: the first has it, ``-1``: the second, ``0``: neither):
+
+- ``major``: arms 0 and 2 (east-west) are the major road: a vehicle from it has the right of
+  way over one from arms 1 and 3; between two vehicles on the same road (opposite arms) a
+  left turn yields to a straight or right movement;
+- ``right-before-left``: the vehicle coming from the other's right has it; opposite arms as
+  above;
+- ``first-come``: the vehicle that would reach its stop line first at its initial speed
+  (its distance over ``max(v, 1 m/s)``) has it; ties: neither.
+
+Named variants (:data:`VARIANTS`) fix the priority and the movement mix: ``major``,
+``all-way`` (first come), ``right-before-left`` and ``left-heavy`` (first come, 60 % left
+turns).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from ..config import ConfigError
+from ..envs.external import Polyline
+
+#: Arms, anticlockwise from east.
+ARMS = ("east", "north", "west", "south")
+MOVEMENTS = ("left", "straight", "right")
+PRIORITIES = ("major", "first-come", "right-before-left")
+#: Whom a human plays against (:attr:`JunctionSpec.opponents`).
+OPPONENTS = ("next", "all")
+#: Arm offsets of each movement's exit (right-hand traffic: a left turn from the east arm,
+#: heading west, leaves by the south arm).
+EXIT_OFFSET = {"left": 3, "straight": 2, "right": 1}
+#: Named variants: the fields of :class:`JunctionSpec` each sets.
+VARIANTS: dict[str, dict[str, Any]] = {
+    "major": {"priority": "major", "mix": (0.25, 0.5, 0.25)},
+    "all-way": {"priority": "first-come", "mix": (0.25, 0.5, 0.25)},
+    "right-before-left": {"priority": "right-before-left", "mix": (0.25, 0.5, 0.25)},
+    "left-heavy": {"priority": "first-come", "mix": (0.6, 0.3, 0.1)},
+}
+#: The vehicle length a spec's fit is checked with [m] (:func:`arrivals` checks the real one).
+FIT_LENGTH_M = 5.0
+#: Sample spacing of a route's centre line in the box [m].
+CURVE_STEP_M = 0.5
+
+
+@dataclass(frozen=True)
+class JunctionSpec:
+    """A four-way junction and its arrivals (module docstring). Lengths in metres, speeds in
+    m/s; ``mix`` is the (left, straight, right) share of the humans' movements."""
+
+    n_vehicles: int = 4  #: vehicles in the run, the AV included (>= 1)
+    lanes: int = 1  #: lanes per direction on every arm (1 or 2)
+    lane_width_m: float = 4.0
+    #: inbound lane length before the stop line [m] (None: long enough for every vehicle in
+    #: one lane, at least 100 m)
+    approach_m: float | None = None
+    exit_m: float = 40.0  #: exit lane length after the box [m]
+    priority: str = "major"
+    mix: tuple[float, float, float] = (0.25, 0.5, 0.25)
+    av_arm: int = 3  #: the AV's arm (0 east, 1 north, 2 west, 3 south)
+    av_movement: str = "straight"
+    #: the first vehicle's centre in a lane starts this far before the stop line [m]
+    first_m: tuple[float, float] = (10.0, 30.0)
+    #: the bumper gap to the vehicle ahead in the lane [m]
+    gap_m: tuple[float, float] = (6.0, 20.0)
+    v0_mps: tuple[float, float] = (3.0, 5.0)  #: initial speeds
+    #: the humans' kinds and their shares (any simulated human kind of the project)
+    hv_kinds: tuple[tuple[str, float], ...] = (("lfg", 1.0),)
+    duration_s: float = 30.0  #: run length [s]
+    #: whom a human plays its pair game against: ``next``, the vehicle it conflicts with next;
+    #: ``all``, every vehicle of an uncleared conflict within the prediction's reach (the
+    #: lowest of the answers, as Li et al.'s concurrent pairwise games)
+    opponents: str = "next"
+
+    def __post_init__(self) -> None:
+        def bad(name: str, allowed: str) -> ConfigError:
+            return ConfigError(f"junction.{name} = {getattr(self, name)!r} is out of range; "
+                               f"allowed: {allowed}")
+
+        if not isinstance(self.n_vehicles, (int, np.integer)) or not 1 <= self.n_vehicles <= 64:
+            raise bad("n_vehicles", "an integer in [1, 64] (the AV included)")
+        if self.lanes not in (1, 2):
+            raise bad("lanes", "1 | 2")
+        if not 2.0 <= self.lane_width_m <= 6.0:
+            raise bad("lane_width_m", "[2, 6] m")
+        if not 10.0 <= self.exit_m <= 1000.0:
+            raise bad("exit_m", "[10, 1000] m")
+        if self.priority not in PRIORITIES:
+            raise bad("priority", " | ".join(PRIORITIES))
+        mix = tuple(float(m) for m in self.mix)
+        if len(mix) != 3 or not all(math.isfinite(m) and m >= 0.0 for m in mix) or \
+                not sum(mix) > 0.0:
+            raise bad("mix", "three shares (left, straight, right) >= 0 with a positive sum")
+        object.__setattr__(self, "mix", mix)
+        if self.av_arm not in (0, 1, 2, 3):
+            raise bad("av_arm", "0 (east) | 1 (north) | 2 (west) | 3 (south)")
+        if self.av_movement not in MOVEMENTS:
+            raise bad("av_movement", " | ".join(MOVEMENTS))
+        for name, lo_min in (("first_m", 0.0), ("gap_m", 0.5), ("v0_mps", 0.0)):
+            pair = tuple(float(x) for x in getattr(self, name))
+            if len(pair) != 2 or not (lo_min <= pair[0] <= pair[1]) or \
+                    not math.isfinite(pair[1]):
+                raise bad(name, f"(lo, hi) with {lo_min:g} <= lo <= hi, finite")
+            object.__setattr__(self, name, pair)
+        need = self.first_m[1] + (self.n_vehicles - 1) * (FIT_LENGTH_M + self.gap_m[1]) \
+            + 0.5 * FIT_LENGTH_M
+        if self.approach_m is None:
+            object.__setattr__(self, "approach_m", float(max(100.0, 10.0 * math.ceil(need / 10.0))))
+        if not 20.0 <= self.approach_m <= 5000.0:
+            raise bad("approach_m", "[20, 5000] m")
+        if self.first_m[1] + 5.0 > self.approach_m:
+            raise ConfigError(f"junction.first_m = {self.first_m!r} does not fit on an approach "
+                              f"of junction.approach_m = {self.approach_m:g} m; allowed: hi <= "
+                              "approach_m - 5")
+        # every vehicle in one lane must fit (5-m vehicles; arrivals checks the real length)
+        if need > self.approach_m:
+            raise ConfigError(f"junction.n_vehicles = {self.n_vehicles} does not fit on an "
+                              f"approach of junction.approach_m = {self.approach_m:g} m (all in "
+                              f"one lane need {need:g} m); allowed: n_vehicles <= "
+                              f"{self.max_vehicles()}, or a longer approach_m or smaller gap_m")
+        kinds = _kinds(self.hv_kinds)
+        object.__setattr__(self, "hv_kinds", kinds)
+        if self.opponents not in OPPONENTS:
+            raise bad("opponents", " | ".join(OPPONENTS))
+        if not 1.0 <= self.duration_s <= 3600.0:
+            raise bad("duration_s", "[1, 3600] s")
+
+    @classmethod
+    def of(cls, variant: str | None = None, **fields_: Any) -> JunctionSpec:
+        """A spec from a named variant (:data:`VARIANTS`) and fields set over it."""
+        base: dict[str, Any] = {}
+        if variant is not None:
+            if variant not in VARIANTS:
+                raise ConfigError(f"junction variant = {variant!r} is out of range; allowed: "
+                                  f"{' | '.join(VARIANTS)}")
+            base.update(VARIANTS[variant])
+        known = {f.name for f in fields(cls)}
+        for name in fields_:
+            if name not in known:
+                raise ConfigError(f"junction.{name} is not a parameter; allowed: "
+                                  f"{' | '.join(sorted(known))}")
+        base.update(fields_)
+        return cls(**base)
+
+    def max_vehicles(self) -> int:
+        """The most vehicles that fit in one lane of this approach."""
+        room = self.approach_m - self.first_m[1] - 0.5 * FIT_LENGTH_M
+        return max(1, 1 + int(room // (FIT_LENGTH_M + self.gap_m[1])))
+
+    @property
+    def half_m(self) -> float:
+        """Half the side of the junction's box [m]."""
+        return self.lanes * self.lane_width_m
+
+    def with_(self, **changes: Any) -> JunctionSpec:
+        return replace(self, **changes)
+
+
+def _kinds(value) -> tuple[tuple[str, float], ...]:
+    from ..config import SIMULATED_HV_KINDS
+
+    if isinstance(value, str):  # "lfg:0.8,aggressive:0.2" or "idm"
+        items = []
+        for part in value.split(","):
+            name, _, share = part.strip().partition(":")
+            try:
+                items.append((name.strip(), float(share) if share else 1.0))
+            except ValueError:
+                raise ConfigError(f"junction.hv_kinds = {value!r} is not KIND[:SHARE],...") \
+                    from None
+        value = items
+    elif isinstance(value, dict):
+        value = list(value.items())
+    out = []
+    for item in value:
+        name, share = (item, 1.0) if isinstance(item, str) else item
+        if name not in SIMULATED_HV_KINDS or name == "replay":
+            allowed = " | ".join(k for k in SIMULATED_HV_KINDS if k != "replay")
+            raise ConfigError(f"junction.hv_kinds has {name!r}; allowed: {allowed}")
+        share = float(share)
+        if not (math.isfinite(share) and share >= 0.0):
+            raise ConfigError(f"junction.hv_kinds share of {name!r} = {share!r} is out of "
+                              "range; allowed: >= 0")
+        out.append((str(name), share))
+    if not out or not sum(s for _, s in out) > 0.0:
+        raise ConfigError("junction.hv_kinds needs at least one kind with a positive share")
+    return tuple(out)
+
+
+# -- routes -----------------------------------------------------------------------------------
+
+
+def _unit(arm: int) -> np.ndarray:
+    angle = 0.5 * math.pi * arm
+    return np.array([math.cos(angle), math.sin(angle)])
+
+
+def _right_of(d: np.ndarray) -> np.ndarray:
+    return np.array([d[1], -d[0]])
+
+
+@dataclass(frozen=True)
+class Route:
+    """One route through the junction: its centre line and where it enters and leaves the box.
+
+    ``entry_m``, ``exit_m``: arc lengths [m] of the stop line and of the box's far edge;
+    ``inbound``, ``outbound``: ``(arm, lane)`` of its lanes (lane 0 next to the centre line).
+    """
+
+    arm: int
+    movement: str
+    lane: int
+    line: Polyline = field(compare=False)
+    entry_m: float
+    exit_m: float
+    inbound: tuple[int, int]
+    outbound: tuple[int, int]
+
+    @property
+    def length_m(self) -> float:
+        return self.line.length_m
+
+    @property
+    def exit_arm(self) -> int:
+        return (self.arm + EXIT_OFFSET[self.movement]) % 4
+
+
+@lru_cache(maxsize=256)
+def route(spec_geometry: tuple, arm: int, movement: str, lane: int) -> Route:
+    """The :class:`Route` of ``(arm, movement, lane)`` on the geometry
+    ``(lanes, lane_width_m, approach_m, exit_m)`` (:func:`geometry_of`)."""
+    lanes, w, approach, exit_len = spec_geometry
+    half = lanes * w
+    u_in = _unit(arm)
+    d = -u_in  # heading into the junction
+    offset = (lane + 0.5) * w
+    p_entry = u_in * half + _right_of(d) * offset
+    p_start = p_entry + u_in * approach
+    out_arm = (arm + EXIT_OFFSET[movement]) % 4
+    u_out = _unit(out_arm)
+    p_exit = u_out * half + _right_of(u_out) * offset
+    p_end = p_exit + u_out * exit_len
+    if movement == "straight":
+        box = np.array([p_entry, p_exit])
+    else:  # a cubic Bezier tangent to both lanes (an arc's usual handle length)
+        chord = float(np.hypot(*(p_exit - p_entry)))
+        handle = 0.39 * chord
+        c1, c2 = p_entry + d * handle, p_exit - u_out * handle
+        n = max(8, int(math.ceil(1.3 * chord / CURVE_STEP_M)))
+        t = np.linspace(0.0, 1.0, n + 1)[:, None]
+        box = ((1 - t) ** 3 * p_entry + 3 * (1 - t) ** 2 * t * c1 + 3 * (1 - t) * t ** 2 * c2
+               + t ** 3 * p_exit)
+    line = Polyline.of(np.vstack([p_start, box, p_end]))
+    entry = float(approach)
+    exit_ = float(line.arc[-1] - exit_len)
+    return Route(arm, movement, lane, line, entry, exit_, (arm, lane), (out_arm, lane))
+
+
+def geometry_of(spec: JunctionSpec) -> tuple:
+    """The part of a spec the routes depend on (a cache key)."""
+    return (spec.lanes, spec.lane_width_m, spec.approach_m, spec.exit_m)
+
+
+def lane_of(spec: JunctionSpec, movement: str, u: float) -> int:
+    """The inbound lane a movement uses (module docstring); ``u``: a uniform for the straight
+    movement's choice with two lanes."""
+    if spec.lanes == 1:
+        return 0
+    if movement == "left":
+        return 0
+    if movement == "right":
+        return 1
+    return 0 if u < 0.5 else 1
+
+
+# -- arrivals ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Arrivals:
+    """Every vehicle's route and initial state; vehicle 0 is the AV.
+
+    ``route``: per vehicle; ``s0_m`` ``(n,)``: arc length along its route; ``v0_mps`` ``(n,)``;
+    ``kind``: per vehicle (``"av"`` for vehicle 0, else a human kind).
+    """
+
+    routes: tuple[Route, ...]
+    s0_m: np.ndarray
+    v0_mps: np.ndarray
+    kinds: tuple[str, ...]
+
+    @property
+    def n(self) -> int:
+        return len(self.routes)
+
+
+def arrivals(spec: JunctionSpec, seed: int, vehicle_length_m: float = 5.0) -> Arrivals:
+    """Draw the arrivals of run ``seed`` (module docstring). The humans' draws come first and
+    do not depend on the AV's: vehicle ``i``'s draws are the same with and without the AV."""
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([int(seed), 0x4A4E])))
+    geo = geometry_of(spec)
+    mix = np.asarray(spec.mix) / sum(spec.mix)
+    names = [k for k, _ in spec.hv_kinds]
+    shares = np.array([s for _, s in spec.hv_kinds]) / sum(s for _, s in spec.hv_kinds)
+    n_h = spec.n_vehicles - 1
+    u = rng.random((n_h, 6))  # arm, movement, lane, kind, place order, speed per human
+    routes = [route(geo, spec.av_arm, spec.av_movement, lane_of(spec, spec.av_movement, 0.5))]
+    kinds = ["av"]
+    for i in range(n_h):
+        arm = min(int(u[i, 0] * 4), 3)
+        movement = MOVEMENTS[min(int(np.searchsorted(np.cumsum(mix), u[i, 1], side="right")),
+                                 2)]
+        routes.append(route(geo, arm, movement, lane_of(spec, movement, u[i, 2])))
+        kinds.append(names[min(int(np.searchsorted(np.cumsum(shares), u[i, 3], side="right")),
+                               len(names) - 1)])
+    av_u = rng.random(2)  # the AV's place order and speed
+    order = np.r_[av_u[0], u[:, 4]]
+    speed_u = np.r_[av_u[1], u[:, 5]]
+    v0 = spec.v0_mps[0] + speed_u * (spec.v0_mps[1] - spec.v0_mps[0])
+    gaps = rng.random(spec.n_vehicles)  # one per vehicle: its place in its lane
+    s0 = np.empty(spec.n_vehicles)
+    lanes: dict[tuple[int, int], list[int]] = {}
+    for i, r in enumerate(routes):
+        lanes.setdefault(r.inbound, []).append(i)
+    for lane, members in lanes.items():
+        members.sort(key=lambda i: (order[i], i))
+        dist = None
+        for i in members:
+            if dist is None:
+                dist = spec.first_m[0] + gaps[i] * (spec.first_m[1] - spec.first_m[0])
+            else:
+                dist += vehicle_length_m + spec.gap_m[0] + gaps[i] * (spec.gap_m[1] -
+                                                                      spec.gap_m[0])
+            if dist > spec.approach_m - 0.5 * vehicle_length_m:
+                raise ConfigError(
+                    f"junction.n_vehicles = {spec.n_vehicles} does not fit: lane "
+                    f"{ARMS[lane[0]]}/{lane[1]} needs more than junction.approach_m = "
+                    f"{spec.approach_m:g} m (seed {seed}); allowed: fewer vehicles, more lanes "
+                    "or a longer approach")
+            s0[i] = routes[i].entry_m - dist
+    return Arrivals(tuple(routes), s0, v0, tuple(kinds))
+
+
+def right_of_way(spec: JunctionSpec, a: Route, b: Route, x_a: tuple[float, float],
+                 x_b: tuple[float, float]) -> int:
+    """Who has the right of way between vehicles on routes ``a`` and ``b`` (module docstring):
+    ``+1`` the first, ``-1`` the second, ``0`` neither; ``x_a``, ``x_b``: their initial
+    ``(s, v)`` (for ``first-come``)."""
+    if spec.priority == "first-come":
+        t_a = (a.entry_m - x_a[0]) / max(x_a[1], 1.0)
+        t_b = (b.entry_m - x_b[0]) / max(x_b[1], 1.0)
+        return 0 if t_a == t_b else (1 if t_a < t_b else -1)
+    rel = (b.arm - a.arm) % 4
+    if rel == 2 or rel == 0:  # the same road: a left turn yields to the other movements
+        left_a, left_b = a.movement == "left", b.movement == "left"
+        return 0 if left_a == left_b else (-1 if left_a else 1)
+    if spec.priority == "major":
+        return 1 if a.arm % 2 == 0 else -1  # adjacent arms: one is on the major road
+    # right before left: b comes from a's right when it is on the arm after a's (rel 1)
+    return -1 if rel == 1 else 1
+
+
+__all__ = ["ARMS", "Arrivals", "EXIT_OFFSET", "JunctionSpec", "MOVEMENTS", "OPPONENTS", "PRIORITIES",
+           "Route", "VARIANTS", "arrivals", "geometry_of", "lane_of", "right_of_way", "route"]

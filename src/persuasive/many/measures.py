@@ -1,0 +1,240 @@
+"""Liveness and safety of a run of many vehicles (docs/method.md §15.5).
+
+- **Wait-for graph** (:func:`wait_edges`): at a step, vehicle ``i`` waits for ``j`` when ``i``
+  is slower than ``WAIT_V_MPS`` before leaving the box, and either ``j`` is ahead of it in a
+  lane they share within ``FOLLOW_GAP_M`` (bumper gap), or ``i`` has not reached the
+  conflict point of a crossing or merge with ``j``, is within ``APPROACH_M`` of its occupancy
+  interval or inside it, and ``j`` has not cleared the conflict and is within ``APPROACH_M``
+  of its own interval or inside it.
+- **Deadlock** (:func:`deadlock`): a cycle of that graph (a strongly connected component of
+  two or more vehicles, ``scipy.sparse.csgraph``) whose members stay the same for
+  ``DEADLOCK_S`` seconds; the first one is reported with its members and time.
+- **Waiting time**: the time a vehicle spends slower than ``WAIT_V_MPS`` before leaving the
+  box.
+- **Throughput**: vehicles through the box per hour, over the time until the last one left
+  it (the run's length when some did not).
+- **Delays**: the AV's, its time to leave the box less its free-flow time (full throttle to
+  ``v_max`` from its initial state, alone); the delay it causes, the humans' mean time to
+  leave the box less the same in the run of the same seed without the AV (a vehicle that
+  never leaves counts the run's length).
+- **PET** (post-encroachment time) of a crossing or merge: the time between the two centres
+  passing their conflict points (linear between steps).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..envs.external import CROSSING, FOLLOW, MERGE
+from .world import ACTIVE, CRASHED, WAIT_V_MPS, JunctionWorld
+
+#: A follower within this bumper gap of its leader waits for it [m].
+FOLLOW_GAP_M = 15.0
+#: How far before its occupancy interval a vehicle waits for a conflict, and how near its own
+#: a vehicle must be to be waited for [m].
+APPROACH_M = 20.0
+#: A cycle of the wait-for graph that lasts this long is a deadlock [s].
+DEADLOCK_S = 5.0
+
+
+def clear_times(world: JunctionWorld) -> np.ndarray:
+    """Per vehicle: the time it left the box [s] (NaN: never), linear between steps."""
+    S, dt = world.S, world.dt
+    out = np.full(world.n, np.nan)
+    for i in range(world.n):
+        line = world.through_m(i)
+        s = S[:, i]
+        past = np.flatnonzero(np.nan_to_num(s, nan=-np.inf) >= line)
+        done = np.flatnonzero(world.STATUS[:, i] == 1)
+        if past.size:
+            k = int(past[0])
+            if k == 0:
+                out[i] = 0.0
+            else:
+                s0, s1 = s[k - 1], s[k]
+                out[i] = dt * (k - 1 + (line - s0) / (s1 - s0) if s1 > s0 else k)
+        elif done.size:  # left the map within one step
+            out[i] = dt * int(done[0])
+    return out
+
+
+def free_flow_s(s0: float, v0: float, s1: float, u_max: float, v_max: float) -> float:
+    """The time to go from ``s0`` to ``s1`` [m] starting at ``v0``, at ``u_max`` up to
+    ``v_max``."""
+    d = s1 - s0
+    if d <= 0.0:
+        return 0.0
+    d_acc = (v_max * v_max - v0 * v0) / (2.0 * u_max)
+    if d <= d_acc:
+        return (-v0 + math.sqrt(v0 * v0 + 2.0 * u_max * d)) / u_max
+    return (v_max - v0) / u_max + (d - d_acc) / v_max
+
+
+def wait_edges(world: JunctionWorld, k: int) -> list[tuple[int, int]]:
+    """The wait-for graph at step ``k`` (module docstring), as ``(waiter, waited for)``."""
+    s, v, st = world.S[k], world.V[k], world.STATUS[k]
+    waiting = [(st[i] == ACTIVE and v[i] < WAIT_V_MPS and s[i] < world.through_m(i))
+               for i in range(world.n)]
+    edges = []
+    for row in world.table.rows:
+        i, j = row.i, row.j
+        if st[i] != ACTIVE or st[j] != ACTIVE or not (waiting[i] or waiting[j]):
+            continue
+        if row.kind == FOLLOW:
+            if s[i] > s[j]:
+                lead, fol = i, j
+            else:
+                lead, fol = j, i
+            gap = s[lead] - s[fol] - 0.5 * (world.limits[lead].length_m +
+                                             world.limits[fol].length_m)
+            if waiting[fol] and gap < FOLLOW_GAP_M and s[fol] <= row.shared_until_m:
+                edges.append((fol, lead))
+            continue
+        for a, b, rc in ((i, j, row.ij), (j, i, row.ji)):
+            if not waiting[a]:
+                continue
+            sa, sb = s[a] - rc.ego_at_m, s[b] - rc.other_at_m
+            lo_a, (lo_b, hi_b) = rc.ego_occupancy[0], rc.other_occupancy
+            if sa < min(0.0, rc.ego_occupancy[1]) and lo_a - sa < APPROACH_M and sb < hi_b \
+                    and lo_b - sb < APPROACH_M:
+                edges.append((a, b))
+    return edges
+
+
+def _may_cycle(edges: list[tuple[int, int]]) -> bool:
+    """Whether a graph may hold a cycle: what is left after removing, again and again, every
+    vertex without an edge in or without an edge out (a cheap test before the components)."""
+    live = list(edges)
+    while live:
+        heads, tails = {b for _, b in live}, {a for a, _ in live}
+        keep = [(a, b) for a, b in live if a in heads and b in tails]
+        if len(keep) == len(live):
+            return True
+        live = keep
+    return False
+
+
+def deadlock(world: JunctionWorld, hold_s: float = DEADLOCK_S
+             ) -> tuple[float, tuple[int, ...]] | None:
+    """The first deadlock of the run (module docstring): ``(time it began [s], members)``,
+    or None."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    hold = max(1, int(round(hold_s / world.dt)))
+    current: frozenset = frozenset()
+    since = 0
+    for k in range(world.k + 1):
+        edges = wait_edges(world, k)
+        cycle: frozenset = frozenset()
+        if len(edges) >= 2 and _may_cycle(edges):
+            e = np.array(edges)
+            g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(world.n, world.n))
+            _, label = connected_components(g, directed=True, connection="strong")
+            counts = np.bincount(label)
+            members = np.flatnonzero(counts[label] >= 2)
+            cycle = frozenset(int(m) for m in members)
+        if cycle != current:
+            current, since = cycle, k
+        if current and k - since >= hold:
+            return since * world.dt, tuple(sorted(current))
+    return None
+
+
+def waiting_s(world: JunctionWorld) -> np.ndarray:
+    """Per vehicle: its waiting time [s] (module docstring)."""
+    through = np.array([world.through_m(i) for i in range(world.n)])
+    S, V = world.S[: world.k + 1], world.V[: world.k + 1]
+    with np.errstate(invalid="ignore"):
+        w = (world.STATUS[: world.k + 1] == ACTIVE) & (V < WAIT_V_MPS) & (S < through)
+    return w.sum(axis=0) * world.dt
+
+
+def pets(world: JunctionWorld) -> list[tuple[int, int, float]]:
+    """``(i, j, PET [s])`` of every crossing and merge both vehicles passed."""
+    S, dt = world.S[: world.k + 1], world.dt
+    out = []
+
+    def passed(col: np.ndarray, at: float) -> float:
+        rel = np.nan_to_num(col - at, nan=-np.inf)
+        k = np.flatnonzero(rel >= 0.0)
+        if not k.size or k[0] == 0 or not np.isfinite(rel[k[0] - 1]):
+            return math.nan if not k.size or k[0] != 0 else 0.0
+        k0 = int(k[0])
+        r0, r1 = rel[k0 - 1], rel[k0]
+        return dt * (k0 - 1 + (-r0) / (r1 - r0))
+
+    for row in world.table.rows:
+        if row.kind not in (CROSSING, MERGE):
+            continue
+        ti, tj = passed(S[:, row.i], row.ij.ego_at_m), passed(S[:, row.j], row.ji.ego_at_m)
+        if math.isfinite(ti) and math.isfinite(tj):
+            out.append((row.i, row.j, abs(ti - tj)))
+    return out
+
+
+def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
+            step_ms: np.ndarray | None = None) -> dict:
+    """One row of a study: the run's outcome and measures (module docstring);
+    ``reference``: the same seed without the AV (for the delay it causes)."""
+    spec, dt = world.spec, world.dt
+    t_end = world.k * dt
+    clear = clear_times(world)
+    n = world.n
+    humans = np.arange(1, n)
+    through = np.isfinite(clear)
+    through[0] &= world.with_av
+    n_through = int(through.sum())
+    last = float(np.nanmax(clear)) if n_through else math.nan
+    throughput = 3600.0 * n_through / (last if n_through == (n if world.with_av else n - 1)
+                                       and last > 0 else spec.duration_s)
+    lock = deadlock(world)
+    wait = waiting_s(world)
+    pet = pets(world)
+    av = world.limits[0]
+    row = {
+        "seed": world.seed,
+        "n_vehicles": n,
+        "steps": world.k,
+        "av_through": bool(through[0]),
+        "av_clear_s": float(clear[0]),
+        "av_delay_s": float(clear[0] - free_flow_s(world.arrivals.s0_m[0],
+                                                   world.arrivals.v0_mps[0],
+                                                   world.through_m(0), av.u_max_mps2,
+                                                   av.v_max_mps)),
+        "av_collisions": sum(1 for _, i, _, _ in world.collisions if i == 0),
+        "av_caused_collisions": sum(1 for _, i, _, c in world.collisions if i == 0 and c),
+        "human_collisions": sum(1 for _, i, _, _ in world.collisions if i != 0),
+        "uncertified_steps": sum(v == "uncertified" for v in world.verdicts),
+        "shield_overrides": sum(v in ("brake", "go") for v in world.verdicts),
+        "deadlock": lock is not None,
+        "deadlock_t_s": lock[0] if lock else math.nan,
+        "deadlock_vehicles": " ".join(map(str, lock[1])) if lock else "",
+        "av_in_deadlock": bool(lock and 0 in lock[1]),
+        "av_wait_s": float(wait[0]),
+        "mean_wait_s": float(wait[humans].mean()) if n > 1 else 0.0,
+        "max_wait_s": float(wait.max()),
+        "vehicles_through": n_through,
+        "throughput_veh_h": float(throughput),
+        "min_pet_av_s": min((p for i, _, p in pet if i == 0), default=math.nan),
+        "min_pet_s": min((p for _, _, p in pet), default=math.nan),
+        "min_gap_av_m": world.min_gap_av_m,
+        "caused_delay_s": math.nan,
+        "crashed_humans": int((world.status[humans] == CRASHED).sum()),
+        "t_end_s": t_end,
+    }
+    if reference is not None:
+        with_av = np.where(np.isfinite(clear[1:]), clear[1:], spec.duration_s)
+        ref = clear_times(reference)[1:]
+        without = np.where(np.isfinite(ref), ref, spec.duration_s)
+        row["caused_delay_s"] = float(np.mean(with_av - without)) if n > 1 else 0.0
+    if step_ms is not None and len(step_ms):
+        row["step_ms_median"] = float(np.median(step_ms))
+        row["step_ms_max"] = float(np.max(step_ms))
+    return row
+
+
+__all__ = ["APPROACH_M", "DEADLOCK_S", "FOLLOW_GAP_M", "clear_times", "deadlock", "free_flow_s",
+           "pets", "summary", "wait_edges", "waiting_s"]

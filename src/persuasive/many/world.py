@@ -1,0 +1,550 @@
+"""The world of N vehicles at the junction: a vehicles table, a conflict table, the closed loop
+(docs/method.md §15).
+
+**Vehicles table** (:class:`Vehicles`): per vehicle its route (``persuasive.many.junction``),
+limits, kind and state ``(s, v)`` along its route; vehicle 0 is the AV (absent in a run
+``with_av=False``, the reference that measures the delay the AV causes).
+
+**Conflict table** (:class:`ConflictTable`, built once per run by :func:`conflict_table`, the
+one builder): one row per pair of vehicles whose routes come close enough for the footprints
+to touch: ``follow`` (the same inbound lane; shared up to the box, or to the end on the same
+route), ``merge`` (different inbound lanes into one exit lane, conflict point at the box's
+far edge) or ``crossing`` (the centre lines' closest approach), with both conflict points,
+both occupancy intervals (``persuasive.envs.external.route_conflict``), the right of way
+(``persuasive.many.junction.right_of_way``) and each side's stop line. Pairs without a row
+can never touch.
+
+**A step** (:meth:`JunctionWorld.step`): every vehicle decides on the same states, then all
+advance (the saturated step), then every row is checked for overlap:
+
+- the **AV** drives as the outside-simulator adapters do (``persuasive.envs.external``,
+  :class:`~persuasive.envs.external.ExternalPlanner`): one planner per conflicting human, the
+  lowest acceleration, IDM behind a leader in its lane, and the one shield over every
+  conflict, its yield line at its stop line;
+- each **human** (:class:`Human`) computes, in this order: IDM behind the nearest vehicle
+  ahead in its lane (or, before a merge, ahead in the exit lane) or behind the start of its
+  occupancy interval of any conflict another vehicle is inside of (as behind a standing car:
+  it does not drive into an occupied conflict), or the free-road IDM term;
+  its own pair policy against the vehicle it conflicts with next (the uncleared crossing or
+  merge whose conflict point it reaches first; among several at one point, the other vehicle
+  nearest to it), in that pair's coordinates as the two-vehicle world has them, with its own
+  role (the right of way's: leader with it, follower without, ``hv.role`` when neither), belief
+  and ``p_a``, kept while the pair's conflict lasts; then the lowest of these, within its
+  limits. It assumes of the others only what its pair policy assumes of its opponent; it
+  does not see a third vehicle at the same conflict until that one is next.
+- an **agent** (:meth:`JunctionWorld.step`'s ``actions``) replaces a vehicle's policy; with
+  ``shield=True`` its acceleration goes through the same shield as the AV's.
+
+**Collisions.** Footprints (oriented rectangles) that overlap at a step's end. One between
+the AV and a human is the AV's unless it is a rear-end by the human (the human behind the AV
+in a lane they share), as in the two-vehicle world; it ends the run. Two humans that collide
+are taken off the road (counted, ``human_collisions``) and the run goes on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from typing import Hashable
+
+import numpy as np
+
+from ..config import Config, ConfigError
+from ..envs.external import (CROSSING, FOLLOW, MERGE, Conflict, ExternalPlanner, Limits,
+                             RouteConflict, idm_follow, route_conflict)
+from ..kinematics import saturated_step
+from ..policies.kinds import HV as _HV
+from ..policies.kinds import LOG_SIZE
+from .junction import Arrivals, JunctionSpec, Route, arrivals, right_of_way
+
+#: Vehicle status codes.
+ACTIVE, DONE, CRASHED = 0, 1, 2
+#: Conflict kind codes in the table.
+KIND_IDS = {FOLLOW: 0, MERGE: 1, CROSSING: 2}
+#: The gap between two routes' centre lines laid end to end (:meth:`JunctionWorld.poses`) [m].
+_LINE_SPACING_M = 1000.0
+#: A vehicle slower than this waits [m/s] (the wait-for graph, ``persuasive.many.measures``).
+WAIT_V_MPS = 0.5
+
+
+@dataclass(frozen=True)
+class Row:
+    """One conflict (module docstring): vehicles ``i < j``; ``ij`` is the conflict seen from
+    ``i`` (``i`` the ego of :class:`~persuasive.envs.external.RouteConflict`), ``ji`` from
+    ``j``; ``shared_until_m``: for a follow row, the arc up to which the lane is shared;
+    ``priority``: +1 ``i`` has the right of way, -1 ``j``, 0 neither."""
+
+    i: int
+    j: int
+    kind: str
+    ij: RouteConflict | None
+    ji: RouteConflict | None
+    shared_until_m: float
+    priority: int
+
+
+@lru_cache(maxsize=4096)
+def _route_pair(a: Route, b: Route, size_a: tuple[float, float], size_b: tuple[float, float]
+                ) -> tuple[str, RouteConflict | None, RouteConflict | None, float] | None:
+    """The conflict of two routes (cached: a junction has few routes)."""
+    if a.inbound == b.inbound:
+        same = a.movement == b.movement
+        return FOLLOW, None, None, math.inf if same else a.entry_m + max(size_a[0], size_b[0])
+    if a.outbound == b.outbound:
+        ab = route_conflict(a.line, b.line, size_a, size_b, merge_at=(a.exit_m, b.exit_m))
+        ba = route_conflict(b.line, a.line, size_b, size_a, merge_at=(b.exit_m, a.exit_m))
+        kind = MERGE
+    else:
+        ab = route_conflict(a.line, b.line, size_a, size_b)
+        if ab is None:
+            return None
+        ba = RouteConflict(CROSSING, ab.other_at_m, ab.ego_at_m, ab.other_occupancy,
+                           ab.ego_occupancy)
+        kind = CROSSING
+    # each side's yield line: its stop line (never after its occupancy's start)
+    ab = replace(ab, ego_line_m=min(a.entry_m - ab.ego_at_m, ab.ego_occupancy[0]))
+    ba = replace(ba, ego_line_m=min(b.entry_m - ba.ego_at_m, ba.ego_occupancy[0]))
+    return kind, ab, ba, math.nan
+
+
+@dataclass
+class ConflictTable:
+    """Every conflict of a run (module docstring) and, per vehicle, the rows it is in."""
+
+    rows: list[Row]
+    of: list[list[int]]  #: per vehicle: indices of its rows
+
+
+def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits]) -> ConflictTable:
+    """The one builder of the conflict table of a run (module docstring)."""
+    rows: list[Row] = []
+    of: list[list[int]] = [[] for _ in range(arr.n)]
+    for i in range(arr.n):
+        for j in range(i + 1, arr.n):
+            a, b = arr.routes[i], arr.routes[j]
+            pair = _route_pair(a, b, (limits[i].length_m, limits[i].width_m),
+                               (limits[j].length_m, limits[j].width_m))
+            if pair is None:
+                continue
+            kind, ij, ji, until = pair
+            prio = 0 if kind == FOLLOW else right_of_way(
+                spec, a, b, (arr.s0_m[i], arr.v0_mps[i]), (arr.s0_m[j], arr.v0_mps[j]))
+            of[i].append(len(rows))
+            of[j].append(len(rows))
+            rows.append(Row(i, j, kind, ij, ji, until, prio))
+    return ConflictTable(rows, of)
+
+
+class Human:
+    """One human's decision (module docstring): its kind's pair policy per opponent (the
+    compiled step of the two-vehicle world, the human on the HV side), IDM behind a leader."""
+
+    def __init__(self, config: Config, kind: str, rng: np.random.Generator, games):
+        from ..policies import KINDS
+
+        self.config = config.with_overrides({"hv.kind": kind}) if config.hv.kind != kind \
+            else config
+        self.spec = KINDS[kind]
+        self.rng = rng
+        self.games = games
+        self._pairs: dict[Hashable, list] = {}
+        self._diag = np.zeros((self.config.library.n_traj, 10))
+        self._log = np.full(LOG_SIZE, np.nan)
+        self._empty = games.empty_view()
+        self._draws = np.zeros(2)
+        self.limits = Limits.of(self.config, "hv")
+        self.opponent: int = -1  #: the vehicle of its last pair decision (-1: none)
+
+    def _pair(self, key: Hashable, role: float) -> list:
+        """The kept ``[prm, state, k]`` of the pair with ``key`` (made at first need)."""
+        got = self._pairs.get(key)
+        if got is None:
+            from ..policies import policy_params, state_size
+            from ..policies.lfg import PRM_ROLE
+            from ..policies.step import policy_init
+            from .. import packing as slot
+
+            prm = policy_params(self.config, _HV)
+            if self.spec.has_role and not math.isnan(role):
+                prm[PRM_ROLE] = role
+            st = np.zeros(state_size(prm, self.spec.kind))
+            policy_init(self.spec.kind, prm, st, float(self.games.P_av[slot.PRIOR_L]))
+            got = self._pairs[key] = [prm, st, 0]
+        return got
+
+    def forget(self, keep: set) -> None:
+        """Drop the pairs whose conflict is over."""
+        if len(keep) != len(self._pairs):
+            for key in [k for k in self._pairs if k not in keep]:
+                del self._pairs[key]
+
+    def pair_accel(self, key: Hashable, role: float, me: tuple[float, float],
+                   other: tuple[float, float], dt: float) -> float:
+        """The pair policy's acceleration against ``other`` (pair coordinates: each ``s``
+        relative to the conflict point)."""
+        from ..policies.step import policy_step_buffers
+
+        prm, st, k = self._pair(key, role)
+        lim = self.limits
+        me = (me[0], min(max(me[1], lim.v_min_mps), lim.v_max_mps))
+        other = (other[0], min(max(other[1], lim.v_min_mps), lim.v_max_mps))
+        games = self.games
+        view = self._empty
+        if self.spec.needs_game:  # the full prediction, into this human's own buffers
+            from ..game import build_buffers, solve_buffers
+
+            build_buffers(me[0], me[1], games.P_hv, games.disc, *view.hv)
+            build_buffers(other[0], other[1], games.P_av, games.disc, *view.av)
+            solve_buffers(*view.hv, *view.av, games.P_hv, view.idx, view.q_values, games.work)
+        n = self.spec.draws
+        if n:
+            self._draws[:n] = self.rng.random(n)
+        a = policy_step_buffers(
+            self.spec.kind, _HV, prm, st, k, other[0], other[1], me[0], me[1], self._draws, -1,
+            *view.hv, *view.av, view.idx, view.q_values, games.P_av, games.P_hv, games.disc,
+            dt, self._diag, *games.ahead_a, *games.ahead_b, games.ahead, self._log, games.work)
+        self._pairs[key][2] = k + 1
+        return float(a)
+
+
+@dataclass
+class StepInfo:
+    """What one step did (:meth:`JunctionWorld.step`)."""
+
+    verdict: str | None  #: the AV's shield verdict (None: no AV or no shield)
+    collisions: list[tuple[int, int, bool]]  #: ``(i, j, caused by the AV)`` this step
+    done: bool  #: the run is over (every vehicle off the road, an AV collision, or time)
+
+
+class JunctionWorld:
+    """The N-vehicle closed loop at a junction (module docstring).
+
+    ``config``: the vehicles' limits, the AV's kind and shield, the humans' parameters (a
+    human of kind ``k`` is ``config`` with ``hv.kind = k``), ``simulation.dt_s``; ``spec``: the
+    junction and its arrivals; ``seed``: the run's; ``with_av=False``: the same run without
+    the AV (vehicle 0 never enters the road).
+    """
+
+    def __init__(self, config: Config, spec: JunctionSpec, seed: int, with_av: bool = True):
+        from ..packing import discounts, pack
+        from ..scenarios import build_scenario
+        from ..world import GameCache
+
+        if config.av.yield_line_choices_m or config.yield_line_choices is not None:
+            config = config.with_overrides({"av.yield_line_choices_m": []})
+        self.config, self.spec, self.seed, self.with_av = config, spec, int(seed), with_av
+        self.dt = float(config.simulation.dt_s)
+        self.n_steps = int(round(spec.duration_s / self.dt))
+        av_lim, hv_lim = Limits.of(config, "av"), Limits.of(config, "hv")
+        self.arrivals = arr = arrivals(spec, seed, hv_lim.length_m)
+        self.n = arr.n
+        self.limits = [av_lim] + [hv_lim] * (arr.n - 1)
+        self.table = conflict_table(spec, arr, self.limits)
+        self._prepare_views()
+        self.routes = arr.routes
+        self._lines()
+        P_av, P_hv = pack(config, build_scenario(config))
+        self.games = GameCache(P_av, P_hv, discounts(config))
+        self.s = arr.s0_m.astype(float).copy()
+        self.v = arr.v0_mps.astype(float).copy()
+        self.a = np.zeros(arr.n)
+        self.status = np.full(arr.n, ACTIVE, np.int8)
+        if not with_av:
+            self.status[0] = DONE
+        self.k = 0
+        self.planner = ExternalPlanner(config, self.seed) if with_av else None
+        self.humans: list[Human | None] = [None]
+        for i in range(1, arr.n):
+            rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(
+                [self.seed, 0x4855, i])))
+            self.humans.append(Human(config, arr.kinds[i], rng, self.games))
+        self._agent_shields: dict[int, ExternalPlanner] = {}
+        # opponents = "all": a vehicle this far from its interval or nearer is played [m]
+        # (the prediction horizon at the top speed: a game cannot tell one further away
+        # from no vehicle)
+        self._reach_m = hv_lim.v_max_mps * config.library.n_samples * \
+            config.library.sample_dt_s
+        #: per step (n_steps + 1, n): positions, speeds; (n_steps, n) accelerations; status
+        self.S = np.full((self.n_steps + 1, arr.n), np.nan)
+        self.V = np.full((self.n_steps + 1, arr.n), np.nan)
+        self.A = np.full((self.n_steps, arr.n), np.nan)
+        self.STATUS = np.zeros((self.n_steps + 1, arr.n), np.int8)
+        self.verdicts: list[str | None] = []
+        self.collisions: list[tuple[float, int, int, bool]] = []  #: (t, i, j, AV-caused)
+        self.min_gap_av_m = math.inf  #: the AV's closest footprint gap to any human
+        self.opponents = np.full((self.n_steps, arr.n), -1, np.int16)
+        self._record()
+
+    # -- what each vehicle sees ----------------------------------------------------------
+
+    def active(self, i: int) -> bool:
+        return self.status[i] == ACTIVE
+
+    def through_m(self, i: int) -> float:
+        """The arc past which vehicle ``i`` has left the box (its rear past the far edge)."""
+        return self.routes[i].exit_m + 0.5 * self.limits[i].length_m
+
+    def conflicts_of(self, i: int) -> list[Conflict]:
+        """Vehicle ``i``'s conflicts as the adapters hand them to the shield and the planners
+        (``persuasive.envs.external.Conflict``): crossings and merges not cleared, and the
+        vehicles ahead of it in a lane it shares."""
+        out = []
+        s, status = self.s, self.status
+        for r in self.table.of[i]:
+            row = self.table.rows[r]
+            j = row.j if row.i == i else row.i
+            if status[j] != ACTIVE:
+                continue
+            if row.kind == FOLLOW:
+                if s[j] > s[i] and s[i] <= row.shared_until_m:
+                    out.append(Conflict(j, FOLLOW, float(s[i]), float(s[j]), float(self.v[j]),
+                                        other=self.limits[j]))
+                continue
+            rc = row.ij if row.i == i else row.ji
+            s_me, s_ot = s[i] - rc.ego_at_m, s[j] - rc.other_at_m
+            if row.kind == CROSSING and (s_me > rc.ego_occupancy[1] or
+                                         s_ot > rc.other_occupancy[1]):
+                continue  # one of them has cleared it: no contact possible
+            if row.kind == MERGE and s_me >= 0.0 and s_ot < s_me:
+                continue  # merged ahead of the other: the other follows
+            prio = row.priority if row.i == i else -row.priority
+            out.append(replace(rc.conflict(j, float(s[i]), float(s[j]), float(self.v[j]),
+                                           self.limits[j]), right_of_way=float(prio)))
+        return out
+
+    def _prepare_views(self) -> None:
+        """Per vehicle, its rows as flat tuples seen from it (the loop reads plain floats):
+        ``(j, kind, at_me, at_other, lo_me, hi_me, lo_other, hi_other, shared_until, right
+        of way, half the two lengths, row)``."""
+        kind_id = {FOLLOW: 0, MERGE: 1, CROSSING: 2}
+        self._views: list[list[tuple]] = [[] for _ in range(self.n)]
+        for row in self.table.rows:
+            for me, ot, rc, prio in ((row.i, row.j, row.ij, row.priority),
+                                     (row.j, row.i, row.ji, -row.priority)):
+                half = 0.5 * (self.limits[me].length_m + self.limits[ot].length_m)
+                if rc is None:
+                    view = (ot, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, row.shared_until_m, 0, half,
+                            row)
+                else:
+                    view = (ot, kind_id[row.kind], rc.ego_at_m, rc.other_at_m,
+                            rc.ego_occupancy[0], rc.ego_occupancy[1], rc.other_occupancy[0],
+                            rc.other_occupancy[1], math.nan, prio, half, row)
+                self._views[me].append(view)
+
+    def _human_accel(self, i: int, s: list, v: list, status: list) -> float:
+        """Human ``i``'s acceleration (module docstring) at positions ``s``, speeds ``v`` and
+        statuses ``status`` (lists, one per vehicle)."""
+        h = self.humans[i]
+        lim = self.limits[i]
+        desired = min(self.config.hv.idm.desired_speed_mps, lim.v_max_mps)
+        leader = None
+        best = None  # (s_me, s_ot, j, right of way) of the next conflict
+        every = self.spec.opponents == "all"
+        games = []
+        reach_m = self._reach_m
+        keep = set()
+        s_i = s[i]
+        for j, kind, at_me, at_ot, lo_me, hi_me, lo_ot, hi_ot, until, prio, half, _ in \
+                self._views[i]:
+            if status[j] != ACTIVE:
+                continue
+            if kind == 0:  # follow
+                if s[j] > s_i and s_i <= until:
+                    gap = s[j] - s_i - half
+                    if leader is None or gap < leader[0]:
+                        leader = (gap, v[j])
+                continue
+            s_me, s_ot = s_i - at_me, s[j] - at_ot
+            if kind == 1 and s_ot >= 0.0 and s_ot > s_me:
+                # the other is in the exit lane ahead: follow it
+                gap = s_ot - s_me - half
+                if leader is None or gap < leader[0]:
+                    leader = (gap, v[j])
+                continue
+            if s_me > hi_me or s_ot > hi_ot or (kind == 1 and s_me >= 0.0):
+                continue  # cleared
+            keep.add(j)
+            if s_me < lo_me and lo_ot <= s_ot <= hi_ot:
+                # the other is in the conflict: stop before it as behind a standing car
+                gap = lo_me - s_me
+                if leader is None or gap < leader[0]:
+                    leader = (gap, 0.0)
+            if every:
+                if lo_ot - s_ot <= reach_m:
+                    games.append((s_me, s_ot, j, prio))
+            elif best is None or (s_me, s_ot) > (best[0], best[1]):
+                best = (s_me, s_ot, j, prio)
+        h.forget(keep)
+        a = idm_follow(self.config, v[i], leader, desired)
+        if best is not None:
+            games.append(best)
+        h.opponent = -1
+        for s_me, s_ot, j, prio in games:
+            role = 0.0 if prio > 0 else (1.0 if prio < 0 else math.nan)
+            a_j = h.pair_accel(j, role, (s_me, v[i]), (s_ot, v[j]), self.dt)
+            if a_j < a or h.opponent < 0:
+                h.opponent = j
+            a = min(a, a_j)
+        return min(max(a, lim.u_min_mps2), lim.u_max_mps2)
+
+    def agent_shield(self, i: int, proposed: float) -> tuple[float, str | None]:
+        """An agent's acceleration through the shield over its conflicts (the AV's shield)."""
+        planner = self._agent_shields.get(i)
+        if planner is None:
+            cfg = self.config
+            if i > 0:  # a human agent: its own limits are the ego's
+                hv = cfg.vehicle_of("hv")
+                cfg = cfg.with_overrides({f"av.vehicle.{k}": getattr(hv, k) for k in (
+                    "length_m", "width_m", "v_max_mps", "u_min_mps2", "u_max_mps2")})
+            planner = self._agent_shields[i] = ExternalPlanner(cfg, self.seed)
+        return planner.shield(float(self.v[i]), proposed, self.conflicts_of(i), self.dt)
+
+    # -- the loop ------------------------------------------------------------------------
+
+    def step(self, actions: dict[int, float] | None = None, shield: bool = True) -> StepInfo:
+        """Decide every vehicle's acceleration on the same states, advance all, check every
+        conflict (module docstring). ``actions``: accelerations [m/s^2] of the vehicles
+        driven from outside (agents), through the shield unless ``shield=False``."""
+        if self.k >= self.n_steps:
+            raise RuntimeError("the run is over (its duration has passed)")
+        actions = actions or {}
+        acc = np.zeros(self.n)
+        verdict = None
+        s_l, v_l, st_l = self.s.tolist(), self.v.tolist(), self.status.tolist()
+        for i in range(self.n):
+            if self.status[i] != ACTIVE:
+                continue
+            lim = self.limits[i]
+            if i in actions:
+                a = float(actions[i])
+                if not math.isfinite(a):
+                    raise ConfigError(f"action of vehicle {i} = {a!r} is not finite")
+                a = min(max(a, lim.u_min_mps2), lim.u_max_mps2)
+                if shield and self.config.shield != "off":
+                    a, v_ = self.agent_shield(i, a)
+                    if i == 0:
+                        verdict = v_
+            elif i == 0:
+                d = self.planner.act(float(self.v[0]), self.conflicts_of(0), self.dt)
+                a, verdict = d.accel_mps2, d.verdict
+            else:
+                a = self._human_accel(i, s_l, v_l, st_l)
+                self.opponents[self.k, i] = self.humans[i].opponent
+            acc[i] = a
+        if self.with_av:
+            self.verdicts.append(verdict)
+        for i in range(self.n):
+            if self.status[i] == ACTIVE:
+                lim = self.limits[i]
+                self.s[i], self.v[i] = saturated_step(float(self.s[i]), float(self.v[i]),
+                                                      float(acc[i]), self.dt, lim.v_min_mps,
+                                                      lim.v_max_mps)
+        self.a = acc
+        self.A[self.k] = np.where(self.status == ACTIVE, acc, np.nan)
+        self.k += 1
+        hits = self._collide()
+        for i in range(self.n):
+            if self.status[i] == ACTIVE and self.s[i] >= self.routes[i].length_m:
+                self.status[i] = DONE
+        self._record()
+        av_hit = any(i == 0 for i, _, _ in hits)
+        done = av_hit or self.k >= self.n_steps or not np.any(self.status == ACTIVE)
+        return StepInfo(verdict, hits, bool(done))
+
+    def _record(self) -> None:
+        k = self.k
+        self.S[k], self.V[k], self.STATUS[k] = self.s, self.v, self.status
+        self.S[k, self.status != ACTIVE] = np.nan
+        self.V[k, self.status != ACTIVE] = np.nan
+
+    def _lines(self) -> None:
+        """Every route's centre line laid end to end on one arc axis (each route ``i`` from
+        ``offset[i]``, :data:`_LINE_SPACING_M` apart), so that one ``np.interp`` places every
+        vehicle."""
+        arcs, xs, ys, offsets = [], [], [], []
+        start = 0.0
+        for r in self.routes:
+            offsets.append(start)
+            arcs.append(r.line.arc + start)
+            xs.append(r.line.xy[:, 0])
+            ys.append(r.line.xy[:, 1])
+            start += r.line.length_m + _LINE_SPACING_M
+        self._arc = np.concatenate(arcs)
+        self._x, self._y = np.concatenate(xs), np.concatenate(ys)
+        self._offset = np.array(offsets)
+        self._length = np.array([r.line.length_m for r in self.routes])
+
+    def poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every vehicle's centre ``(n, 2)`` [m] and unit heading ``(n, 2)`` now (the
+        heading: the chord of its centre line 0.25 m either side, clamped to the line)."""
+        s = np.clip(self.s, 0.0, self._length)
+        lo = np.clip(self.s - 0.25, 0.0, self._length) + self._offset
+        hi = np.clip(self.s + 0.25, 0.0, self._length) + self._offset
+        at = np.concatenate([s + self._offset, lo, hi])
+        x, y = np.interp(at, self._arc, self._x), np.interp(at, self._arc, self._y)
+        n = self.n
+        xy = np.column_stack([x[:n], y[:n]])
+        d = np.column_stack([x[2 * n:] - x[n:2 * n], y[2 * n:] - y[n:2 * n]])
+        u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)[:, None]
+        return xy, u
+
+    def _collide(self) -> list[tuple[int, int, bool]]:
+        from ..safety.measures import footprint_gaps
+
+        rows = [r for r in self.table.rows if self.status[r.i] == ACTIVE and
+                self.status[r.j] == ACTIVE]
+        if not rows:
+            return []
+        xy, u = self.poses()
+        i = np.array([r.i for r in rows])
+        j = np.array([r.j for r in rows])
+        gaps = np.empty(len(rows))
+        # one call per pair of sizes (the AV's rows, the humans')
+        for sel in (i == 0, i != 0):
+            if not sel.any():
+                continue
+            la, wa = self.limits[int(i[sel][0])].length_m, self.limits[int(i[sel][0])].width_m
+            lb, wb = self.limits[1].length_m, self.limits[1].width_m
+            out = np.empty(int(sel.sum()))
+            ii, jj = i[sel], j[sel]
+            footprint_gaps(xy[ii, 0].copy(), xy[ii, 1].copy(), u[ii, 0].copy(), u[ii, 1].copy(),
+                           la, wa, xy[jj, 0].copy(), xy[jj, 1].copy(), u[jj, 0].copy(),
+                           u[jj, 1].copy(), lb, wb, out)
+            gaps[sel] = out
+        av_rows = i == 0
+        if av_rows.any():
+            self.min_gap_av_m = min(self.min_gap_av_m, float(gaps[av_rows].min()))
+        hits = []
+        t = self.k * self.dt
+        for r, g in zip(rows, gaps):
+            if g > 0.0 or self.status[r.i] != ACTIVE or self.status[r.j] != ACTIVE:
+                continue
+            caused = False
+            if r.i == 0:
+                caused = not self._rear_end_by_human(r)
+            hits.append((r.i, r.j, caused))
+            self.collisions.append((t, r.i, r.j, caused))
+            if r.i != 0:  # two humans: off the road
+                self.status[r.i] = self.status[r.j] = CRASHED
+        return hits
+
+    def _rear_end_by_human(self, r: Row) -> bool:
+        """The AV (``r.i == 0``) is ahead of the human in a lane they share."""
+        s_av, s_h = self.s[0], self.s[r.j]
+        if r.kind == FOLLOW:
+            return s_av > s_h and s_h <= r.shared_until_m
+        if r.kind == MERGE:
+            rc = r.ij
+            return s_av - rc.ego_at_m >= 0.0 and s_av - rc.ego_at_m > s_h - rc.other_at_m
+        return False
+
+    def run(self) -> JunctionWorld:
+        """Step until the run is over; returns itself."""
+        while not self.step().done:
+            pass
+        return self
+
+
+__all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "Row",
+           "StepInfo", "WAIT_V_MPS", "conflict_table"]

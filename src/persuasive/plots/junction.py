@@ -1,0 +1,84 @@
+"""A run at the four-way junction seen from above (``persuasive.many``): the roads, every
+vehicle's path driven (a line, the AV's thicker), its footprint at a few times, crashes
+marked."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Polygon, Rectangle
+
+from ._common import _COLORS, _new_figure
+
+
+def _corners(xy: np.ndarray, u: np.ndarray, length: float, width: float) -> np.ndarray:
+    n = np.array([-u[1], u[0]])
+    hl, hw = 0.5 * length * u, 0.5 * width * n
+    return np.array([xy + hl + hw, xy + hl - hw, xy - hl - hw, xy - hl + hw])
+
+
+def topview_figure(world, snapshots: int = 4, view_m: float = 45.0) -> Figure:
+    """The figure of a finished :class:`persuasive.many.world.JunctionWorld` run."""
+    spec = world.spec
+    fig = _new_figure(6.0, 6.0)
+    ax = fig.add_subplot(1, 1, 1)
+    half = spec.half_m
+    reach = view_m
+    ax.add_patch(Rectangle((-reach, -half), 2 * reach, 2 * half, color="0.86", zorder=0))
+    ax.add_patch(Rectangle((-half, -reach), 2 * half, 2 * reach, color="0.86", zorder=0))
+    for c in (-1, 1):  # the stop lines and the centre lines
+        ax.plot([c * half, c * half], [-half, half], color="0.6", lw=0.5, zorder=1)
+        ax.plot([-half, half], [c * half, c * half], color="0.6", lw=0.5, zorder=1)
+    ax.plot([-reach, -half], [0, 0], [half, reach], [0, 0], color="0.99", lw=0.6, ls="--")
+    ax.plot([0, 0], [-reach, -half], [0, 0], [half, reach], color="0.99", lw=0.6, ls="--")
+    n_k = world.k
+    times = np.linspace(0, n_k, snapshots + 1).round().astype(int)
+    colors = [_COLORS["av"]] + [_COLORS["hv"]] * (world.n - 1)
+    for i, r in enumerate(world.routes):
+        s = world.S[: n_k + 1, i]
+        s = s[np.isfinite(s)]
+        if not s.size:
+            continue
+        xy = r.line.at(s)
+        ax.plot(xy[:, 0], xy[:, 1], color=colors[i], lw=2.0 if i == 0 else 0.8, alpha=0.8,
+                zorder=3 if i == 0 else 2)
+        lim = world.limits[i]
+        for alpha, k in zip(np.linspace(0.25, 0.9, len(times)), times):
+            sk = world.S[k, i]
+            if not np.isfinite(sk):
+                continue
+            p = r.line.at(np.array([sk - 0.25, sk, sk + 0.25]))
+            d = p[2] - p[0]
+            u = d / max(float(np.hypot(*d)), 1e-12)
+            ax.add_patch(Polygon(_corners(p[1], u, lim.length_m, lim.width_m),
+                                 closed=True, color=colors[i], alpha=float(alpha), lw=0,
+                                 zorder=4))
+    for t, i, j, caused in world.collisions:
+        k = int(round(t / world.dt))
+        for v in (i, j):
+            sk = world.S[max(k - 1, 0), v]
+            if np.isfinite(sk):
+                x, y = world.routes[v].line.at(np.array([sk]))[0]
+                ax.plot(x, y, marker="x", color="k", ms=8, zorder=5)
+    ax.set_xlim(-reach, reach)
+    ax.set_ylim(-reach, reach)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"junction, {world.n} vehicles, seed {world.seed}: AV (thick) and humans; "
+                 f"footprints at {', '.join(f'{k * world.dt:.0f}' for k in times)} s",
+                 fontsize=7)
+    return fig
+
+
+def topview(world, path: str | Path) -> Path:
+    """Draw :func:`topview_figure` to ``path`` (PNG, PDF or SVG), atomically."""
+    from .files import save_figure
+
+    fig = topview_figure(world)
+    return save_figure(fig, path, dpi=150.0)
+
+
+__all__ = ["topview", "topview_figure"]
