@@ -19,6 +19,14 @@ def test_parallel_api(agents):
     parallel_api_test(JunctionParallelEnv(n_vehicles=4, agents=agents), num_cycles=150)
 
 
+def test_parallel_api_with_agents_still_to_arrive():
+    from persuasive.many.junction import JunctionSpec
+
+    spec = JunctionSpec(n_vehicles=4, arrival="poisson", flow_veh_h=1200.0, duration_s=15.0,
+                        av_arrival_s=2.0)
+    parallel_api_test(JunctionParallelEnv(spec=spec, agents="all"), num_cycles=200)
+
+
 def test_seeded_like_gymnasium():
     parallel_seed_test(lambda: JunctionParallelEnv(n_vehicles=4, agents=(0, 2)))
 

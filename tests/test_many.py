@@ -359,3 +359,66 @@ def test_the_command_runs_writes_and_refuses(capsys, tmp_path):
     assert len(err.strip().splitlines()) == 1
     code, _, err = run_cli(capsys, "junction", "--hv", "lfg,bus")
     assert code == 2 and "junction.hv_kinds" in err
+
+
+# -- Poisson arrivals -----------------------------------------------------------------------
+
+
+def test_poisson_arrivals_enter_in_time_at_the_start_of_the_approach():
+    spec = JunctionSpec(n_vehicles=8, arrival="poisson", flow_veh_h=900.0, duration_s=60.0,
+                        av_arrival_s=5.0)
+    a = arrivals(spec, 4)
+    assert np.all(np.diff(a.t0_s[1:]) >= 0.0) and a.t0_s[1] > 0.0
+    assert a.t0_s[0] == 5.0 and np.all(a.s0_m == 0.0)
+    # the placed draws come first: the humans' routes are those of the placed arrivals
+    placed = arrivals(JunctionSpec(n_vehicles=8), 4)
+    assert a.routes == placed.routes
+    w = JunctionWorld(CONFIG, spec, 4)
+    from persuasive.many.world import PENDING
+    assert (w.status == PENDING).all()
+    while not w.step().done:
+        t = w.k * w.dt
+        on = w.STATUS[w.k] != PENDING
+        assert np.all(w.t0[on] <= t + 1e-9)  # nobody before its arrival time
+    # a vehicle that entered did so at its arrival time or later, at the start of its lane
+    for i in range(w.n):
+        k = np.flatnonzero(np.isfinite(w.S[:, i]))
+        if k.size:
+            assert k[0] * w.dt >= w.t0[i] - 1e-9
+
+
+def test_an_entry_waits_while_its_lane_is_blocked():
+    spec = JunctionSpec(n_vehicles=3, arrival="poisson", duration_s=20.0)
+    w = JunctionWorld(CONFIG, spec, 2)
+    from persuasive.many.junction import Arrivals
+    from persuasive.many.world import PENDING
+    r = w.routes[1]
+    arr = Arrivals((w.routes[0], r, r), np.zeros(3), np.array([4.0, 0.0, 4.0]),
+                   ("av", "idm", "idm"), np.array([19.0, 0.1, 0.2]))
+    w.arrivals, w.routes, w.t0 = arr, arr.routes, arr.t0_s
+    w.s, w.v = arr.s0_m.copy(), arr.v0_mps.copy()
+    w.table = conflict_table(spec, arr, w.limits)
+    w._prepare_views()
+    w._lines()
+    w.status[:] = PENDING
+    for _ in range(5):
+        w.step()
+    # the first entered at 0.1 s standing; the second stays off the road behind it
+    assert w.status[1] == ACTIVE and w.status[2] == PENDING
+    assert w.s[1] - w.s[2] < 5.0 + spec.gap_m[0]
+
+
+def test_stand_ins_cover_the_newcomers():
+    """With humans still to arrive the AV's shield sees one stand-in per route a newcomer may
+    take; over a dense flow no step is left uncertified."""
+    spec = JunctionSpec(n_vehicles=10, arrival="poisson", flow_veh_h=1200.0, duration_s=40.0,
+                        av_arrival_s=3.0)
+    for seed in range(1, 9):
+        w = JunctionWorld(CONFIG, spec, seed)
+        saw = False
+        while not w.step().done:
+            if w.status[0] == ACTIVE and (w.status == 3).any():
+                c = w.conflicts_of(0)
+                saw |= any(x.extra.get("stand_in") for x in c)
+        assert saw and "uncertified" not in w.verdicts
+        assert not any(c for _, i, _, c in w.collisions if i == 0)

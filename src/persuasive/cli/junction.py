@@ -60,6 +60,15 @@ def summary_lines(agg: dict) -> list[str]:
               show_default=True,
               help="Whom each human plays its pair game against: the vehicle it conflicts "
                    "with next, or every one within reach.")
+@click.option("--arrival", type=click.Choice(["placed", "poisson"]), default="placed",
+              show_default=True,
+              help="placed: every human on the road at the start, queued in its lane; "
+                   "poisson: a Poisson flow of --flow vehicles per hour on each arm.")
+@click.option("--flow", "flow_veh_h", type=click.FloatRange(1.0, 3600.0), default=600.0,
+              show_default=True, help="Vehicles per hour on each arm (--arrival poisson).")
+@click.option("--av-arrival", "av_arrival_s", type=click.FloatRange(0.0, 3600.0), default=10.0,
+              show_default=True,
+              help="When the AV enters its approach, into the flow [s] (--arrival poisson).")
 @click.option("--av-arm", type=click.Choice(list(ARMS)), default="south", show_default=True,
               help="The arm the AV comes from.")
 @click.option("--av-movement", type=click.Choice(list(MOVEMENTS)), default="straight",
@@ -83,7 +92,8 @@ def summary_lines(agg: dict) -> list[str]:
               help="Draw the first seed's run from above (PNG, PDF or SVG).")
 @click.option("--json", "as_json", is_flag=True, help="Print the rows and summary as JSON.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def junction(vehicles, variant, lanes, hv_kinds, opponents, av_arm, av_movement, duration_s, seeds, seed,
+def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h, av_arrival_s,
+             av_arm, av_movement, duration_s, seeds, seed,
              workers, shield, mode, config_file, sets, out, force, plot, as_json, quiet):
     """The AV among N vehicles at a four-way unsignalised junction (docs/guide/junction.md).
 
@@ -101,7 +111,9 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, av_arm, av_movement,
                                               "av.shield": shield})
     spec = JunctionSpec.of(variant, n_vehicles=vehicles, lanes=lanes, hv_kinds=hv_kinds,
                            av_arm=ARMS.index(av_arm), av_movement=av_movement,
-                           duration_s=duration_s, opponents=opponents)
+                           duration_s=duration_s, opponents=opponents,
+                           arrival=arrival, flow_veh_h=flow_veh_h,
+                           av_arrival_s=av_arrival_s)
     if plot:
         check_output_file(plot, (".png", ".pdf", ".svg"), "--plot")
     if out:
@@ -120,6 +132,7 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, av_arm, av_movement,
     compile_report(clock)
     agg = aggregate(rows, step_ms)
     agg.update({"variant": variant, "lanes": lanes, "hv": hv_kinds, "opponents": opponents,
+                "arrival": arrival, "flow_veh_h": flow_veh_h,
                 "av_arm": av_arm,
                 "av_movement": av_movement, "duration_s": duration_s, "seeds": [seed,
                                                                                  seed + seeds - 1],

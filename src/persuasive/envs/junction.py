@@ -18,7 +18,8 @@ position relative to the conflict point [m], the other's speed [m/s] and the kin
 
 Reward per step: the distance driven over ``v_max * dt`` (1 at full speed), less
 :data:`COLLISION_PENALTY` in the step the agent collides. An agent terminates when it leaves
-the map or crashes; every agent is truncated when the run's duration has passed (or the AV
+the map or crashes (an agent that has not arrived yet, with Poisson arrivals, waits: its
+actions are ignored until it is on the road); every agent is truncated when the run's duration has passed (or the AV
 crashed).
 
 :class:`JunctionEnv` is the gymnasium single-agent view: one vehicle (the AV by default) is
@@ -37,7 +38,7 @@ import numpy as np
 from ..config import Config, ConfigError
 from ..envs.external import CROSSING, FOLLOW, MERGE
 from ..many.junction import JunctionSpec
-from ..many.world import ACTIVE, CRASHED, JunctionWorld
+from ..many.world import ACTIVE, CRASHED, DONE, JunctionWorld
 
 #: Conflicts in an observation.
 N_NEAREST = 4
@@ -172,7 +173,7 @@ class JunctionParallelEnv(_ParallelBase):
             lim = w.limits[i]
             rew[a] = float((w.s[i] - s_before[i]) / (lim.v_max_mps * w.dt)) - (
                 COLLISION_PENALTY if i in hit else 0.0)
-            term[a] = bool(w.status[i] != ACTIVE or i in hit)
+            term[a] = bool(w.status[i] in (DONE, CRASHED) or i in hit)
             trunc[a] = bool(info_step.done and not term[a])
             obs[a] = self._observe(i)
             infos[a] = {"accel_mps2": float(w.a[i]), "collided": i in hit,

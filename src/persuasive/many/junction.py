@@ -11,9 +11,12 @@ either (drawn); a route keeps its lane index through the box.
 
 The arrivals (:func:`arrivals`) are drawn from the run's seed alone: every vehicle's arm,
 movement, lane, distance to the stop line and speed; the AV's arm and movement are set
-(:attr:`JunctionSpec.av_arm`, :attr:`JunctionSpec.av_movement`). Vehicles in one lane are
-placed one behind the other, each a drawn gap behind the one ahead; a spec whose vehicles do
-not fit on its approaches is refused.
+(:attr:`JunctionSpec.av_arm`, :attr:`JunctionSpec.av_movement`). ``placed`` (default): all on
+the road at the start, vehicles in one lane one behind the other, each a drawn gap behind the
+one ahead; a spec whose vehicles do not fit on its approaches is refused. ``poisson``: the
+humans arrive as a Poisson flow of ``flow_veh_h`` on each arm (arms drawn uniformly from the
+merged flow), each entering at the start of its approach at its arrival time, or as soon as
+its lane's entry is free; the AV enters there too, at ``av_arrival_s``.
 
 The right of way of two vehicles on crossing or merging routes
 (:func:`right_of_way`, ``+1``: the first has it, ``-1``: the second, ``0``: neither):
@@ -24,7 +27,7 @@ The right of way of two vehicles on crossing or merging routes
 - ``right-before-left``: the vehicle coming from the other's right has it; opposite arms as
   above;
 - ``first-come``: the vehicle that would reach its stop line first at its initial speed
-  (its distance over ``max(v, 1 m/s)``) has it; ties: neither.
+  (its arrival time plus its distance over ``max(v, 1 m/s)``) has it; ties: neither.
 
 Named variants (:data:`VARIANTS`) fix the priority and the movement mix: ``major``,
 ``all-way`` (first come), ``right-before-left`` and ``left-heavy`` (first come, 60 % left
@@ -47,6 +50,8 @@ from ..envs.external import Polyline
 ARMS = ("east", "north", "west", "south")
 MOVEMENTS = ("left", "straight", "right")
 PRIORITIES = ("major", "first-come", "right-before-left")
+#: How the humans arrive (:attr:`JunctionSpec.arrival`).
+ARRIVALS = ("placed", "poisson")
 #: Whom a human plays against (:attr:`JunctionSpec.opponents`).
 OPPONENTS = ("next", "all")
 #: Arm offsets of each movement's exit (right-hand traffic: a left turn from the east arm,
@@ -93,6 +98,13 @@ class JunctionSpec:
     #: ``all``, every vehicle of an uncleared conflict within the prediction's reach (the
     #: lowest of the answers, as Li et al.'s concurrent pairwise games)
     opponents: str = "next"
+    #: how the humans arrive: ``placed``, all on the road at the start, queued in their lanes;
+    #: ``poisson``, a Poisson flow of ``flow_veh_h`` per arm, each entering at the start of its
+    #: approach at its arrival time (later while its lane's entry is blocked)
+    arrival: str = "placed"
+    flow_veh_h: float = 600.0  #: vehicles per hour on each arm (``arrival = "poisson"``)
+    #: when the AV enters at the start of its approach, into the flow [s] (``poisson``)
+    av_arrival_s: float = 10.0
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ConfigError:
@@ -142,6 +154,13 @@ class JunctionSpec:
                               f"{self.max_vehicles()}, or a longer approach_m or smaller gap_m")
         kinds = _kinds(self.hv_kinds)
         object.__setattr__(self, "hv_kinds", kinds)
+        if self.arrival not in ARRIVALS:
+            raise bad("arrival", " | ".join(ARRIVALS))
+        if not (isinstance(self.flow_veh_h, (int, float)) and 1.0 <= self.flow_veh_h <= 3600.0):
+            raise bad("flow_veh_h", "[1, 3600] vehicles per hour per arm")
+        if not (isinstance(self.av_arrival_s, (int, float)) and 0.0 <= self.av_arrival_s and
+                (self.arrival != "poisson" or self.av_arrival_s < self.duration_s)):
+            raise bad("av_arrival_s", "[0, duration_s) s")
         if self.opponents not in OPPONENTS:
             raise bad("opponents", " | ".join(OPPONENTS))
         if not 1.0 <= self.duration_s <= 3600.0:
@@ -283,6 +302,19 @@ def geometry_of(spec: JunctionSpec) -> tuple:
     return (spec.lanes, spec.lane_width_m, spec.approach_m, spec.exit_m)
 
 
+def possible_routes(spec: JunctionSpec) -> tuple[Route, ...]:
+    """Every route a human of ``spec`` may take (the movements of a positive share)."""
+    geo = geometry_of(spec)
+    out = []
+    for arm in range(4):
+        for m, share in zip(MOVEMENTS, spec.mix):
+            if share <= 0.0:
+                continue
+            lanes = {lane_of(spec, m, 0.0), lane_of(spec, m, 0.99)}
+            out.extend(route(geo, arm, m, lane) for lane in sorted(lanes))
+    return tuple(out)
+
+
 def lane_of(spec: JunctionSpec, movement: str, u: float) -> int:
     """The inbound lane a movement uses (module docstring); ``u``: a uniform for the straight
     movement's choice with two lanes."""
@@ -303,13 +335,16 @@ class Arrivals:
     """Every vehicle's route and initial state; vehicle 0 is the AV.
 
     ``route``: per vehicle; ``s0_m`` ``(n,)``: arc length along its route; ``v0_mps`` ``(n,)``;
-    ``kind``: per vehicle (``"av"`` for vehicle 0, else a human kind).
+    ``kind``: per vehicle (``"av"`` for vehicle 0, else a human kind); ``t0_s`` ``(n,)``:
+    arrival times.
     """
 
     routes: tuple[Route, ...]
     s0_m: np.ndarray
     v0_mps: np.ndarray
     kinds: tuple[str, ...]
+    #: when each vehicle arrives at ``s0_m`` [s] (all 0 with ``arrival = "placed"``)
+    t0_s: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -341,9 +376,15 @@ def arrivals(spec: JunctionSpec, seed: int, vehicle_length_m: float = 5.0) -> Ar
     v0 = spec.v0_mps[0] + speed_u * (spec.v0_mps[1] - spec.v0_mps[0])
     gaps = rng.random(spec.n_vehicles)  # one per vehicle: its place in its lane
     s0 = np.empty(spec.n_vehicles)
+    t0 = np.zeros(spec.n_vehicles)
     lanes: dict[tuple[int, int], list[int]] = {}
     for i, r in enumerate(routes):
         lanes.setdefault(r.inbound, []).append(i)
+    if spec.arrival == "poisson":  # drawn after the placed draws: those keep their bits
+        t0[1:] = np.cumsum(rng.exponential(3600.0 / (4.0 * spec.flow_veh_h), n_h))
+        s0[:] = 0.0  # every vehicle enters at the start of its approach
+        t0[0] = spec.av_arrival_s
+        lanes = {}
     for lane, members in lanes.items():
         members.sort(key=lambda i: (order[i], i))
         dist = None
@@ -360,17 +401,17 @@ def arrivals(spec: JunctionSpec, seed: int, vehicle_length_m: float = 5.0) -> Ar
                     f"{spec.approach_m:g} m (seed {seed}); allowed: fewer vehicles, more lanes "
                     "or a longer approach")
             s0[i] = routes[i].entry_m - dist
-    return Arrivals(tuple(routes), s0, v0, tuple(kinds))
+    return Arrivals(tuple(routes), s0, v0, tuple(kinds), t0)
 
 
 def right_of_way(spec: JunctionSpec, a: Route, b: Route, x_a: tuple[float, float],
-                 x_b: tuple[float, float]) -> int:
+                 x_b: tuple[float, float], t_a0: float = 0.0, t_b0: float = 0.0) -> int:
     """Who has the right of way between vehicles on routes ``a`` and ``b`` (module docstring):
     ``+1`` the first, ``-1`` the second, ``0`` neither; ``x_a``, ``x_b``: their initial
-    ``(s, v)`` (for ``first-come``)."""
+    ``(s, v)``, ``t_a0``, ``t_b0`` their arrival times [s] (for ``first-come``)."""
     if spec.priority == "first-come":
-        t_a = (a.entry_m - x_a[0]) / max(x_a[1], 1.0)
-        t_b = (b.entry_m - x_b[0]) / max(x_b[1], 1.0)
+        t_a = t_a0 + (a.entry_m - x_a[0]) / max(x_a[1], 1.0)
+        t_b = t_b0 + (b.entry_m - x_b[0]) / max(x_b[1], 1.0)
         return 0 if t_a == t_b else (1 if t_a < t_b else -1)
     rel = (b.arm - a.arm) % 4
     if rel == 2 or rel == 0:  # the same road: a left turn yields to the other movements
@@ -382,5 +423,5 @@ def right_of_way(spec: JunctionSpec, a: Route, b: Route, x_a: tuple[float, float
     return -1 if rel == 1 else 1
 
 
-__all__ = ["ARMS", "Arrivals", "EXIT_OFFSET", "JunctionSpec", "MOVEMENTS", "OPPONENTS", "PRIORITIES",
-           "Route", "VARIANTS", "arrivals", "geometry_of", "lane_of", "right_of_way", "route"]
+__all__ = ["ARMS", "ARRIVALS", "Arrivals", "EXIT_OFFSET", "JunctionSpec", "MOVEMENTS", "OPPONENTS", "PRIORITIES",
+           "Route", "VARIANTS", "arrivals", "geometry_of", "lane_of", "possible_routes", "right_of_way", "route"]

@@ -13,8 +13,8 @@
   box.
 - **Throughput**: vehicles through the box per hour, over the time until the last one left
   it (the run's length when some did not).
-- **Delays**: the AV's, its time to leave the box less its free-flow time (full throttle to
-  ``v_max`` from its initial state, alone); the delay it causes, the humans' mean time to
+- **Delays**: the AV's, its time to leave the box (from its arrival) less its free-flow time
+  (full throttle to ``v_max`` from its initial state, alone); the delay it causes, the humans' mean time to
   leave the box less the same in the run of the same seed without the AV (a vehicle that
   never leaves counts the run's length).
 - **PET** (post-encroachment time) of a crossing or merge: the time between the two centres
@@ -200,7 +200,7 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
         "steps": world.k,
         "av_through": bool(through[0]),
         "av_clear_s": float(clear[0]),
-        "av_delay_s": float(clear[0] - free_flow_s(world.arrivals.s0_m[0],
+        "av_delay_s": float(clear[0] - world.t0[0] - free_flow_s(world.arrivals.s0_m[0],
                                                    world.arrivals.v0_mps[0],
                                                    world.through_m(0), av.u_max_mps2,
                                                    av.v_max_mps)),

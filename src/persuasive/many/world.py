@@ -56,10 +56,11 @@ from ..envs.external import (CROSSING, FOLLOW, MERGE, Conflict, ExternalPlanner,
 from ..kinematics import saturated_step
 from ..policies.kinds import HV as _HV
 from ..policies.kinds import LOG_SIZE
-from .junction import Arrivals, JunctionSpec, Route, arrivals, right_of_way
+from .junction import (Arrivals, JunctionSpec, Route, arrivals, possible_routes,
+                       right_of_way)
 
-#: Vehicle status codes.
-ACTIVE, DONE, CRASHED = 0, 1, 2
+#: Vehicle status codes (PENDING: arrives later, not on the road yet).
+ACTIVE, DONE, CRASHED, PENDING = 0, 1, 2, 3
 #: Conflict kind codes in the table.
 KIND_IDS = {FOLLOW: 0, MERGE: 1, CROSSING: 2}
 #: The gap between two routes' centre lines laid end to end (:meth:`JunctionWorld.poses`) [m].
@@ -128,8 +129,10 @@ def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits]) -> C
             if pair is None:
                 continue
             kind, ij, ji, until = pair
+            t0 = arr.t0_s if arr.t0_s is not None else np.zeros(arr.n)
             prio = 0 if kind == FOLLOW else right_of_way(
-                spec, a, b, (arr.s0_m[i], arr.v0_mps[i]), (arr.s0_m[j], arr.v0_mps[j]))
+                spec, a, b, (arr.s0_m[i], arr.v0_mps[i]), (arr.s0_m[j], arr.v0_mps[j]),
+                float(t0[i]), float(t0[j]))
             of[i].append(len(rows))
             of[j].append(len(rows))
             rows.append(Row(i, j, kind, ij, ji, until, prio))
@@ -250,6 +253,8 @@ class JunctionWorld:
         self.v = arr.v0_mps.astype(float).copy()
         self.a = np.zeros(arr.n)
         self.status = np.full(arr.n, ACTIVE, np.int8)
+        self.t0 = arr.t0_s if arr.t0_s is not None else np.zeros(arr.n)
+        self.status[self.t0 > 0.0] = PENDING
         if not with_av:
             self.status[0] = DONE
         self.k = 0
@@ -260,6 +265,7 @@ class JunctionWorld:
                 [self.seed, 0x4855, i])))
             self.humans.append(Human(config, arr.kinds[i], rng, self.games))
         self._agent_shields: dict[int, ExternalPlanner] = {}
+        self._stand_ins: dict[int, list] = {}
         # opponents = "all": a vehicle this far from its interval or nearer is played [m]
         # (the prediction horizon at the top speed: a game cannot tell one further away
         # from no vehicle)
@@ -285,11 +291,42 @@ class JunctionWorld:
         """The arc past which vehicle ``i`` has left the box (its rear past the far edge)."""
         return self.routes[i].exit_m + 0.5 * self.limits[i].length_m
 
+    def _stand_in_rows(self, i: int) -> list[tuple[int, RouteConflict]]:
+        """The conflicts of vehicle ``i``'s route with every route a newcomer may take (for the
+        stand-ins of :meth:`conflicts_of`; cached per vehicle)."""
+        got = self._stand_ins.get(i)
+        if got is None:
+            mine = self.routes[i]
+            size = (self.limits[i].length_m, self.limits[i].width_m)
+            hv = (self.limits[-1].length_m, self.limits[-1].width_m)
+            got = []
+            for n, other in enumerate(possible_routes(self.spec)):
+                pair = _route_pair(mine, other, size, hv)
+                if pair is not None and pair[0] != FOLLOW:
+                    got.append((n, pair[1]))
+            self._stand_ins[i] = got
+        return got
+
     def conflicts_of(self, i: int) -> list[Conflict]:
         """Vehicle ``i``'s conflicts as the adapters hand them to the shield and the planners
         (``persuasive.envs.external.Conflict``): crossings and merges not cleared, and the
-        vehicles ahead of it in a lane it shares."""
+        vehicles ahead of it in a lane it shares. While humans are still to arrive
+        (``arrival = "poisson"``), one **stand-in** per route a newcomer may take, at the start
+        of its approach at the top initial speed ``v0_mps[1]`` (where and how fast a newcomer
+        appears), marked ``extra["stand_in"]``: the shield checks it, the planner does not
+        plan against it, so a newcomer is covered from the moment it appears."""
         out = []
+        if PENDING in self.status:
+            v_in = float(self.spec.v0_mps[1])
+            lim = self.limits[-1]
+            for n, rc in self._stand_in_rows(i):
+                c = rc.conflict(("stand-in", n), float(self.s[i]), 0.0, v_in, lim,
+                                {"stand_in": True})
+                if c.kind == CROSSING and (c.ego_s_m > c.ego_occupancy[1]):
+                    continue
+                if c.kind == MERGE and c.ego_s_m >= 0.0:
+                    continue
+                out.append(c)
         s, status = self.s, self.status
         for r in self.table.of[i]:
             row = self.table.rows[r]
@@ -409,6 +446,8 @@ class JunctionWorld:
         if self.k >= self.n_steps:
             raise RuntimeError("the run is over (its duration has passed)")
         actions = actions or {}
+        if PENDING in self.status:
+            self._enter()
         acc = np.zeros(self.n)
         verdict = None
         s_l, v_l, st_l = self.s.tolist(), self.v.tolist(), self.status.tolist()
@@ -449,8 +488,24 @@ class JunctionWorld:
                 self.status[i] = DONE
         self._record()
         av_hit = any(i == 0 for i, _, _ in hits)
-        done = av_hit or self.k >= self.n_steps or not np.any(self.status == ACTIVE)
+        done = av_hit or self.k >= self.n_steps or not np.any(
+            (self.status == ACTIVE) | (self.status == PENDING))
         return StepInfo(verdict, hits, bool(done))
+
+    def _enter(self) -> None:
+        """Put on the road every pending vehicle whose arrival time has come and whose lane's
+        entry is free (the last vehicle on it a length and ``gap_m[0]`` ahead), in arrival
+        order."""
+        t = self.k * self.dt
+        for i in np.flatnonzero(self.status == PENDING):
+            if self.t0[i] > t + 1e-9:
+                continue
+            lane = self.routes[i].inbound
+            need = self.limits[i].length_m + self.spec.gap_m[0]
+            blocked = any(self.status[j] == ACTIVE and self.routes[j].inbound == lane and
+                          abs(self.s[j] - self.s[i]) < need for j in range(self.n) if j != i)
+            if not blocked:
+                self.status[i] = ACTIVE
 
     def _record(self) -> None:
         k = self.k
@@ -546,5 +601,5 @@ class JunctionWorld:
         return self
 
 
-__all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "Row",
+__all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "PENDING", "Row",
            "StepInfo", "WAIT_V_MPS", "conflict_table"]
