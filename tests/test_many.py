@@ -422,3 +422,24 @@ def test_stand_ins_cover_the_newcomers():
                 saw |= any(x.extra.get("stand_in") for x in c)
         assert saw and "uncertified" not in w.verdicts
         assert not any(c for _, i, _, c in w.collisions if i == 0)
+
+
+# -- the guarantee over configurations --------------------------------------------------------
+
+
+@given(seed=st.integers(0, 10_000), n=st.integers(2, 8), lanes=st.integers(1, 2),
+       variant=st.sampled_from(list(VARIANTS)), arm=st.integers(0, 3),
+       movement=st.sampled_from(MOVEMENTS), poisson=st.booleans(),
+       kinds=st.sampled_from(["lfg", "idm", "aggressive", "adversary",
+                              "lfg:0.6,aggressive:0.2,adversary:0.2", "random,noisy"]))
+def test_the_shield_holds_over_junction_configurations(seed, n, lanes, variant, arm, movement,
+                                                        poisson, kinds):
+    """Whatever the junction, the crowd and its arrivals: no collision the AV causes and no
+    uncertified step (the humans stay inside the envelope the shield assumes)."""
+    spec = JunctionSpec.of(variant, n_vehicles=n, lanes=lanes, av_arm=arm,
+                           av_movement=movement, hv_kinds=kinds, duration_s=15.0,
+                           arrival="poisson" if poisson else "placed", flow_veh_h=1200.0,
+                           av_arrival_s=2.0)
+    w = JunctionWorld(CONFIG, spec, seed).run()
+    assert not any(c for _, i, _, c in w.collisions if i == 0)
+    assert "uncertified" not in w.verdicts
