@@ -359,6 +359,19 @@ def test_the_command_runs_writes_and_refuses(capsys, tmp_path):
     assert len(err.strip().splitlines()) == 1
     code, _, err = run_cli(capsys, "junction", "--hv", "lfg,bus")
     assert code == 2 and "junction.hv_kinds" in err
+    code, _, err = run_cli(capsys, "junction", "--video", tmp_path / "v.avi")
+    assert code == 2 and "unsupported extension" in err
+
+
+def test_the_video_has_one_frame_per_state(capsys, tmp_path):
+    import imageio.v3 as iio
+
+    code, _, err = run_cli(capsys, "junction", "--vehicles", 3, "--seeds", 1, "--workers", 1,
+                           "--duration", 2, "--video", tmp_path / "v.gif", "--quiet")
+    assert code == 0, err
+    frames = iio.imread(tmp_path / "v.gif", index=None)
+    w = JunctionWorld(CONFIG, JunctionSpec(n_vehicles=3, duration_s=2.0), 1).run()
+    assert frames.shape[0] == w.k + 1 and frames.shape[-1] in (3, 4)
 
 
 # -- Poisson arrivals -----------------------------------------------------------------------

@@ -3,7 +3,8 @@
 Seeds of one junction (``persuasive.many``): each seed's run with the AV and the same seed
 without it (the delay the AV causes), on worker processes; one row per seed and the study's
 summary (or one JSON object). ``--out`` writes ``runs.parquet`` (one row per seed),
-``summary.json`` and ``summary.md``; ``--plot`` draws the first seed's run from above.
+``summary.json`` and ``summary.md``; ``--plot`` draws the first seed's run from above,
+``--video`` makes a video of it.
 """
 
 from __future__ import annotations
@@ -90,11 +91,13 @@ def summary_lines(agg: dict) -> list[str]:
                    + "); other files are kept.")
 @click.option("--plot", type=click.Path(dir_okay=False), default=None,
               help="Draw the first seed's run from above (PNG, PDF or SVG).")
+@click.option("--video", type=click.Path(dir_okay=False), default=None,
+              help="The first seed's run as a video, one frame per step (MP4 or GIF).")
 @click.option("--json", "as_json", is_flag=True, help="Print the rows and summary as JSON.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h, av_arrival_s,
              av_arm, av_movement, duration_s, seeds, seed,
-             workers, shield, mode, config_file, sets, out, force, plot, as_json, quiet):
+             workers, shield, mode, config_file, sets, out, force, plot, video, as_json, quiet):
     """The AV among N vehicles at a four-way unsignalised junction (docs/guide/junction.md).
 
     The AV drives as the outside-simulator adapters do (one planner per conflicting human, the
@@ -116,6 +119,10 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h,
                            av_arrival_s=av_arrival_s)
     if plot:
         check_output_file(plot, (".png", ".pdf", ".svg"), "--plot")
+    if video:
+        from ..plots.files import check_animation_path
+
+        check_animation_path(video)
     if out:
         path = check_replaceable_folder(out, force, owned=OUT_FILES)
         lock_output(path, "results folder")
@@ -139,11 +146,15 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h,
                 "workers": n_workers, "shield": config.shield, "mode": config.mode})
     if out:
         _write(out, rows, agg)
-    if plot:
+    if plot or video:
         from ..many.world import JunctionWorld
-        from ..plots.junction import topview
+        from ..plots import junction as draw
 
-        topview(JunctionWorld(config, spec, seed).run(), plot)
+        first = JunctionWorld(config, spec, seed).run()
+        if plot:
+            draw.topview(first, plot)
+        if video:
+            draw.video(first, video)
     if as_json:
         click.echo(json.dumps({"summary": agg, "runs": rows}, default=float))
         return
@@ -160,6 +171,8 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h,
         click.echo(f"runs and summary written to {out}")
     if plot:
         click.echo(f"top view of seed {seed} written to {plot}")
+    if video:
+        click.echo(f"video of seed {seed} written to {video}")
 
 
 def _write(out: str, rows: list[dict], agg: dict) -> None:

@@ -1,6 +1,7 @@
 """A run at the four-way junction seen from above (``persuasive.many``): the roads, every
 vehicle's path driven (a line, the AV's thicker), its footprint at a few times, crashes
-marked."""
+marked (:func:`topview_figure`); and the run as a video, one frame per step
+(:func:`video`)."""
 
 from __future__ import annotations
 
@@ -19,13 +20,8 @@ def _corners(xy: np.ndarray, u: np.ndarray, length: float, width: float) -> np.n
     return np.array([xy + hl + hw, xy + hl - hw, xy - hl - hw, xy - hl + hw])
 
 
-def topview_figure(world, snapshots: int = 4, view_m: float = 45.0) -> Figure:
-    """The figure of a finished :class:`persuasive.many.world.JunctionWorld` run."""
-    spec = world.spec
-    fig = _new_figure(6.0, 6.0)
-    ax = fig.add_subplot(1, 1, 1)
+def _roads(ax, spec, reach: float) -> None:
     half = spec.half_m
-    reach = view_m
     ax.add_patch(Rectangle((-reach, -half), 2 * reach, 2 * half, color="0.86", zorder=0))
     ax.add_patch(Rectangle((-half, -reach), 2 * half, 2 * reach, color="0.86", zorder=0))
     for c in (-1, 1):  # the stop lines and the centre lines
@@ -33,6 +29,30 @@ def topview_figure(world, snapshots: int = 4, view_m: float = 45.0) -> Figure:
         ax.plot([-half, half], [c * half, c * half], color="0.6", lw=0.5, zorder=1)
     ax.plot([-reach, -half], [0, 0], [half, reach], [0, 0], color="0.99", lw=0.6, ls="--")
     ax.plot([0, 0], [-reach, -half], [0, 0], [half, reach], color="0.99", lw=0.6, ls="--")
+    ax.set_xlim(-reach, reach)
+    ax.set_ylim(-reach, reach)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+
+
+def _footprint(world, i: int, k: int) -> np.ndarray | None:
+    sk = world.S[k, i]
+    if not np.isfinite(sk):
+        return None
+    p = world.routes[i].line.at(np.array([sk - 0.25, sk, sk + 0.25]))
+    d = p[2] - p[0]
+    u = d / max(float(np.hypot(*d)), 1e-12)
+    lim = world.limits[i]
+    return _corners(p[1], u, lim.length_m, lim.width_m)
+
+
+def topview_figure(world, snapshots: int = 4, view_m: float = 45.0) -> Figure:
+    """The figure of a finished :class:`persuasive.many.world.JunctionWorld` run."""
+    fig = _new_figure(6.0, 6.0)
+    ax = fig.add_subplot(1, 1, 1)
+    reach = view_m
+    _roads(ax, world.spec, reach)
     n_k = world.k
     times = np.linspace(0, n_k, snapshots + 1).round().astype(int)
     colors = [_COLORS["av"]] + [_COLORS["hv"]] * (world.n - 1)
@@ -44,17 +64,11 @@ def topview_figure(world, snapshots: int = 4, view_m: float = 45.0) -> Figure:
         xy = r.line.at(s)
         ax.plot(xy[:, 0], xy[:, 1], color=colors[i], lw=2.0 if i == 0 else 0.8, alpha=0.8,
                 zorder=3 if i == 0 else 2)
-        lim = world.limits[i]
         for alpha, k in zip(np.linspace(0.25, 0.9, len(times)), times):
-            sk = world.S[k, i]
-            if not np.isfinite(sk):
-                continue
-            p = r.line.at(np.array([sk - 0.25, sk, sk + 0.25]))
-            d = p[2] - p[0]
-            u = d / max(float(np.hypot(*d)), 1e-12)
-            ax.add_patch(Polygon(_corners(p[1], u, lim.length_m, lim.width_m),
-                                 closed=True, color=colors[i], alpha=float(alpha), lw=0,
-                                 zorder=4))
+            corners = _footprint(world, i, k)
+            if corners is not None:
+                ax.add_patch(Polygon(corners, closed=True, color=colors[i],
+                                     alpha=float(alpha), lw=0, zorder=4))
     for t, i, j, caused in world.collisions:
         k = int(round(t / world.dt))
         for v in (i, j):
@@ -62,15 +76,40 @@ def topview_figure(world, snapshots: int = 4, view_m: float = 45.0) -> Figure:
             if np.isfinite(sk):
                 x, y = world.routes[v].line.at(np.array([sk]))[0]
                 ax.plot(x, y, marker="x", color="k", ms=8, zorder=5)
-    ax.set_xlim(-reach, reach)
-    ax.set_ylim(-reach, reach)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
     ax.set_title(f"junction, {world.n} vehicles, seed {world.seed}: AV (thick) and humans; "
                  f"footprints at {', '.join(f'{k * world.dt:.0f}' for k in times)} s",
                  fontsize=7)
     return fig
+
+
+def frames(world, view_m: float = 45.0, dpi: float = 80.0):
+    """One RGB frame ``(h, w, 3)`` per state of a finished run (a generator): the roads drawn
+    once, the footprints of that state (the AV red, the humans blue, crashed ones grey)."""
+    fig = _new_figure(5.0, 5.0)
+    fig.set_dpi(dpi)
+    ax = fig.add_subplot(1, 1, 1)
+    _roads(ax, world.spec, view_m)
+    colors = [_COLORS["av"]] + [_COLORS["hv"]] * (world.n - 1)
+    for k in range(world.k + 1):
+        patches = []
+        for i in range(world.n):
+            corners = _footprint(world, i, k)
+            if corners is not None:
+                patches.append(ax.add_patch(Polygon(corners, closed=True, color=colors[i],
+                                                    lw=0, zorder=4)))
+        ax.set_title(f"seed {world.seed}, t = {k * world.dt:4.1f} s", fontsize=8)
+        fig.canvas.draw()
+        yield np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+        for p in patches:
+            p.remove()
+
+
+def video(world, path: str | Path) -> Path:
+    """The run as a video (MP4 or GIF, by extension), one frame per step at the run's rate,
+    atomically."""
+    from .files import write_frames
+
+    return write_frames(frames(world), path, fps=max(1, int(round(1.0 / world.dt))))
 
 
 def topview(world, path: str | Path) -> Path:
@@ -81,4 +120,4 @@ def topview(world, path: str | Path) -> Path:
     return save_figure(fig, path, dpi=150.0)
 
 
-__all__ = ["topview", "topview_figure"]
+__all__ = ["frames", "topview", "topview_figure", "video"]

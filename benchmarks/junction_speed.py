@@ -1,0 +1,88 @@
+"""How fast the N-vehicle junction steps, and where the time goes, by number of vehicles.
+
+    python benchmarks/junction_speed.py [--vehicles 2 3 4 6 8 10] [--seeds 50] [--json]
+
+For each N: ``--seeds`` runs (seeds 1..), one process, the default junction (``major``, one
+lane, ``lfg`` humans playing their next conflict, the persuasive AV with the worst-case
+shield, 30-s runs), timing every closed-loop step (every vehicle decides, all advance, every
+conflict checked) and, inside it, the AV's decision (its planners and the shield) and the
+humans' decisions. Prints the medians and 99th percentiles [ms] and the share of the step
+each part takes. Targets (issue 40, the 2-core machine): one step at N = 10 at most 1 ms
+median. The whole study's wall time is ``persuasive junction --vehicles 10 --seeds 500
+--workers 2`` (at most 2 minutes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from persuasive.config import Config
+from persuasive.many.junction import JunctionSpec
+from persuasive.many.world import JunctionWorld
+
+
+def measure(n: int, seeds: int) -> dict:
+    config = Config(mode="corrected")
+    spec = JunctionSpec(n_vehicles=n)
+    JunctionWorld(config, spec, 0).run()  # load the kernels
+    step, av, humans = [], [], []
+    clock = time.perf_counter_ns
+    for seed in range(1, seeds + 1):
+        w = JunctionWorld(config, spec, seed)
+        planner_act, human_accel = w.planner.act, w._human_accel
+        spent = {"av": 0, "hv": 0}
+
+        def timed_act(*a, **k):
+            t0 = clock()
+            out = planner_act(*a, **k)
+            spent["av"] += clock() - t0
+            return out
+
+        def timed_human(*a, **k):
+            t0 = clock()
+            out = human_accel(*a, **k)
+            spent["hv"] += clock() - t0
+            return out
+
+        w.planner.act, w._human_accel = timed_act, timed_human
+        while True:
+            spent["av"] = spent["hv"] = 0
+            t0 = clock()
+            done = w.step().done
+            step.append((clock() - t0) * 1e-6)
+            av.append(spent["av"] * 1e-6)
+            humans.append(spent["hv"] * 1e-6)
+            if done:
+                break
+    step, av, humans = map(np.asarray, (step, av, humans))
+    return {"vehicles": n, "steps": int(step.size),
+            "step_ms_median": float(np.median(step)), "step_ms_p99": float(np.percentile(step, 99)),
+            "av_ms_median": float(np.median(av)), "humans_ms_median": float(np.median(humans)),
+            "av_share": float(av.sum() / step.sum()), "humans_share": float(humans.sum() / step.sum())}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--vehicles", type=int, nargs="+", default=[2, 3, 4, 6, 8, 10])
+    parser.add_argument("--seeds", type=int, default=50)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    rows = [measure(n, args.seeds) for n in args.vehicles]
+    if args.json:
+        print(json.dumps(rows))
+        return
+    print("| vehicles | steps | step ms median / p99 | AV decision ms median | humans ms median "
+          "| AV share | humans share |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['vehicles']} | {r['steps']} | {r['step_ms_median']:.3f} / "
+              f"{r['step_ms_p99']:.3f} | {r['av_ms_median']:.3f} | {r['humans_ms_median']:.3f} "
+              f"| {100 * r['av_share']:.0f} % | {100 * r['humans_share']:.0f} % |")
+
+
+if __name__ == "__main__":
+    main()
