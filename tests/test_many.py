@@ -318,6 +318,9 @@ def test_the_delay_caused_compares_the_same_seed_without_the_av():
     a, b = M.clear_times(w)[1:], M.clear_times(ref)[1:]
     d = np.where(np.isfinite(a), a, 30.0) - np.where(np.isfinite(b), b, 30.0)
     assert row["caused_delay_s"] == pytest.approx(float(d.mean()), abs=1e-12)
+    passed = [(ti, tj) for i, _, ti, tj in M.passings(w) if i == 0]
+    assert row["av_conflicts_passed"] == len(passed)
+    assert row["av_first_conflicts"] == sum(ti < tj for ti, tj in passed)
 
 
 def test_a_study_is_the_same_with_one_or_two_workers():

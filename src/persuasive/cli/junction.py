@@ -17,7 +17,7 @@ import click
 
 from .._compile import StudyClock
 from .._files import check_output_file, check_replaceable_folder
-from ..config import ConfigError
+from ..config import AV_KINDS
 from ..many.junction import ARMS, MOVEMENTS, VARIANTS, JunctionSpec
 from ._common import (Count, check_workers, compile_notice, compile_report, config_options,
                       lock_output, progress_bar, shield_option, workers_type)
@@ -33,11 +33,13 @@ def _num(value, digits: int = 2) -> str:
 
 def summary_lines(agg: dict) -> list[str]:
     """The study's summary as Markdown rows."""
-    head = ("| vehicles | runs | AV through | AV-caused collisions | uncertified steps | "
+    head = ("| vehicles | runs | AV through | AV first (conflicts) | AV-caused collisions | "
+            "uncertified steps | "
             "deadlocks (AV in) | human collisions | AV delay [s] | delay caused [s] | "
             "throughput [veh/h] | min PET AV [s] | min gap AV [m] | step ms median / p99 |")
     return [head, "|" + "---|" * head.count(" | ") + "---|",
             f"| {agg['n_vehicles']} | {agg['runs']} | {agg['av_through_pct']:.1f} % | "
+            f"{agg['av_first_pct']:.1f} % ({agg['av_conflicts_passed']}) | "
             f"{agg['av_caused_collisions']} | {agg['uncertified_steps']} | "
             f"{agg['deadlock_runs']} ({agg['av_in_deadlock_runs']}) | "
             f"{agg['human_collisions']} | {_num(agg['mean_av_delay_s'])} | "
@@ -82,6 +84,8 @@ def summary_lines(agg: dict) -> list[str]:
               help="First seed.")
 @click.option("--workers", type=workers_type(), default=None,
               help="Worker processes [all cores].")
+@click.option("--av", "av_kind", type=click.Choice(list(AV_KINDS)), default=None,
+              help="The AV's planner (one per conflicting human) [persuasive].")
 @shield_option
 @config_options
 @click.option("--out", type=click.Path(file_okay=False), default=None,
@@ -97,7 +101,7 @@ def summary_lines(agg: dict) -> list[str]:
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h, av_arrival_s,
              av_arm, av_movement, duration_s, seeds, seed,
-             workers, shield, mode, config_file, sets, out, force, plot, video, as_json, quiet):
+             workers, av_kind, shield, mode, config_file, sets, out, force, plot, video, as_json, quiet):
     """The AV among N vehicles at a four-way unsignalised junction (docs/guide/junction.md).
 
     The AV drives as the outside-simulator adapters do (one planner per conflicting human, the
@@ -111,7 +115,7 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h,
     from ._common import build_config
 
     config = build_config(config_file, sets, {"mode": mode or "corrected",
-                                              "av.shield": shield})
+                                              "av.shield": shield, "av.kind": av_kind})
     spec = JunctionSpec.of(variant, n_vehicles=vehicles, lanes=lanes, hv_kinds=hv_kinds,
                            av_arm=ARMS.index(av_arm), av_movement=av_movement,
                            duration_s=duration_s, opponents=opponents,
@@ -164,7 +168,9 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h,
                f"seeds {seed}..{seed + seeds - 1}, {duration_s:g}-s runs")
     for line in summary_lines(agg):
         click.echo(line)
-    click.echo("deadlocks: runs with a cycle of waiting vehicles that lasted 5 s (AV in: the "
+    click.echo("AV first: of the AV's crossings and merges both vehicles passed, the share it "
+               "passed first (how many in parentheses); "
+               "deadlocks: runs with a cycle of waiting vehicles that lasted 5 s (AV in: the "
                "AV was in it); delay caused: the humans' mean time to leave the box less "
                "the same seed without the AV")
     if out:

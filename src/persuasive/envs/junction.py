@@ -30,7 +30,6 @@ the agent, ``n_vehicles`` and the junction's variant are its parameters (id
 from __future__ import annotations
 
 import functools
-import math
 from typing import Any
 
 import numpy as np

@@ -19,6 +19,8 @@
   never leaves counts the run's length).
 - **PET** (post-encroachment time) of a crossing or merge: the time between the two centres
   passing their conflict points (linear between steps).
+- **AV first**: of the AV's crossings and merges both vehicles passed, those whose conflict
+  point the AV's centre passed first (persuasion's measure, per conflict).
 """
 
 from __future__ import annotations
@@ -154,6 +156,12 @@ def waiting_s(world: JunctionWorld) -> np.ndarray:
 
 def pets(world: JunctionWorld) -> list[tuple[int, int, float]]:
     """``(i, j, PET [s])`` of every crossing and merge both vehicles passed."""
+    return [(i, j, abs(ti - tj)) for i, j, ti, tj in passings(world)]
+
+
+def passings(world: JunctionWorld) -> list[tuple[int, int, float, float]]:
+    """``(i, j, t_i, t_j)``: when each centre passed its conflict point [s] (linear between
+    steps), for every crossing and merge both vehicles passed."""
     S, dt = world.S[: world.k + 1], world.dt
     out = []
 
@@ -171,7 +179,7 @@ def pets(world: JunctionWorld) -> list[tuple[int, int, float]]:
             continue
         ti, tj = passed(S[:, row.i], row.ij.ego_at_m), passed(S[:, row.j], row.ji.ego_at_m)
         if math.isfinite(ti) and math.isfinite(tj):
-            out.append((row.i, row.j, abs(ti - tj)))
+            out.append((row.i, row.j, ti, tj))
     return out
 
 
@@ -192,7 +200,9 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
                                        and last > 0 else spec.duration_s)
     lock = deadlock(world)
     wait = waiting_s(world)
-    pet = pets(world)
+    passed = passings(world)
+    pet = [(i, j, abs(ti - tj)) for i, j, ti, tj in passed]
+    av_passed = [(ti, tj) for i, _, ti, tj in passed if i == 0]
     av = world.limits[0]
     row = {
         "seed": world.seed,
@@ -218,6 +228,8 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
         "max_wait_s": float(wait.max()),
         "vehicles_through": n_through,
         "throughput_veh_h": float(throughput),
+        "av_conflicts_passed": len(av_passed),
+        "av_first_conflicts": sum(ti < tj for ti, tj in av_passed),
         "min_pet_av_s": min((p for i, _, p in pet if i == 0), default=math.nan),
         "min_pet_s": min((p for _, _, p in pet), default=math.nan),
         "min_gap_av_m": world.min_gap_av_m,
@@ -237,4 +249,4 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
 
 
 __all__ = ["APPROACH_M", "DEADLOCK_S", "FOLLOW_GAP_M", "clear_times", "deadlock", "free_flow_s",
-           "pets", "summary", "wait_edges", "waiting_s"]
+           "passings", "pets", "summary", "wait_edges", "waiting_s"]

@@ -93,6 +93,9 @@ def aggregate(rows: Sequence[dict], step_ms: np.ndarray) -> dict:
         "runs": n,
         "n_vehicles": rows[0]["n_vehicles"] if rows else 0,
         "av_through_pct": 100.0 * sum(r["av_through"] for r in rows) / max(n, 1),
+        "av_first_pct": 100.0 * sum(r["av_first_conflicts"] for r in rows) / max(
+            1, sum(r["av_conflicts_passed"] for r in rows)),
+        "av_conflicts_passed": int(sum(r["av_conflicts_passed"] for r in rows)),
         "av_caused_collisions": int(sum(r["av_caused_collisions"] for r in rows)),
         "av_collisions": int(sum(r["av_collisions"] for r in rows)),
         "uncertified_steps": int(sum(r["uncertified_steps"] for r in rows)),
