@@ -5,13 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pettingzoo.test import parallel_api_test, parallel_seed_test  # the test extra has it
 
-pytest.importorskip("pettingzoo")
-
-from pettingzoo.test import parallel_api_test, parallel_seed_test  # noqa: E402
-
-from persuasive.config import ConfigError  # noqa: E402
-from persuasive.envs.junction import JunctionEnv, JunctionParallelEnv  # noqa: E402
+from persuasive.config import ConfigError
+from persuasive.envs.junction import JunctionEnv, JunctionParallelEnv
 
 
 @pytest.mark.parametrize("agents", ["all", ("vehicle_0",), ("vehicle_1", "vehicle_3")])

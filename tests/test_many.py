@@ -146,7 +146,8 @@ def test_the_table_has_a_row_for_every_pair_that_can_touch_and_none_for_the_othe
 
     def kind(a, b):
         from persuasive.many.junction import Arrivals
-        arr = Arrivals((a, b), np.array([0.0, 0.0]), np.array([4.0, 4.0]), ("av", "lfg"))
+        arr = Arrivals((a, b), np.array([0.0, 0.0]), np.array([4.0, 4.0]), ("av", "lfg"),
+                       np.zeros(2))
         rows = conflict_table(spec, arr, lim).rows
         return rows[0].kind if rows else None
 
@@ -242,12 +243,14 @@ def test_without_the_shield_an_aggressive_crowd_can_hit_the_av():
 
 
 def test_agents_replace_a_vehicles_policy_and_pass_through_the_shield():
-    w = JunctionWorld(CONFIG, JunctionSpec(n_vehicles=4), 3)
-    free = JunctionWorld(CONFIG, JunctionSpec(n_vehicles=4), 3)
-    w.step({0: 1.0}, shield=False)
-    assert w.a[0] == 1.0
-    free.step({0: 1.0})
-    assert free.a[0] <= 1.0
+    unshielded = JunctionWorld(CONFIG, JunctionSpec(n_vehicles=4), 3)
+    shielded = JunctionWorld(CONFIG, JunctionSpec(n_vehicles=4), 3)
+    unshielded.step({0: 1.0}, shield=False)
+    assert unshielded.a[0] == 1.0
+    info = shielded.step({0: 1.0})
+    assert info.verdict in ("admitted", "brake", "go")  # the shield judged the agent's action
+    assert unshielded.verdicts == [None] and shielded.verdicts == [info.verdict]
+    w = unshielded
     with pytest.raises(ConfigError, match="action of vehicle 0"):
         w.step({0: float("nan")})
 
@@ -272,7 +275,7 @@ def test_a_standoff_is_a_deadlock_and_a_queue_is_not():
     # rebuild the run by hand: AV from the south, one human from the east, one behind it
     arr = Arrivals((south, east, east), np.array([south.entry_m - 2.0, east.entry_m - 2.0,
                                                   east.entry_m - 12.0]),
-                   np.zeros(3), ("av", "lfg", "lfg"))
+                   np.zeros(3), ("av", "lfg", "lfg"), np.zeros(3))
     w.arrivals, w.routes = arr, arr.routes
     w.table = conflict_table(spec, arr, w.limits)
     steps = int(round(6.0 / w.dt))

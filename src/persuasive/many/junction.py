@@ -344,7 +344,7 @@ class Arrivals:
     v0_mps: np.ndarray
     kinds: tuple[str, ...]
     #: when each vehicle arrives at ``s0_m`` [s] (all 0 with ``arrival = "placed"``)
-    t0_s: np.ndarray | None = None
+    t0_s: np.ndarray
 
     @property
     def n(self) -> int:

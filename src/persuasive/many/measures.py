@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from ..envs.external import CROSSING, FOLLOW, MERGE
-from .world import ACTIVE, CRASHED, WAIT_V_MPS, JunctionWorld
+from .world import ACTIVE, CRASHED, DONE, WAIT_V_MPS, JunctionWorld
 
 #: A follower within this bumper gap of its leader waits for it [m].
 FOLLOW_GAP_M = 15.0
@@ -49,7 +49,7 @@ def clear_times(world: JunctionWorld) -> np.ndarray:
         line = world.through_m(i)
         s = S[:, i]
         past = np.flatnonzero(np.nan_to_num(s, nan=-np.inf) >= line)
-        done = np.flatnonzero(world.STATUS[:, i] == 1)
+        done = np.flatnonzero(world.STATUS[:, i] == DONE)
         if past.size:
             k = int(past[0])
             if k == 0:
@@ -64,7 +64,9 @@ def clear_times(world: JunctionWorld) -> np.ndarray:
 
 def free_flow_s(s0: float, v0: float, s1: float, u_max: float, v_max: float) -> float:
     """The time to go from ``s0`` to ``s1`` [m] starting at ``v0``, at ``u_max`` up to
-    ``v_max``."""
+    ``v_max``, in continuous time (not ``persuasive.record.free_flow_time``, which counts the
+    loop's steps: the clear times here are interpolated between steps, and the delay compares
+    like with like)."""
     d = s1 - s0
     if d <= 0.0:
         return 0.0

@@ -22,8 +22,7 @@ from .measures import summary
 from .world import JunctionWorld
 
 
-def run_seed(config: Config, spec: JunctionSpec, seed: int, timed: bool = True
-             ) -> tuple[dict, np.ndarray]:
+def run_seed(config: Config, spec: JunctionSpec, seed: int) -> tuple[dict, np.ndarray]:
     """One seed's row and its closed-loop step times [ms] (module docstring)."""
     world = JunctionWorld(config, spec, seed)
     times = []
@@ -36,7 +35,7 @@ def run_seed(config: Config, spec: JunctionSpec, seed: int, timed: bool = True
             break
     reference = JunctionWorld(config, spec, seed, with_av=False).run()
     step_ms = np.array(times)
-    row = summary(world, reference, step_ms if timed else None)
+    row = summary(world, reference, step_ms)
     return row, step_ms
 
 

@@ -1,8 +1,10 @@
 """The world of N vehicles at the junction: a vehicles table, a conflict table, the closed loop
 (docs/method.md §15).
 
-**Vehicles table** (:class:`Vehicles`): per vehicle its route (``persuasive.many.junction``),
-limits, kind and state ``(s, v)`` along its route; vehicle 0 is the AV (absent in a run
+**Vehicles table** (held by :class:`JunctionWorld`: ``routes``, ``limits``, the arrivals'
+kinds and times, and the arrays ``s``, ``v``, ``status``): per vehicle its route
+(``persuasive.many.junction``), limits, kind and state ``(s, v)`` along its route; vehicle 0
+is the AV (absent in a run
 ``with_av=False``, the reference that measures the delay the AV causes).
 
 **Conflict table** (:class:`ConflictTable`, built once per run by :func:`conflict_table`, the
@@ -61,8 +63,9 @@ from .junction import (Arrivals, JunctionSpec, Route, arrivals, possible_routes,
 
 #: Vehicle status codes (PENDING: arrives later, not on the road yet).
 ACTIVE, DONE, CRASHED, PENDING = 0, 1, 2, 3
-#: Conflict kind codes in the table.
-KIND_IDS = {FOLLOW: 0, MERGE: 1, CROSSING: 2}
+#: Conflict kind codes of the flat row views (:meth:`JunctionWorld._prepare_views`).
+K_FOLLOW, K_MERGE, K_CROSSING = 0, 1, 2
+KIND_IDS = {FOLLOW: K_FOLLOW, MERGE: K_MERGE, CROSSING: K_CROSSING}
 #: The gap between two routes' centre lines laid end to end (:meth:`JunctionWorld.poses`) [m].
 _LINE_SPACING_M = 1000.0
 #: A vehicle slower than this waits [m/s] (the wait-for graph, ``persuasive.many.measures``).
@@ -121,6 +124,7 @@ def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits]) -> C
     """The one builder of the conflict table of a run (module docstring)."""
     rows: list[Row] = []
     of: list[list[int]] = [[] for _ in range(arr.n)]
+    t0 = arr.t0_s
     for i in range(arr.n):
         for j in range(i + 1, arr.n):
             a, b = arr.routes[i], arr.routes[j]
@@ -129,7 +133,6 @@ def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits]) -> C
             if pair is None:
                 continue
             kind, ij, ji, until = pair
-            t0 = arr.t0_s if arr.t0_s is not None else np.zeros(arr.n)
             prio = 0 if kind == FOLLOW else right_of_way(
                 spec, a, b, (arr.s0_m[i], arr.v0_mps[i]), (arr.s0_m[j], arr.v0_mps[j]),
                 float(t0[i]), float(t0[j]))
@@ -234,8 +237,6 @@ class JunctionWorld:
         from ..scenarios import build_scenario
         from ..world import GameCache
 
-        if config.av.yield_line_choices_m or config.yield_line_choices is not None:
-            config = config.with_overrides({"av.yield_line_choices_m": []})
         self.config, self.spec, self.seed, self.with_av = config, spec, int(seed), with_av
         self.dt = float(config.simulation.dt_s)
         self.n_steps = int(round(spec.duration_s / self.dt))
@@ -253,7 +254,7 @@ class JunctionWorld:
         self.v = arr.v0_mps.astype(float).copy()
         self.a = np.zeros(arr.n)
         self.status = np.full(arr.n, ACTIVE, np.int8)
-        self.t0 = arr.t0_s if arr.t0_s is not None else np.zeros(arr.n)
+        self.t0 = arr.t0_s
         self.status[self.t0 > 0.0] = PENDING
         if not with_av:
             self.status[0] = DONE
@@ -283,9 +284,6 @@ class JunctionWorld:
         self._record()
 
     # -- what each vehicle sees ----------------------------------------------------------
-
-    def active(self, i: int) -> bool:
-        return self.status[i] == ACTIVE
 
     def through_m(self, i: int) -> float:
         """The arc past which vehicle ``i`` has left the box (its rear past the far edge)."""
@@ -353,20 +351,19 @@ class JunctionWorld:
     def _prepare_views(self) -> None:
         """Per vehicle, its rows as flat tuples seen from it (the loop reads plain floats):
         ``(j, kind, at_me, at_other, lo_me, hi_me, lo_other, hi_other, shared_until, right
-        of way, half the two lengths, row)``."""
-        kind_id = {FOLLOW: 0, MERGE: 1, CROSSING: 2}
+        of way, half the two lengths)``."""
         self._views: list[list[tuple]] = [[] for _ in range(self.n)]
         for row in self.table.rows:
             for me, ot, rc, prio in ((row.i, row.j, row.ij, row.priority),
                                      (row.j, row.i, row.ji, -row.priority)):
                 half = 0.5 * (self.limits[me].length_m + self.limits[ot].length_m)
                 if rc is None:
-                    view = (ot, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, row.shared_until_m, 0, half,
-                            row)
+                    view = (ot, K_FOLLOW, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, row.shared_until_m, 0,
+                            half)
                 else:
-                    view = (ot, kind_id[row.kind], rc.ego_at_m, rc.other_at_m,
+                    view = (ot, KIND_IDS[row.kind], rc.ego_at_m, rc.other_at_m,
                             rc.ego_occupancy[0], rc.ego_occupancy[1], rc.other_occupancy[0],
-                            rc.other_occupancy[1], math.nan, prio, half, row)
+                            rc.other_occupancy[1], math.nan, prio, half)
                 self._views[me].append(view)
 
     def _human_accel(self, i: int, s: list, v: list, status: list) -> float:
@@ -382,24 +379,24 @@ class JunctionWorld:
         reach_m = self._reach_m
         keep = set()
         s_i = s[i]
-        for j, kind, at_me, at_ot, lo_me, hi_me, lo_ot, hi_ot, until, prio, half, _ in \
+        for j, kind, at_me, at_ot, lo_me, hi_me, lo_ot, hi_ot, until, prio, half in \
                 self._views[i]:
             if status[j] != ACTIVE:
                 continue
-            if kind == 0:  # follow
+            if kind == K_FOLLOW:
                 if s[j] > s_i and s_i <= until:
                     gap = s[j] - s_i - half
                     if leader is None or gap < leader[0]:
                         leader = (gap, v[j])
                 continue
             s_me, s_ot = s_i - at_me, s[j] - at_ot
-            if kind == 1 and s_ot >= 0.0 and s_ot > s_me:
+            if kind == K_MERGE and s_ot >= 0.0 and s_ot > s_me:
                 # the other is in the exit lane ahead: follow it
                 gap = s_ot - s_me - half
                 if leader is None or gap < leader[0]:
                     leader = (gap, v[j])
                 continue
-            if s_me > hi_me or s_ot > hi_ot or (kind == 1 and s_me >= 0.0):
+            if s_me > hi_me or s_ot > hi_ot or (kind == K_MERGE and s_me >= 0.0):
                 continue  # cleared
             keep.add(j)
             if s_me < lo_me and lo_ot <= s_ot <= hi_ot:
@@ -601,5 +598,5 @@ class JunctionWorld:
         return self
 
 
-__all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "PENDING", "Row",
-           "StepInfo", "WAIT_V_MPS", "conflict_table"]
+__all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "KIND_IDS",
+           "PENDING", "Row", "StepInfo", "WAIT_V_MPS", "conflict_table"]
