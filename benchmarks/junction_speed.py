@@ -16,53 +16,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 
-import numpy as np
-
+from persuasive.bench import bench_junction
 from persuasive.config import Config
-from persuasive.many.junction import JunctionSpec
-from persuasive.many.world import JunctionWorld
 
 
 def measure(n: int, seeds: int) -> dict:
-    config = Config(mode="corrected")
-    spec = JunctionSpec(n_vehicles=n)
-    JunctionWorld(config, spec, 0).run()  # load the kernels
-    step, av, humans = [], [], []
-    clock = time.perf_counter_ns
-    for seed in range(1, seeds + 1):
-        w = JunctionWorld(config, spec, seed)
-        planner_act, human_accel = w.planner.act, w._human_accel
-        spent = {"av": 0, "hv": 0}
-
-        def timed_act(*a, **k):
-            t0 = clock()
-            out = planner_act(*a, **k)
-            spent["av"] += clock() - t0
-            return out
-
-        def timed_human(*a, **k):
-            t0 = clock()
-            out = human_accel(*a, **k)
-            spent["hv"] += clock() - t0
-            return out
-
-        w.planner.act, w._human_accel = timed_act, timed_human
-        while True:
-            spent["av"] = spent["hv"] = 0
-            t0 = clock()
-            done = w.step().done
-            step.append((clock() - t0) * 1e-6)
-            av.append(spent["av"] * 1e-6)
-            humans.append(spent["hv"] * 1e-6)
-            if done:
-                break
-    step, av, humans = map(np.asarray, (step, av, humans))
-    return {"vehicles": n, "steps": int(step.size),
-            "step_ms_median": float(np.median(step)), "step_ms_p99": float(np.percentile(step, 99)),
-            "av_ms_median": float(np.median(av)), "humans_ms_median": float(np.median(humans)),
-            "av_share": float(av.sum() / step.sum()), "humans_share": float(humans.sum() / step.sum())}
+    """One N's timings (``persuasive.bench.bench_junction``, as ``persuasive bench
+    --scenario junction --vehicles N --runs SEEDS`` prints them)."""
+    config = Config(mode="corrected").with_overrides({"scenario.kind": "junction",
+                                                      "junction.n_vehicles": n})
+    return bench_junction(config, seeds)
 
 
 def main() -> None:

@@ -21,8 +21,8 @@ import pytest
 
 from persuasive.cli import cli
 from persuasive.cli._common import KIND_OPTIONS, SHIELD_HELP, kinds_text
-from persuasive.config import (AV_KIND_ALIASES, AV_KINDS, ROLES, SCENARIO_KINDS, SHIELD_KINDS,
-                               SIMULATED_HV_KINDS, Config)
+from persuasive.config import (AV_KIND_ALIASES, AV_KINDS, MANY_SCENARIO_KINDS, ROLES,
+                               SCENARIO_KINDS, SHIELD_KINDS, SIMULATED_HV_KINDS, Config)
 from persuasive.policies import kinds as kd
 from persuasive.policies import policy_params
 from persuasive.scenarios import SCENARIOS
@@ -58,12 +58,13 @@ def test_run_options_list_exactly_the_registries(path):
     cmd = command(*path)
     assert choices(cmd, "av") == [*AV_KINDS, *AV_KIND_ALIASES]
     assert choices(cmd, "hv") == list(SIMULATED_HV_KINDS)
-    assert choices(cmd, "scenario") == list(SCENARIO_KINDS)
+    assert choices(cmd, "scenario") == [*SCENARIO_KINDS, *MANY_SCENARIO_KINDS]
     assert choices(cmd, "shield") == list(SHIELD_KINDS)
     assert choices(cmd, "hv_role") == list(ROLES)
     assert f": {kinds_text(AV_KINDS, {'lfg': 'the 2-LFG case'})} (docs" in help_of(cmd, "av")
     assert help_of(cmd, "hv").endswith(f": {', '.join(SIMULATED_HV_KINDS)}.")
-    assert help_of(cmd, "scenario").endswith(f": {', '.join(SCENARIO_KINDS)}.")
+    assert help_of(cmd, "scenario").endswith(f": {', '.join(SCENARIO_KINDS)}, junction (N "
+                                             "vehicles, --vehicles).")
     assert f": {', '.join(SHIELD_KINDS)} [" in help_of(cmd, "shield")
 
 
@@ -71,7 +72,7 @@ def test_other_commands_list_exactly_the_registries():
     from persuasive.studies.compare import DEFAULT_HV_KINDS
 
     compare = command("compare")
-    assert choices(compare, "scenario") == list(SCENARIO_KINDS)
+    assert choices(compare, "scenario") == [*SCENARIO_KINDS, *MANY_SCENARIO_KINDS]
     assert choices(compare, "hv_role") == list(ROLES)
     assert f"[all: {','.join(AV_KINDS)}]" in help_of(compare, "av_kinds")
     assert help_of(compare, "hv_kinds").endswith(f"[all but replay: "
@@ -84,7 +85,7 @@ def test_other_commands_list_exactly_the_registries():
     assert choices(highway, "shield") == list(SHIELD_KINDS)
     assert f": {', '.join(SHIELD_KINDS)} [" in help_of(highway, "shield")
     assert choices(command("bench"), "av") == list(AV_KINDS)
-    assert choices(command("bench"), "scenario") == list(SCENARIO_KINDS)
+    assert choices(command("bench"), "scenario") == [*SCENARIO_KINDS, *MANY_SCENARIO_KINDS]
     for name in ("sweep", "drive"):
         assert choices(command(name), "shield") == list(SHIELD_KINDS)
         assert help_of(command(name), "shield") == SHIELD_HELP

@@ -66,7 +66,7 @@ import re
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from .config import ConfigError
 
@@ -464,3 +464,22 @@ def writer_lock(path: str | Path, what: str = "output") -> Iterator[Path]:
                 os.unlink(lock)
             os.close(fd)
         _remove_empty(made)
+
+def json_safe(value: Any) -> Any:
+    """``value`` with NumPy scalars as Python values and every non-finite float as None, so
+    that ``json.dumps(..., allow_nan=False)`` writes it (JSON has no NaN)."""
+    import math
+
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, (np.bool_, bool)):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return None if not math.isfinite(value) else float(value)
+    return value

@@ -214,6 +214,59 @@ def bench(n_runs: int = 10, repeats: int = 3, full: bool = False, reference: boo
     return out
 
 
+def bench_junction(config: Config, seeds: int = 20) -> dict[str, Any]:
+    """How fast a junction of ``config`` (``scenario.kind = "junction"``) steps: ``seeds``
+    runs (seeds ``1..seeds``) in this process after a warm-up run, every closed-loop step
+    timed (every vehicle decides, all advance, every conflict checked) and, inside it, the
+    AV's decision (its planners and the shield) and the humans' decisions. Medians and 99th
+    percentiles [ms], and each part's share of the step time."""
+    from .many.world import JunctionWorld
+
+    JunctionWorld.of(config, 0).run()  # load the kernels
+    step, av, humans = [], [], []
+    clock = time.perf_counter_ns
+    for seed in range(1, seeds + 1):
+        w = JunctionWorld.of(config, seed)
+        planner_act, human_accel = w.planner.act, w._human_accel
+        spent = {"av": 0, "hv": 0}
+
+        def timed_act(*a, _act=planner_act, **k):
+            t0 = clock()
+            out = _act(*a, **k)
+            spent["av"] += clock() - t0
+            return out
+
+        def timed_human(*a, _accel=human_accel, **k):
+            t0 = clock()
+            out = _accel(*a, **k)
+            spent["hv"] += clock() - t0
+            return out
+
+        w.planner.act, w._human_accel = timed_act, timed_human
+        while True:
+            spent["av"] = spent["hv"] = 0
+            t0 = clock()
+            done = w.step().done
+            step.append((clock() - t0) * 1e-6)
+            av.append(spent["av"] * 1e-6)
+            humans.append(spent["hv"] * 1e-6)
+            if done:
+                break
+    step_, av_, hv_ = map(np.asarray, (step, av, humans))
+    spec = config.junction_spec
+    return {"scenario": "junction", "vehicles": spec.n_vehicles, "av": config.av.kind,
+            "shield": config.shield, "runs": seeds, "steps": int(step_.size),
+            "step_ms_median": float(np.median(step_)),
+            "step_ms_p99": float(np.percentile(step_, 99)),
+            "av_ms_median": float(np.median(av_)), "av_ms_p99": float(np.percentile(av_, 99)),
+            "humans_ms_median": float(np.median(hv_)),
+            "av_share": float(av_.sum() / step_.sum()),
+            "humans_share": float(hv_.sum() / step_.sum()),
+            "machine": {"cpus": os.cpu_count(),
+                        "processor": platform.processor() or platform.machine(),
+                        "python": platform.python_version()}}
+
+
 def _reference_times(config: Config, run, n: int = 5) -> dict[str, float]:
     """The straightforward NumPy path on ``n`` states of one run (it is slow)."""
     from . import reference

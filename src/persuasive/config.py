@@ -17,6 +17,7 @@ import hashlib
 import math
 import tomllib
 from dataclasses import MISSING, asdict, dataclass, field, fields, is_dataclass, replace
+from numbers import Integral
 from pathlib import Path
 from typing import Any, Literal, get_args
 
@@ -37,6 +38,9 @@ HV_KINDS: tuple[str, ...] = get_args(HVKind)
 #: The human kinds the simulation runs by itself (all but ``person``).
 SIMULATED_HV_KINDS: tuple[str, ...] = tuple(k for k in HV_KINDS if k != "person")
 SCENARIO_KINDS: tuple[str, ...] = get_args(ScenarioKind)
+#: The scenarios of many vehicles (``persuasive.many``): ``scenario.kind`` takes these after
+#: the two-vehicle :data:`SCENARIO_KINDS`, and the ``[junction]`` section describes it.
+MANY_SCENARIO_KINDS: tuple[str, ...] = ("junction",)
 NOISE_KINDS: tuple[str, ...] = get_args(NoiseKind)
 STREAM_LAYOUTS: tuple[str, ...] = get_args(StreamLayout)
 SHIELD_KINDS: tuple[str, ...] = get_args(ShieldKind)
@@ -304,7 +308,9 @@ class ScenarioParams:
     paper's intersection).
     """
 
-    kind: ScenarioKind = "intersection"  #: intersection | crossing | left-turn | merge
+    #: intersection | crossing | left-turn | merge (two vehicles) | junction (N vehicles, the
+    #: ``[junction]`` section; ``persuasive.many``)
+    kind: str = "intersection"
     #: crossing: angle between the paths [deg] (90, in [15, 165]); merge: ramp angle (30, in
     #: [15, 90])
     angle_deg: float | None = None
@@ -321,7 +327,7 @@ class ScenarioParams:
 
     def __post_init__(self) -> None:
         p = "scenario."
-        _choice(p + "kind", self.kind, SCENARIO_KINDS)
+        _choice(p + "kind", self.kind, (*SCENARIO_KINDS, *MANY_SCENARIO_KINDS))
         if self.angle_deg is not None:
             _in_range(p + "angle_deg", self.angle_deg, 0.0, 180.0, lo_open=True, hi_open=True)
             if self.kind in ANGLE_RANGES_DEG:
@@ -634,6 +640,241 @@ class ResponsibilityParams:
         return rho, acc, brake, min(front_brake, -front.u_min_mps2)
 
 
+# -- the junction of many vehicles (persuasive.many) -----------------------------------------
+
+#: Arms, anticlockwise from east.
+ARMS = ("east", "north", "west", "south")
+MOVEMENTS = ("left", "straight", "right")
+PRIORITIES = ("major", "first-come", "right-before-left")
+#: How the humans arrive (:attr:`JunctionSpec.arrival`).
+ARRIVALS = ("placed", "poisson")
+#: Whom a human plays against (:attr:`JunctionSpec.opponents`).
+OPPONENTS = ("next", "all")
+#: Named variants: the fields of :class:`JunctionSpec` each sets.
+VARIANTS: dict[str, dict[str, Any]] = {
+    "major": {"priority": "major", "mix": (0.25, 0.5, 0.25)},
+    "all-way": {"priority": "first-come", "mix": (0.25, 0.5, 0.25)},
+    "right-before-left": {"priority": "right-before-left", "mix": (0.25, 0.5, 0.25)},
+    "left-heavy": {"priority": "first-come", "mix": (0.6, 0.3, 0.1)},
+}
+#: The vehicle length a spec's fit is checked with [m] (:func:`arrivals` checks the real one).
+FIT_LENGTH_M = 5.0
+@dataclass(frozen=True)
+class JunctionSpec:
+    """A four-way junction and its arrivals (module docstring). Lengths in metres, speeds in
+    m/s; ``mix`` is the (left, straight, right) share of the humans' movements."""
+
+    n_vehicles: int = 4  #: vehicles in the run, the AV included (>= 1)
+    lanes: int = 1  #: lanes per direction on every arm (1 or 2)
+    lane_width_m: float = 4.0
+    #: inbound lane length before the stop line [m] (None: long enough for every vehicle in
+    #: one lane, at least 100 m)
+    approach_m: float | None = None
+    exit_m: float = 40.0  #: exit lane length after the box [m]
+    priority: str = "major"
+    mix: tuple[float, float, float] = (0.25, 0.5, 0.25)
+    av_arm: int = 3  #: the AV's arm (0 east, 1 north, 2 west, 3 south)
+    av_movement: str = "straight"
+    #: the first vehicle's centre in a lane starts this far before the stop line [m]
+    first_m: tuple[float, float] = (10.0, 30.0)
+    #: the bumper gap to the vehicle ahead in the lane [m]
+    gap_m: tuple[float, float] = (6.0, 20.0)
+    v0_mps: tuple[float, float] = (3.0, 5.0)  #: initial speeds
+    #: the humans' kinds and their shares (any simulated human kind of the project)
+    hv_kinds: tuple[tuple[str, float], ...] = (("lfg", 1.0),)
+    duration_s: float = 30.0  #: run length [s]
+    #: whom a human plays its pair game against: ``next``, the vehicle it conflicts with next;
+    #: ``all``, every vehicle of an uncleared conflict within the prediction's reach (the
+    #: lowest of the answers, as Li et al.'s concurrent pairwise games)
+    opponents: str = "next"
+    #: how the humans arrive: ``placed``, all on the road at the start, queued in their lanes;
+    #: ``poisson``, a Poisson flow of ``flow_veh_h`` per arm, each entering at the start of its
+    #: approach at its arrival time (later while its lane's entry is blocked)
+    arrival: str = "placed"
+    flow_veh_h: float = 600.0  #: vehicles per hour on each arm (``arrival = "poisson"``)
+    #: when the AV enters at the start of its approach, into the flow [s] (``poisson``)
+    av_arrival_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        def bad(name: str, allowed: str) -> ConfigError:
+            return ConfigError(f"junction.{name} = {getattr(self, name)!r} is out of range; "
+                               f"allowed: {allowed}")
+
+        if isinstance(self.n_vehicles, bool) or not isinstance(self.n_vehicles, Integral) or \
+                not 1 <= self.n_vehicles <= 64:
+            raise bad("n_vehicles", "an integer in [1, 64] (the AV included)")
+        if self.lanes not in (1, 2):
+            raise bad("lanes", "1 | 2")
+        if not 2.0 <= self.lane_width_m <= 6.0:
+            raise bad("lane_width_m", "[2, 6] m")
+        if not 10.0 <= self.exit_m <= 1000.0:
+            raise bad("exit_m", "[10, 1000] m")
+        if self.priority not in PRIORITIES:
+            raise bad("priority", " | ".join(PRIORITIES))
+        mix = tuple(float(m) for m in self.mix)
+        if len(mix) != 3 or not all(math.isfinite(m) and m >= 0.0 for m in mix) or \
+                not sum(mix) > 0.0:
+            raise bad("mix", "three shares (left, straight, right) >= 0 with a positive sum")
+        object.__setattr__(self, "mix", mix)
+        if self.av_arm not in (0, 1, 2, 3):
+            raise bad("av_arm", "0 (east) | 1 (north) | 2 (west) | 3 (south)")
+        if self.av_movement not in MOVEMENTS:
+            raise bad("av_movement", " | ".join(MOVEMENTS))
+        for name, lo_min in (("first_m", 0.0), ("gap_m", 0.5), ("v0_mps", 0.0)):
+            pair = tuple(float(x) for x in getattr(self, name))
+            if len(pair) != 2 or not (lo_min <= pair[0] <= pair[1]) or \
+                    not math.isfinite(pair[1]):
+                raise bad(name, f"(lo, hi) with {lo_min:g} <= lo <= hi, finite")
+            object.__setattr__(self, name, pair)
+        need = self.first_m[1] + (self.n_vehicles - 1) * (FIT_LENGTH_M + self.gap_m[1]) \
+            + 0.5 * FIT_LENGTH_M
+        if self.approach_m is None:
+            object.__setattr__(self, "approach_m", float(max(100.0, 10.0 * math.ceil(need / 10.0))))
+        if not 20.0 <= self.approach_m <= 5000.0:
+            raise bad("approach_m", "[20, 5000] m")
+        if self.first_m[1] + 5.0 > self.approach_m:
+            raise ConfigError(f"junction.first_m = {self.first_m!r} does not fit on an approach "
+                              f"of junction.approach_m = {self.approach_m:g} m; allowed: hi <= "
+                              "approach_m - 5")
+        # every vehicle in one lane must fit (5-m vehicles; arrivals checks the real length)
+        if need > self.approach_m:
+            raise ConfigError(f"junction.n_vehicles = {self.n_vehicles} does not fit on an "
+                              f"approach of junction.approach_m = {self.approach_m:g} m (all in "
+                              f"one lane need {need:g} m); allowed: n_vehicles <= "
+                              f"{self.max_vehicles()}, or a longer approach_m or smaller gap_m")
+        kinds = _junction_kinds(self.hv_kinds)
+        object.__setattr__(self, "hv_kinds", kinds)
+        if self.arrival not in ARRIVALS:
+            raise bad("arrival", " | ".join(ARRIVALS))
+        if not (isinstance(self.flow_veh_h, (int, float)) and 1.0 <= self.flow_veh_h <= 3600.0):
+            raise bad("flow_veh_h", "[1, 3600] vehicles per hour per arm")
+        if not (isinstance(self.av_arrival_s, (int, float)) and 0.0 <= self.av_arrival_s and
+                (self.arrival != "poisson" or self.av_arrival_s < self.duration_s)):
+            raise bad("av_arrival_s", "[0, duration_s) s")
+        if self.opponents not in OPPONENTS:
+            raise bad("opponents", " | ".join(OPPONENTS))
+        if not 1.0 <= self.duration_s <= 3600.0:
+            raise bad("duration_s", "[1, 3600] s")
+
+    @classmethod
+    def of(cls, variant: str | None = None, **fields_: Any) -> JunctionSpec:
+        """A spec from a named variant (:data:`VARIANTS`) and fields set over it."""
+        base: dict[str, Any] = {}
+        if variant is not None:
+            if variant not in VARIANTS:
+                raise ConfigError(f"junction.variant = {variant!r} is out of range; allowed: "
+                                  f"{' | '.join(VARIANTS)}")
+            base.update(VARIANTS[variant])
+        known = {f.name for f in fields(cls)}
+        for name in fields_:
+            if name not in known:
+                raise ConfigError(f"junction.{name} is not a parameter; allowed: "
+                                  f"{' | '.join(sorted(known))}")
+        base.update(fields_)
+        return cls(**base)
+
+    def max_vehicles(self) -> int:
+        """The most vehicles that fit in one lane of this approach."""
+        room = self.approach_m - self.first_m[1] - 0.5 * FIT_LENGTH_M
+        return max(1, 1 + int(room // (FIT_LENGTH_M + self.gap_m[1])))
+
+    @property
+    def half_m(self) -> float:
+        """Half the side of the junction's box [m]."""
+        return self.lanes * self.lane_width_m
+
+    def with_(self, **changes: Any) -> JunctionSpec:
+        return replace(self, **changes)
+
+
+def _junction_kinds(value) -> tuple[tuple[str, float], ...]:
+    if isinstance(value, str):  # "lfg:0.8,aggressive:0.2" or "idm"
+        items = []
+        for part in value.split(","):
+            name, _, share = part.strip().partition(":")
+            try:
+                items.append((name.strip(), float(share) if share else 1.0))
+            except ValueError:
+                raise ConfigError(f"junction.hv_kinds = {value!r} is not KIND[:SHARE],...") \
+                    from None
+        value = items
+    elif isinstance(value, dict):
+        value = list(value.items())
+    out = []
+    for item in value:
+        name, share = (item, 1.0) if isinstance(item, str) else item
+        if name not in SIMULATED_HV_KINDS or name == "replay":
+            allowed = " | ".join(k for k in SIMULATED_HV_KINDS if k != "replay")
+            raise ConfigError(f"junction.hv_kinds has {name!r}; allowed: {allowed}")
+        share = float(share)
+        if not (math.isfinite(share) and share >= 0.0):
+            raise ConfigError(f"junction.hv_kinds share of {name!r} = {share!r} is out of "
+                              "range; allowed: >= 0")
+        out.append((str(name), share))
+    if not out or not sum(s for _, s in out) > 0.0:
+        raise ConfigError("junction.hv_kinds needs at least one kind with a positive share")
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class JunctionParams:
+    """The four-way unsignalised junction of ``scenario.kind = "junction"`` (docs/method.md
+    §15; ``persuasive.many.junction.JunctionSpec`` holds the meaning and checks of every
+    field). Every field unset takes the named variant's value, else the spec's default
+    (``variant`` unset: ``major``); the section is read only with ``scenario.kind =
+    "junction"``. Lengths in metres, speeds in m/s, times in s."""
+
+    #: major | all-way | right-before-left | left-heavy (``persuasive.many.junction.VARIANTS``)
+    variant: str | None = None
+    n_vehicles: int | None = None  #: vehicles in a run, the AV included; unset: 4
+    lanes: int | None = None  #: lanes per direction on every arm (1 or 2); unset: 1
+    lane_width_m: float | None = None  #: unset: 4
+    approach_m: float | None = None  #: unset: long enough for every vehicle in one lane
+    exit_m: float | None = None  #: unset: 40
+    priority: str | None = None  #: major | first-come | right-before-left; unset: the variant's
+    mix: tuple[float, float, float] | None = None  #: (left, straight, right) shares of the humans
+    av_arm: str | None = None  #: east | north | west | south; unset: south
+    av_movement: str | None = None  #: left | straight | right; unset: straight
+    first_m: tuple[float, float] | None = None  #: the first vehicle's distance range to the line
+    gap_m: tuple[float, float] | None = None  #: bumper gaps in a lane
+    v0_mps: tuple[float, float] | None = None  #: initial speeds
+    hv_kinds: str | None = None  #: the humans' kinds and shares, "lfg:0.8,aggressive:0.2"
+    duration_s: float | None = None  #: run length; unset: 30
+    opponents: str | None = None  #: next | all: whom each human plays; unset: next
+    arrival: str | None = None  #: placed | poisson; unset: placed
+    flow_veh_h: float | None = None  #: vehicles per hour on each arm (poisson); unset: 600
+    av_arrival_s: float | None = None  #: when the AV enters (poisson); unset: 10
+
+    def __post_init__(self) -> None:
+        for name in ("mix", "first_m", "gap_m", "v0_mps"):
+            value = getattr(self, name)
+            if value is not None:
+                if not isinstance(value, (list, tuple)) or any(
+                        isinstance(x, bool) or not isinstance(x, (int, float)) for x in value):
+                    _fail(f"junction.{name}", value, "a list of numbers")
+                object.__setattr__(self, name, tuple(float(x) for x in value))
+        if self.av_arm is not None:
+            _choice("junction.av_arm", self.av_arm, ARMS)
+        for name in ("n_vehicles", "lanes"):
+            if getattr(self, name) is not None:
+                _number(f"junction.{name}", getattr(self, name), integer=True)
+
+    @property
+    def is_set(self) -> bool:
+        """Whether any field is set."""
+        return any(getattr(self, f.name) is not None for f in fields(self))
+
+    def spec(self) -> JunctionSpec:
+        """The :class:`JunctionSpec` of this section: its variant (unset: ``major``) with every
+        set field over it; the arm by name."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        variant = values.pop("variant") or "major"
+        set_ = {k: v for k, v in values.items() if v is not None}
+        if "av_arm" in set_:
+            set_["av_arm"] = ARMS.index(set_["av_arm"])
+        return JunctionSpec.of(variant, **set_)
+
+
 @dataclass(frozen=True)
 class Quirks:
     """Reference-implementation quirks Q1..Q7 (docs/method.md §9); ``None`` follows the mode."""
@@ -697,12 +938,22 @@ class Config:
     hv: HVParams = field(default_factory=HVParams)
     quirks: Quirks = field(default_factory=Quirks)
     responsibility: ResponsibilityParams = field(default_factory=ResponsibilityParams)
+    junction: JunctionParams = field(default_factory=JunctionParams)
 
     def __post_init__(self) -> None:
         _choice("mode", self.mode, MODES)
         for name, section_cls in _SECTIONS.items():
             if not isinstance(getattr(self, name), section_cls):
                 raise ConfigError(f"{name} is not a {section_cls.__name__}")
+        if self.scenario.kind in MANY_SCENARIO_KINDS:
+            if (self.simulation.interactions or 1) > 1:
+                _fail("simulation.interactions", self.simulation.interactions,
+                      f"1 with scenario.kind = {self.scenario.kind} (repeated interactions "
+                      "are of one human with the AV)")
+            self.junction_spec  # noqa: B018 -- checked whole here, one line naming the field
+        elif self.junction.is_set:
+            raise ConfigError("[junction] is read only with scenario.kind = \"junction\"; "
+                              f"scenario.kind = {self.scenario.kind!r} is a two-vehicle scenario")
         if self.simulation.dt_s != self.library.sample_dt_s:
             _fail(
                 "simulation.dt_s",
@@ -746,6 +997,15 @@ class Config:
                           "brakes)")
 
     # -- derived -----------------------------------------------------------------------------
+
+    @functools.cached_property
+    def junction_spec(self):
+        """The junction of ``scenario.kind = "junction"`` as a
+        ``persuasive.many.junction.JunctionSpec`` (``[junction]`` over its variant), or None
+        for a two-vehicle scenario."""
+        if self.scenario.kind != "junction":
+            return None
+        return self.junction.spec()
 
     @property
     def responsibility_rule(self) -> tuple[float, float, float, float]:
@@ -851,11 +1111,12 @@ class Config:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (TOML/JSON friendly); unset optional values are left out, and
-        so is a section whose every value is unset (``[responsibility]`` by default: the
+        so is a section whose every value is unset (``[responsibility]`` and ``[junction]`` by
+        default: the
         configurations written before it existed keep their text and digests)."""
         sections = {name: _section_dict(getattr(self, name)) for name in _SECTIONS}
         return {"mode": self.mode, **{k: v for k, v in sections.items()
-                                      if v or k != "responsibility"}}
+                                      if v or k not in _OPTIONAL_SECTIONS}}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Config:
@@ -1006,7 +1267,11 @@ _SECTIONS: dict[str, type] = {
     "hv": HVParams,
     "quirks": Quirks,
     "responsibility": ResponsibilityParams,
+    "junction": JunctionParams,
 }
+#: Sections left out of :meth:`Config.to_dict` while every value in them is unset (the
+#: configurations written before they existed keep their text and digests).
+_OPTIONAL_SECTIONS = ("responsibility", "junction")
 
 #: Fields that moved, for a helpful message when an old configuration names them.
 _MOVED = {"av": "av.kind", "hv_role": "hv.role"}
@@ -1021,6 +1286,9 @@ __all__ = [
     "ConfigError",
     "HVParams",
     "IDMParams",
+    "JunctionParams",
+    "JunctionSpec",
+    "MANY_SCENARIO_KINDS",
     "LibraryParams",
     "NoisyParams",
     "RandomHumanParams",

@@ -104,7 +104,12 @@ def run_summary(config: Config, seed: int) -> dict:
     ``simulation.interactions = K > 1``: the last interaction's summary, plus
     ``interactions = K`` and ``by_interaction``, a list per :data:`BY_INTERACTION` value
     (``pa_hat_final`` only online) over the K interactions (what the sweeps and ``compare``
-    store)."""
+    store). With ``scenario.kind = "junction"``: the junction run's row
+    (``persuasive.many.measures.run_summary``)."""
+    if config.scenario.kind == "junction":  # N vehicles: persuasive.many's row
+        from .many.measures import run_summary as junction_summary
+
+        return junction_summary(config, seed)
     k = config.simulation.interactions or 1
     if k == 1:
         return simulate(config, seed).summary()

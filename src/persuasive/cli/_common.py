@@ -30,8 +30,9 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import click
 
-from ..config import (AV_KIND_ALIASES, AV_KINDS, MODES, ROLES, SCENARIO_KINDS,
-                      SHIELD_KINDS, SIMULATED_HV_KINDS, Config, ConfigError)
+from ..config import (AV_KIND_ALIASES, AV_KINDS, MANY_SCENARIO_KINDS, MODES, ROLES,
+                      SCENARIO_KINDS, SHIELD_KINDS, SIMULATED_HV_KINDS, Config, ConfigError,
+                      read_toml)
 from ..policies.kinds import AV, HV, KINDS
 
 #: Seed of the run the paper shows in its Figs. 2 and 3 (the default of the figure commands).
@@ -144,12 +145,34 @@ def shield_option(func: Callable) -> Callable:
                         help=SHIELD_HELP)(func)
 
 
-def scenario_option(help_text: str) -> Callable:
-    """``--scenario``: a kind of the scenario registry (``SCENARIO_KINDS``), setting nothing
-    itself (the command maps it to ``scenario.kind``); ``help_text`` is followed by the
-    kinds."""
-    return click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default=None,
-                        help=f"{help_text}: {kinds_text(SCENARIO_KINDS)}.")
+def scenario_option(help_text: str, many: bool = False) -> Callable:
+    """``--scenario``: a kind of the scenario registry (``SCENARIO_KINDS``; with ``many``
+    also the many-vehicle ``junction``), setting nothing itself (the command maps it to
+    ``scenario.kind``); ``help_text`` is followed by the kinds."""
+    kinds = (*SCENARIO_KINDS, *MANY_SCENARIO_KINDS) if many else SCENARIO_KINDS
+    notes = {"junction": "N vehicles, --vehicles"} if many else None
+    return click.option("--scenario", type=click.Choice(list(kinds)), default=None,
+                        help=f"{help_text}: {kinds_text(kinds, notes)}.")
+
+
+#: The junction's options (``--vehicles``, ``--variant``) and the fields they set.
+JUNCTION_FIELDS = {"vehicles": "junction.n_vehicles", "variant": "junction.variant"}
+
+
+def junction_options(func: Callable) -> Callable:
+    """``--vehicles`` and ``--variant``: the junction of ``--scenario junction``."""
+    from ..many.junction import VARIANTS
+
+    for option in reversed([
+        click.option("--vehicles", type=Count(1, 64), default=None,
+                     help="Vehicles at the junction, the AV included (--scenario junction) "
+                          "[4]."),
+        click.option("--variant", type=click.Choice(list(VARIANTS)), default=None,
+                     help="The junction's priority and movement mix (--scenario junction; "
+                          "docs/guide/junction.md) [major]."),
+    ]):
+        func = option(func)
+    return func
 
 
 def run_explicit(options: dict[str, Any]) -> dict[str, Any]:
@@ -157,17 +180,69 @@ def run_explicit(options: dict[str, Any]) -> dict[str, Any]:
     return {field: options.get(name) for name, field in RUN_FIELDS.items()}
 
 
+def junction_config(config: Config, options: Mapping[str, Any],
+                    hv_kinds: str | None = None) -> Config:
+    """``config`` with the junction's options applied: ``--vehicles`` and ``--variant`` are
+    refused (exit status 2) unless ``scenario.kind = junction``; there, ``hv_kinds`` (the
+    command's ``--hv``) sets the humans' kinds (``junction.hv_kinds``)."""
+    given = {field: options[name] for name, field in JUNCTION_FIELDS.items()
+             if options.get(name) is not None}
+    if config.scenario.kind != "junction":
+        if given:
+            name = next(n for n, f in JUNCTION_FIELDS.items() if f in given)
+            raise click.UsageError(f"--{name} is read only with --scenario junction (the "
+                                   f"{config.scenario.kind} holds two vehicles)")
+        return config
+    if hv_kinds is not None:
+        given["junction.hv_kinds"] = hv_kinds
+    return config.with_overrides(given) if given else config
+
+
+def kind_configs(config: Config) -> list[Config]:
+    """The configurations whose kinds a run of ``config`` plays, for
+    :func:`check_kind_options`: ``config`` itself, or at a junction one per human kind of
+    ``junction.hv_kinds`` (with the paper's pair geometry,
+    ``persuasive.many.junction.pair_config``)."""
+    if config.scenario.kind != "junction":
+        return [config]
+    from ..many.junction import pair_config
+
+    pair = pair_config(config)
+    return [pair.with_overrides({"hv.kind": k}) for k, share in config.junction_spec.hv_kinds
+            if share > 0.0]
+
+
 def config_of(options: dict[str, Any]) -> Config:
-    """The configuration the run options describe (see the precedence above)."""
-    return build_config(options.get("config_file"), options.get("sets", ()),
-                        run_explicit(options))
+    """The configuration the run options describe (see the precedence above); the
+    junction's options last (:func:`junction_config`), and a junction in corrected mode
+    unless a mode is given (:func:`mode_given`)."""
+    explicit = run_explicit(options)
+    hv = None
+    if options.get("scenario") == "junction" or options.get("vehicles") is not None:
+        hv = explicit.pop("hv.kind")  # the humans of a junction: junction.hv_kinds
+    config = build_config(options.get("config_file"), options.get("sets", ()), explicit)
+    if hv is not None and config.scenario.kind != "junction":
+        config = config.with_overrides({"hv.kind": hv})
+    if config.scenario.kind == "junction" and not mode_given(options):
+        config = config.with_overrides({"mode": "corrected"})
+    return junction_config(config, options, hv)
+
+
+def mode_given(options: Mapping[str, Any]) -> bool:
+    """Whether ``--mode``, ``--set mode=...`` or the ``--config`` file sets the mode (else
+    a junction runs in corrected mode: the paper published nothing for it)."""
+    if options.get("mode") is not None or "mode" in parse_set(options.get("sets", ())):
+        return True
+    path = options.get("config_file")
+    return bool(path) and "mode" in read_toml(path, "config file")
 
 
 def config_options(func: Callable) -> Callable:
     """``--mode``, ``--config`` and ``--set``."""
     for option in reversed([
         click.option("--mode", type=click.Choice(list(MODES)), default=None,
-                     help="paper (quirks Q1..Q7, docs/method.md §9) or corrected [paper]."),
+                     help="paper (quirks Q1..Q7, docs/method.md §9) or corrected [paper; a junction: "
+                          "corrected]."),
         click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
                      help="TOML file of parameters."),
         click.option("--set", "sets", multiple=True, metavar="SECTION.FIELD=VALUE",
@@ -228,13 +303,14 @@ def run_options(seed_default: int = 1, seed_help: str = "Run seed.") -> Callable
                      help="AV's estimate of p_a in [0, 1], or online (a posterior over p_a, "
                           "docs/method.md §13.9) [equal to --pa]; "
                           f"{KIND_OPTIONS['pa_hat'].users()}."),
-        scenario_option(f"Geometry [{d.scenario.kind}]"),
+        scenario_option(f"Geometry [{d.scenario.kind}]", many=True),
         click.option("--seed", type=Count(0, SEED_MAX), default=seed_default,
                      show_default=True, help=seed_help),
     ]
 
     def decorate(func: Callable) -> Callable:
         func = config_options(func)
+        func = junction_options(func)
         for option in reversed(options):
             func = option(func)
         return func
@@ -412,6 +488,16 @@ def compile_notice(*kernels) -> bool:
                "command's)", err=True)
     sys.stderr.flush()
     return True
+
+
+def junction_compile_notice() -> bool:
+    """:func:`compile_notice` for the kernels a junction run uses (``persuasive.many``: the
+    pair policies, the shield, the footprint gaps)."""
+    from ..policies.step import policy_step_buffers
+    from ..safety.measures import footprint_gaps
+    from ..safety.shield import shield_filter
+
+    return compile_notice(policy_step_buffers, shield_filter, footprint_gaps)
 
 
 def compile_report(clock) -> None:

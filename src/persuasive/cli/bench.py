@@ -6,8 +6,8 @@ import json
 
 import click
 
-from ..config import AV_KINDS, SCENARIO_KINDS
-from ._common import Count, compile_notice, workers_type
+from ..config import AV_KINDS, MANY_SCENARIO_KINDS, SCENARIO_KINDS
+from ._common import Count, compile_notice, junction_compile_notice, workers_type
 
 
 @click.command()
@@ -24,13 +24,23 @@ from ._common import Count, compile_notice, workers_type
                    "on the same 2,000 and 8,000 runs: runs/s and the client's peak memory.")
 @click.option("--av", type=click.Choice(list(AV_KINDS)), default="persuasive",
               show_default=True, help="The AV planner whose decisions are timed.")
-@click.option("--scenario", type=click.Choice(list(SCENARIO_KINDS)), default="intersection",
-              show_default=True, help="The scenario the runs are drawn from.")
+@click.option("--scenario", type=click.Choice([*SCENARIO_KINDS, *MANY_SCENARIO_KINDS]), default="intersection",
+              show_default=True,
+              help="The scenario the runs are drawn from (junction: --vehicles vehicles, "
+                   "every closed-loop step timed over --runs 30-s runs in corrected mode with "
+                   "the worst-case shield).")
+@click.option("--vehicles", type=Count(1, 64), default=None,
+              help="Vehicles at the junction, the AV included (--scenario junction) [4].")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, as_json) -> None:
-    """Time a game solve, an MPC decision, a run and (--full) the whole reproduction."""
+def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, vehicles,
+          as_json) -> None:
+    """Time a game solve, an MPC decision, a run and (--full) the whole reproduction; with
+    --scenario junction, the closed-loop step of N vehicles and the AV's decision in it."""
     from ..bench import bench as run_bench
 
+    if scenario == "junction" or vehicles is not None:
+        _bench_junction(scenario, vehicles, av, n_runs, full, reference, sweep, as_json)
+        return
     compile_notice()
     if sweep:
         _bench_sweep(workers or 2, repeats, as_json)
@@ -66,6 +76,40 @@ def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, as_jso
         click.echo(f"reproduce all (16,000 runs, {result['reproduce_workers']} workers): "
                    f"{result['reproduce_all_s']:.1f} s, peak memory at most "
                    f"{result['reproduce_peak_rss_mb']:.0f} MB")
+
+
+def _bench_junction(scenario: str, vehicles: int | None, av: str, runs: int, full: bool,
+                    reference: bool, sweep: bool, as_json: bool) -> None:
+    """``bench --scenario junction``: :func:`persuasive.bench.bench_junction`."""
+    from ..bench import bench_junction
+    from ..config import Config
+
+    if scenario != "junction":
+        raise click.UsageError(f"--vehicles is read only with --scenario junction (the "
+                               f"{scenario} holds two vehicles)")
+    for flag, given in (("--full", full), ("--reference", reference), ("--sweep", sweep)):
+        if given:
+            raise click.UsageError(f"{flag} times the two-vehicle planner; it does not go with "
+                                   "--scenario junction")
+    config = Config(mode="corrected").with_overrides(
+        {"scenario.kind": "junction", "av.kind": av,
+         **({"junction.n_vehicles": vehicles} if vehicles is not None else {})})
+    junction_compile_notice()
+    result = bench_junction(config, runs)
+    if as_json:
+        click.echo(json.dumps(result))
+        return
+    m = result["machine"]
+    click.echo(f"machine: {m['cpus']} cpus, {m['processor']}, Python {m['python']}")
+    click.echo(f"junction, {result['vehicles']} vehicles, {av} AV with the {result['shield']} "
+               f"shield, {result['runs']} runs ({result['steps']} steps)")
+    click.echo(f"closed-loop step (every vehicle decides, all advance, every conflict "
+               f"checked): median {result['step_ms_median']:.3f} ms, p99 "
+               f"{result['step_ms_p99']:.3f} ms")
+    click.echo(f"the AV's decision in it: median {result['av_ms_median']:.3f} ms, p99 "
+               f"{result['av_ms_p99']:.3f} ms ({100 * result['av_share']:.0f} % of the step "
+               f"time); the humans' decisions: median {result['humans_ms_median']:.3f} ms "
+               f"({100 * result['humans_share']:.0f} %)")
 
 
 def _bench_sweep(workers: int, repeats: int, as_json: bool) -> None:

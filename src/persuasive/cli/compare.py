@@ -9,7 +9,8 @@ import click
 from ..config import AV_KINDS, ROLES, SHIELD_KINDS, SIMULATED_HV_KINDS, Config
 from ..studies.compare import DEFAULT_HV_KINDS
 from ._common import (INTERACTIONS_HELP, KIND_OPTIONS, SEED_MAX, Count, build_config,
-                      check_workers, compile_notice, config_options, kinds_text, lock_output,
+                      check_workers, compile_notice, config_options, junction_compile_notice,
+                      junction_config, junction_options, kinds_text, lock_output, mode_given,
                       progress_bar, scenario_option, workers_type)
 
 #: The human kinds left out by default (they need more than a configuration, e.g. replay's
@@ -47,7 +48,8 @@ def check_hv_role(hv_role: str | None, base: Config, avs, hvs) -> None:
 @click.option("--hv-role", type=click.Choice(list(ROLES)), default=None,
               help=f"Initial role of the humans that hold one [{Config().hv.role}]; "
                    f"{KIND_OPTIONS['hv_role'].users()}.")
-@scenario_option(f"Geometry [{Config().scenario.kind}]")
+@scenario_option(f"Geometry [{Config().scenario.kind}]", many=True)
+@junction_options
 @click.option("--seeds", type=Count(1, SEED_MAX), default=200, show_default=True,
               help="Seeds 1..N for every pair (at most 1,000,000 runs in all: seeds x pairs "
                    "x interactions).")
@@ -66,12 +68,16 @@ def check_hv_role(hv_role: str | None, base: Config, avs, hvs) -> None:
 @click.option("--interactions", type=Count(1, 1000), default=None, help=INTERACTIONS_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the rows as one JSON list.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode, config_file,
-            sets, out, force, timing_seeds, interactions, as_json, quiet) -> None:
+def compare(av_kinds, hv_kinds, shields, hv_role, scenario, vehicles, variant, seeds, workers,
+            mode, config_file, sets, out, force, timing_seeds, interactions, as_json,
+            quiet) -> None:
     """Compare AV planners and human models on the same seeds (docs/method.md §11).
 
     Each pair runs on seeds 1..N with independent random streams per agent, so a seed gives
-    the same initial state and the same human draws whatever the AV. Prints one row per pair
+    the same initial state and the same human draws whatever the AV. With --scenario
+    junction: the AV among --vehicles vehicles (persuasive.studies.junction_compare; --hv
+    gives each cell's humans, one kind each, default the configuration's
+    junction.hv_kinds). Prints one row per pair
     with 95 % bootstrap intervals, then each AV's paired differences against persuasive.
 
     A comparison holds at most 1,000,000 runs, each repeated interaction counted (seeds x AV
@@ -82,9 +88,17 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
     from .._files import check_output_folder
     from ..studies import compare as cmp
 
+    options = {"mode": mode, "sets": sets, "config_file": config_file,
+               "vehicles": vehicles, "variant": variant}
     base = build_config(config_file, sets, {"mode": mode, "hv.role": hv_role,
-                                           "scenario.kind": scenario,
-                                           "simulation.interactions": interactions})
+                                           "scenario.kind": scenario})
+    if base.scenario.kind == "junction":
+        _junction(base, options, av_kinds, hv_kinds, shields, hv_role, seeds, workers, out,
+                  force, interactions, as_json, quiet)
+        return
+    base = junction_config(base, options)  # --vehicles, --variant: refused here
+    if interactions is not None:
+        base = base.with_overrides({"simulation.interactions": interactions})
     avs = cmp.parse_kinds(av_kinds, AV_KINDS, "--av", AV_KINDS)
     hvs = cmp.parse_kinds(hv_kinds, SIMULATED_HV_KINDS, "--hv", cmp.DEFAULT_HV_KINDS)
     shield_list = cmp.parse_kinds(shields, SHIELD_KINDS, "--shield", SHIELD_KINDS) \
@@ -118,3 +132,50 @@ def compare(av_kinds, hv_kinds, shields, hv_role, scenario, seeds, workers, mode
         click.echo(f"error: {result.failures} run(s) failed (listed in {result.folder}/failed/);"
                    " run the same command again to retry them", err=True)
         click.get_current_context().exit(1)
+
+
+def _junction(base: Config, options: dict, av_kinds, hv_kinds, shields, hv_role, seeds,
+              workers, out, force, interactions, as_json, quiet) -> None:
+    """``compare --scenario junction`` (persuasive.studies.junction_compare): in corrected
+    mode unless a mode is given; --hv-role and --interactions are two-vehicle options."""
+    from .._files import check_replaceable_folder, json_safe
+    from ..studies import compare as cmp
+    from ..studies import junction_compare as jc
+
+    for flag, given in (("--hv-role", hv_role), ("--interactions", interactions)):
+        if given is not None:
+            raise click.UsageError(f"{flag} is a two-vehicle option; it does not go with "
+                                   "--scenario junction")
+    if not mode_given(options):
+        base = base.with_overrides({"mode": "corrected"})
+    base = junction_config(base, options)
+    avs = cmp.parse_kinds(av_kinds, AV_KINDS, "--av", AV_KINDS)
+    hv_allowed = tuple(k for k in SIMULATED_HV_KINDS if k != "replay")
+    hvs = cmp.parse_kinds(hv_kinds, hv_allowed, "--hv", hv_allowed) \
+        if hv_kinds is not None else None
+    shield_list = cmp.parse_kinds(shields, SHIELD_KINDS, "--shield", SHIELD_KINDS) \
+        if shields is not None else None
+    n_cells = len(jc.cells_of(base, avs, hvs, shield_list))  # every cell checked here
+    cmp.check_size(seeds, n_cells, 2, "--seeds")  # each seed twice: with and without the AV
+    folder = out if out is not None else jc.default_folder(base, avs, hvs, shield_list, seeds)
+    check_replaceable_folder(folder, force, "comparison folder", owned=jc.OUT_FILES)
+    lock_output(folder, "comparison folder")
+    workers = check_workers(workers, n_cells * seeds)
+    junction_compile_notice()
+    progress = progress_bar(quiet)
+    try:
+        summary = jc.run_comparison(base, avs, hvs, shield_list, seeds, folder, workers,
+                                    progress)
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
+    if as_json:
+        click.echo(json.dumps(json_safe(summary), allow_nan=False))
+        return
+    spec = base.junction_spec
+    click.echo(f"junction ({summary['variant']}, {spec.n_vehicles} vehicles, {spec.lanes} "
+               f"lane(s), humans playing {spec.opponents}), {base.mode} mode, seeds 1..{seeds}, "
+               f"{spec.duration_s:g}-s runs")
+    click.echo(jc.to_markdown(summary))
+    click.echo(f"written to {folder}/")
+

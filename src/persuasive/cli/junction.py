@@ -16,11 +16,12 @@ from pathlib import Path
 import click
 
 from .._compile import StudyClock
-from .._files import check_output_file, check_replaceable_folder
+from .._files import check_output_file, check_replaceable_folder, json_safe
 from ..config import AV_KINDS
 from ..many.junction import ARMS, MOVEMENTS, VARIANTS, JunctionSpec
-from ._common import (Count, check_workers, compile_notice, compile_report, config_options,
-                      lock_output, progress_bar, shield_option, workers_type)
+from ._common import (Count, check_workers, compile_report, config_options,
+                      junction_compile_notice, lock_output, progress_bar, shield_option,
+                      workers_type)
 
 #: The files ``--out`` writes: with --force these are replaced and every other file is kept.
 OUT_FILES = ("runs.parquet", "summary.json", "summary.md")
@@ -48,36 +49,37 @@ def summary_lines(agg: dict) -> list[str]:
             f"{_num(agg['step_ms_median'], 3)} / {_num(agg['step_ms_p99'], 3)} |"]
 
 
+_SPEC = JunctionSpec()  # the defaults the help names
+
+
 @click.command()
-@click.option("--vehicles", type=Count(1, 64), default=4, show_default=True,
-              help="Vehicles in each run, the AV included.")
-@click.option("--variant", type=click.Choice(list(VARIANTS)), default="major",
-              show_default=True,
+@click.option("--vehicles", type=Count(1, 64), default=None,
+              help=f"Vehicles in each run, the AV included [{_SPEC.n_vehicles}].")
+@click.option("--variant", type=click.Choice(list(VARIANTS)), default=None,
               help="major: the east-west road has priority; all-way: first come; "
-                   "right-before-left; left-heavy: first come, 60 % left turns.")
-@click.option("--lanes", type=Count(1, 2), default=1, show_default=True,
-              help="Lanes per direction on every arm.")
-@click.option("--hv", "hv_kinds", default="lfg", show_default=True, metavar="KIND[:SHARE],..",
-              help="The humans' kinds and shares, e.g. lfg:0.8,aggressive:0.2.")
-@click.option("--opponents", type=click.Choice(["next", "all"]), default="next",
-              show_default=True,
+                   "right-before-left; left-heavy: first come, 60 % left turns [major].")
+@click.option("--lanes", type=Count(1, 2), default=None,
+              help=f"Lanes per direction on every arm [{_SPEC.lanes}].")
+@click.option("--hv", "hv_kinds", default=None, metavar="KIND[:SHARE],..",
+              help="The humans' kinds and shares, e.g. lfg:0.8,aggressive:0.2 [lfg].")
+@click.option("--opponents", type=click.Choice(["next", "all"]), default=None,
               help="Whom each human plays its pair game against: the vehicle it conflicts "
-                   "with next, or every one within reach.")
-@click.option("--arrival", type=click.Choice(["placed", "poisson"]), default="placed",
-              show_default=True,
+                   f"with next, or every one within reach [{_SPEC.opponents}].")
+@click.option("--arrival", type=click.Choice(["placed", "poisson"]), default=None,
               help="placed: every human on the road at the start, queued in its lane; "
-                   "poisson: a Poisson flow of --flow vehicles per hour on each arm.")
-@click.option("--flow", "flow_veh_h", type=click.FloatRange(1.0, 3600.0), default=600.0,
-              show_default=True, help="Vehicles per hour on each arm (--arrival poisson).")
-@click.option("--av-arrival", "av_arrival_s", type=click.FloatRange(0.0, 3600.0), default=10.0,
-              show_default=True,
-              help="When the AV enters its approach, into the flow [s] (--arrival poisson).")
-@click.option("--av-arm", type=click.Choice(list(ARMS)), default="south", show_default=True,
-              help="The arm the AV comes from.")
-@click.option("--av-movement", type=click.Choice(list(MOVEMENTS)), default="straight",
-              show_default=True, help="The AV's movement.")
-@click.option("--duration", "duration_s", type=click.FloatRange(1.0, 3600.0), default=30.0,
-              show_default=True, help="Run length [s].")
+                   "poisson: a Poisson flow of --flow vehicles per hour on each arm "
+                   f"[{_SPEC.arrival}].")
+@click.option("--flow", "flow_veh_h", type=click.FloatRange(1.0, 3600.0), default=None,
+              help=f"Vehicles per hour on each arm (--arrival poisson) [{_SPEC.flow_veh_h:g}].")
+@click.option("--av-arrival", "av_arrival_s", type=click.FloatRange(0.0, 3600.0), default=None,
+              help="When the AV enters its approach, into the flow [s] (--arrival poisson) "
+                   f"[{_SPEC.av_arrival_s:g}].")
+@click.option("--av-arm", type=click.Choice(list(ARMS)), default=None,
+              help=f"The arm the AV comes from [{ARMS[_SPEC.av_arm]}].")
+@click.option("--av-movement", type=click.Choice(list(MOVEMENTS)), default=None,
+              help=f"The AV's movement [{_SPEC.av_movement}].")
+@click.option("--duration", "duration_s", type=click.FloatRange(1.0, 3600.0), default=None,
+              help=f"Run length [s] [{_SPEC.duration_s:g}].")
 @click.option("--seeds", type=Count(1, 100_000), default=20, show_default=True,
               help="Seeds SEED .. SEED + SEEDS - 1.")
 @click.option("--seed", type=Count(0, 2**31 - 2), default=1, show_default=True,
@@ -100,27 +102,37 @@ def summary_lines(agg: dict) -> list[str]:
 @click.option("--json", "as_json", is_flag=True, help="Print the rows and summary as JSON.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h, av_arrival_s,
-             av_arm, av_movement, duration_s, seeds, seed,
-             workers, av_kind, shield, mode, config_file, sets, out, force, plot, video, as_json, quiet):
+             av_arm, av_movement, duration_s, seeds, seed, workers, av_kind, shield, mode,
+             config_file, sets, out, force, plot, video, as_json, quiet):
     """The AV among N vehicles at a four-way unsignalised junction (docs/guide/junction.md).
 
     The AV drives as the outside-simulator adapters do (one planner per conflicting human, the
     lowest acceleration, one shield over every conflict); each human plays its own pair game
     against the vehicle it conflicts with next and follows the car ahead
-    (docs/method.md §15)."""
+    (docs/method.md §15). Each option sets a field of the configuration's [junction] section
+    (--config, --set junction.FIELD=VALUE); corrected mode unless a mode is given."""
     from ..many.study import aggregate, run_study
-    from ..policies.step import policy_step_buffers
-    from ..safety.measures import footprint_gaps
-    from ..safety.shield import shield_filter
-    from ._common import build_config
+    from ._common import build_config, mode_given
 
-    config = build_config(config_file, sets, {"mode": mode or "corrected",
-                                              "av.shield": shield, "av.kind": av_kind})
-    spec = JunctionSpec.of(variant, n_vehicles=vehicles, lanes=lanes, hv_kinds=hv_kinds,
-                           av_arm=ARMS.index(av_arm), av_movement=av_movement,
-                           duration_s=duration_s, opponents=opponents,
-                           arrival=arrival, flow_veh_h=flow_veh_h,
-                           av_arrival_s=av_arrival_s)
+    explicit = {"scenario.kind": "junction", "av.shield": shield, "av.kind": av_kind,
+                "junction.n_vehicles": vehicles, "junction.variant": variant,
+                "junction.lanes": lanes, "junction.hv_kinds": hv_kinds,
+                "junction.opponents": opponents, "junction.arrival": arrival,
+                "junction.flow_veh_h": flow_veh_h, "junction.av_arrival_s": av_arrival_s,
+                "junction.av_arm": av_arm, "junction.av_movement": av_movement,
+                "junction.duration_s": duration_s}
+    if not mode_given({"mode": mode, "sets": sets, "config_file": config_file}):
+        explicit["mode"] = "corrected"
+    else:
+        explicit["mode"] = mode
+    config = build_config(config_file, sets, explicit)
+    spec = config.junction_spec
+    variant = config.junction.variant or "major"
+    hv_kinds = ",".join(k if len(spec.hv_kinds) == 1 else f"{k}:{w:g}"
+                        for k, w in spec.hv_kinds)
+    opponents, arrival, flow_veh_h = spec.opponents, spec.arrival, spec.flow_veh_h
+    av_arm, av_movement, duration_s, lanes = (ARMS[spec.av_arm], spec.av_movement,
+                                              spec.duration_s, spec.lanes)
     if plot:
         check_output_file(plot, (".png", ".pdf", ".svg"), "--plot")
     if video:
@@ -132,7 +144,7 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h,
         lock_output(path, "results folder")
     n_workers = check_workers(workers, seeds)
     seeds_ = range(seed, seed + seeds)
-    compile_notice(policy_step_buffers, shield_filter, footprint_gaps)
+    junction_compile_notice()
     clock = StudyClock()
     bar = progress_bar(quiet)
     try:
@@ -143,11 +155,10 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h,
     compile_report(clock)
     agg = aggregate(rows, step_ms)
     agg.update({"variant": variant, "lanes": lanes, "hv": hv_kinds, "opponents": opponents,
-                "arrival": arrival, "flow_veh_h": flow_veh_h,
-                "av_arm": av_arm,
-                "av_movement": av_movement, "duration_s": duration_s, "seeds": [seed,
-                                                                                 seed + seeds - 1],
-                "workers": n_workers, "shield": config.shield, "mode": config.mode})
+                "arrival": arrival, "flow_veh_h": flow_veh_h, "av_arm": av_arm,
+                "av_movement": av_movement, "duration_s": duration_s,
+                "seeds": [seed, seed + seeds - 1], "workers": n_workers,
+                "shield": config.shield, "mode": config.mode})
     if out:
         _write(out, rows, agg)
     if plot or video:
@@ -160,7 +171,7 @@ def junction(vehicles, variant, lanes, hv_kinds, opponents, arrival, flow_veh_h,
         if video:
             draw.video(first, video)
     if as_json:
-        click.echo(json.dumps({"summary": agg, "runs": rows}, default=float))
+        click.echo(json.dumps(json_safe({"summary": agg, "runs": rows}), allow_nan=False))
         return
     click.echo(f"junction ({variant}, {lanes} lane(s), humans {hv_kinds} playing "
                f"{opponents}): the AV from the "
@@ -188,7 +199,7 @@ def _write(out: str, rows: list[dict], agg: dict) -> None:
 
     with atomic_folder(out, owned=OUT_FILES) as tmp:
         pd.DataFrame(rows).to_parquet(Path(tmp) / "runs.parquet", index=False)
-        (Path(tmp) / "summary.json").write_text(json.dumps(agg, indent=2, default=float) + "\n")
+        (Path(tmp) / "summary.json").write_text(json.dumps(json_safe(agg), indent=2, allow_nan=False) + "\n")
         (Path(tmp) / "summary.md").write_text("\n".join(summary_lines(agg)) + "\n")
 
 

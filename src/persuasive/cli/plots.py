@@ -19,7 +19,9 @@ import click
 from click.core import ParameterSource
 
 from ._common import (PAPER_SEED, Count, check_input_files, check_kind_options,
-                      check_readable, compile_notice, config_of, lock_output, run_options)
+                      check_readable, compile_notice, config_of, junction_compile_notice,
+                      kind_configs, lock_output,
+                      run_options)
 
 _SEED_HELP = f"Run seed [{PAPER_SEED}: the run shown in the paper's Figs. 2 and 3]."
 
@@ -36,7 +38,7 @@ def _plots():
 
 #: The options that describe the run to simulate, which ``--from`` replaces.
 _RUN_PARAMS = ("av", "hv", "hv_role", "pa", "pa_hat", "scenario", "seed", "mode",
-               "config_file", "sets", "single")
+               "config_file", "sets", "single", "vehicles", "variant")
 
 
 def _check_from(source: str | None) -> None:
@@ -96,6 +98,27 @@ def _runs(single: bool, run: dict) -> Callable[[], tuple]:
     return make
 
 
+def _junction_run(run: dict) -> Callable[[], object] | None:
+    """What makes the junction run the options describe (``--scenario junction``, or a
+    configuration's ``scenario.kind = "junction"``): a finished
+    ``persuasive.many.world.JunctionWorld``; None for a two-vehicle run (and with
+    ``--from``). Checked here, before any work; ``--single`` changes nothing (one run)."""
+    if run.get("source") is not None:
+        return None
+    config = config_of(dict(run))
+    if config.scenario.kind != "junction":
+        return None
+    check_kind_options(run, kind_configs(config))
+
+    def make():
+        from ..many.world import JunctionWorld
+
+        junction_compile_notice()
+        return JunctionWorld.of(config, run["seed"]).run()
+
+    return make
+
+
 def _out_option(help_text: str) -> Callable:
     return click.option("--out", required=True, type=click.Path(dir_okay=False),
                         help=help_text)
@@ -133,7 +156,17 @@ def _fit_run_option(func: Callable) -> Callable:
 @_fit_run_option
 @_out_option("Figure file: .png, .svg or .pdf.")
 def profile(single, out, **run) -> None:
-    """Roles, beliefs, speeds and accelerations over time (the paper's Fig. 2)."""
+    """Roles, beliefs, speeds and accelerations over time (the paper's Fig. 2); at a
+    junction (--scenario junction) every vehicle's speed and acceleration."""
+    junction = _junction_run(run)
+    if junction is not None:
+        from ..plots import junction as draw
+
+        plots = _plots()
+        plots.check_figure_path(out)
+        lock_output(out, "figure")
+        click.echo(f"wrote {plots.save_figure(draw.profile_figure(junction()), out)}")
+        return
     make = _runs(single, run)
     plots = _plots()
     plots.check_figure_path(out)
@@ -151,7 +184,21 @@ def profile(single, out, **run) -> None:
 @_from_option
 @_out_option("Figure file: .png, .svg or .pdf.")
 def topview(single, every_s, out, **run) -> None:
-    """The intersection from above with vehicle snapshots (the paper's Fig. 3)."""
+    """The intersection from above with vehicle snapshots (the paper's Fig. 3); at a
+    junction (--scenario junction) every vehicle's path, with footprints at four times or
+    every --every seconds."""
+    junction = _junction_run(run)
+    if junction is not None:
+        from ..plots import junction as draw
+
+        plots = _plots()
+        plots.check_figure_path(out)
+        lock_output(out, "figure")
+        given = click.get_current_context().get_parameter_source("every_s")
+        every = every_s if given == ParameterSource.COMMANDLINE else None
+        fig = draw.topview_figure(junction(), every_s=every)
+        click.echo(f"wrote {plots.save_figure(fig, out)}")
+        return
     make = _runs(single, run)
     plots = _plots()
     plots.check_figure_path(out)
@@ -202,7 +249,19 @@ def plot_compare(results: str, out: str) -> None:
 @_from_option
 @_out_option("Animation file: .mp4 or .gif.")
 def animate(fps, out, **run) -> None:
-    """Animate one run: the top view, with the beliefs and roles shown live."""
+    """Animate one run: the top view, with the beliefs and roles shown live (at a junction,
+    --scenario junction: every vehicle's footprint)."""
+    junction = _junction_run(run)
+    if junction is not None:
+        from ..plots import junction as draw
+
+        plots = _plots()
+        plots.check_animation_path(out)
+        lock_output(out, "animation")
+        world = junction()
+        path = draw.video(world, out, fps=fps)
+        click.echo(f"wrote {path} ({world.k + 1} frames at {fps} fps)")
+        return
     make = _runs(True, run)
     plots = _plots()
     plots.check_animation_path(out)

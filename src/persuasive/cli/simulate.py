@@ -10,7 +10,8 @@ from .._compile import StudyClock
 from ..config import ROLES
 from ._common import (INTERACTIONS_HELP, KIND_OPTIONS, Count, check_input_files,
                       check_kind_options, compile_notice, compile_report, config_of,
-                      ignored_fields, lock_output, run_options, unread_options)
+                      ignored_fields, junction_compile_notice, kind_configs, lock_output,
+                      run_options, unread_options)
 
 #: Per-step log formats ``--out`` writes, by extension.
 LOG_EXTENSIONS = (".parquet", ".csv")
@@ -36,7 +37,8 @@ def write_log(record, path: str) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--interactions", type=Count(1, 1000), default=None, help=INTERACTIONS_HELP)
 def simulate(out, as_json, interactions, **run) -> None:
-    """Simulate one closed-loop run (two vehicles, one conflict).
+    """Simulate one closed-loop run (two vehicles, one conflict; or, with --scenario
+    junction, the AV among --vehicles vehicles at a four-way junction, docs/guide/junction.md).
 
     --pa, --pa-hat and --hv-role given for kinds that ignore them are refused (exit status
     2); the same fields from --config or --set are run as given, and the summary line says
@@ -46,8 +48,14 @@ def simulate(out, as_json, interactions, **run) -> None:
     from ..simulation import ARRIVAL_LABELS, simulate as simulate_run
 
     config = config_of(run)
-    check_kind_options(run, [config])
+    check_kind_options(run, kind_configs(config))
     check_input_files(config)
+    if config.scenario.kind == "junction":
+        if interactions is not None:
+            raise click.UsageError("--interactions repeats one human's encounter with the AV; "
+                                   "a junction run has many humans (--scenario junction)")
+        _junction(config, run["seed"], out, as_json)
+        return
     if interactions is not None:
         config = config.with_overrides({"simulation.interactions": interactions})
     if (config.simulation.interactions or 1) > 1:
@@ -94,6 +102,69 @@ def simulate(out, as_json, interactions, **run) -> None:
         changes += f"; steps where the chance constraint failed: {o.infeasible_steps}"
     click.echo(changes)
     click.echo(f"time: {elapsed:.3f} s" + (f"; per-step log written to {out}" if out else ""))
+
+
+def _junction(config, seed: int, out: str | None, as_json: bool) -> None:
+    """``simulate --scenario junction``: one seed of the junction (the AV's run and, for the
+    delay it causes, the same seed without it), its row as text or JSON; ``--out`` writes
+    the AV's run per step and vehicle (``JunctionWorld.frame``)."""
+    import math
+
+    from .._files import atomic_write, check_output_file, json_safe
+    from ..many.measures import summary
+    from ..many.world import JunctionWorld
+
+    if out:
+        check_output_file(out, LOG_EXTENSIONS, "log")  # before any work
+        lock_output(out, "log")
+    spec = config.junction_spec
+    junction_compile_notice()
+    clock = StudyClock()
+    world = JunctionWorld.of(config, seed).run()
+    reference = JunctionWorld.of(config, seed, with_av=False).run()
+    elapsed = clock.seconds
+    row = summary(world, reference)
+    if out:
+        frame = world.frame()
+        if out.endswith(".csv"):
+            atomic_write(out, lambda p: frame.to_csv(p, index=False))
+        else:
+            atomic_write(out, lambda p: frame.to_parquet(p, index=False))
+    compile_report(clock)
+    if as_json:
+        click.echo(json.dumps(json_safe({
+            "scenario": "junction", "variant": config.junction.variant or "major",
+            "av": config.av.kind, "shield": config.shield, "mode": config.mode, **row}),
+            allow_nan=False))
+        return
+
+    def secs(x: float) -> str:
+        return f"{x:.1f} s" if math.isfinite(x) else "-"
+
+    kinds = ",".join(f"{k}:{w:g}" if len(spec.hv_kinds) > 1 else k for k, w in spec.hv_kinds)
+    click.echo(f"{config.av.kind} AV among {spec.n_vehicles} vehicles at the junction "
+               f"({config.junction.variant or 'major'}, {spec.lanes} lane(s), {kinds} humans "
+               f"playing {spec.opponents}), seed {seed}, {config.mode} mode, shield "
+               f"{config.shield}, {spec.duration_s:g}-s run")
+    through = (f"yes, clear at t = {row['av_clear_s']:.1f} s (delay {row['av_delay_s']:.1f} s)"
+               if row["av_through"] else "no")
+    click.echo(f"AV through: {through}; first through {row['av_first_conflicts']} of the "
+               f"{row['av_conflicts_passed']} conflicts both passed")
+    click.echo(f"collisions: AV-caused {row['av_caused_collisions']}, AV in any "
+               f"{row['av_collisions']}, between humans {row['human_collisions']}; uncertified "
+               f"steps {row['uncertified_steps']}; shield overrides {row['shield_overrides']}")
+    lock = (f"at t = {row['deadlock_t_s']:.1f} s, vehicles {row['deadlock_vehicles']}"
+            f"{' (the AV in it)' if row['av_in_deadlock'] else ''}" if row["deadlock"]
+            else "none")
+    click.echo(f"deadlock: {lock}; waiting: AV {row['av_wait_s']:.1f} s, humans mean "
+               f"{row['mean_wait_s']:.1f} s, max {row['max_wait_s']:.1f} s; delay caused to "
+               f"the humans {row['caused_delay_s']:.2f} s")
+    click.echo(f"vehicles through {row['vehicles_through']} of {spec.n_vehicles}, throughput "
+               f"{row['throughput_veh_h']:.0f} veh/h; min PET of the AV "
+               f"{secs(row['min_pet_av_s'])}, of all {secs(row['min_pet_s'])}; AV's closest "
+               f"gap {row['min_gap_av_m']:.2f} m")
+    click.echo(f"time: {elapsed:.3f} s (both runs)"
+               + (f"; per-step log written to {out}" if out else ""))
 
 
 def _interactions(config, seed: int, as_json: bool) -> None:

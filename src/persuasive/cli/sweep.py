@@ -144,7 +144,9 @@ def _parse_where(values: tuple[str, ...]) -> dict[str, Any]:
                    "infeasible_pct, both_cleared_pct, av_first_through_pct, deadlock_pct "
                    "(percent of runs, Wilson 95 % interval), min_distance_m, "
                    "min_distance_to_line_m, hv_role_changes, wait_s (means, normal 95 % "
-                   "interval).")
+                   "interval); a junction's (scenario.kind = junction): av_through_pct, "
+                   "av_caused_collision_pct, human_collision_pct, deadlock_pct, "
+                   "caused_delay_s, mean_wait_s, throughput_veh_h.")
 @click.option("--where", "where", multiple=True, metavar="AXIS=VALUE",
               help="Keep only runs with this value of another axis (repeatable); other "
                    "axes are pooled.")

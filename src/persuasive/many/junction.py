@@ -37,195 +37,31 @@ turns).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import (ARMS, ARRIVALS, MOVEMENTS, OPPONENTS, PRIORITIES, VARIANTS, ConfigError,
+                      JunctionParams, JunctionSpec)
 from ..envs.external import Polyline
 
-#: Arms, anticlockwise from east.
-ARMS = ("east", "north", "west", "south")
-MOVEMENTS = ("left", "straight", "right")
-PRIORITIES = ("major", "first-come", "right-before-left")
-#: How the humans arrive (:attr:`JunctionSpec.arrival`).
-ARRIVALS = ("placed", "poisson")
-#: Whom a human plays against (:attr:`JunctionSpec.opponents`).
-OPPONENTS = ("next", "all")
 #: Arm offsets of each movement's exit (right-hand traffic: a left turn from the east arm,
 #: heading west, leaves by the south arm).
 EXIT_OFFSET = {"left": 3, "straight": 2, "right": 1}
-#: Named variants: the fields of :class:`JunctionSpec` each sets.
-VARIANTS: dict[str, dict[str, Any]] = {
-    "major": {"priority": "major", "mix": (0.25, 0.5, 0.25)},
-    "all-way": {"priority": "first-come", "mix": (0.25, 0.5, 0.25)},
-    "right-before-left": {"priority": "right-before-left", "mix": (0.25, 0.5, 0.25)},
-    "left-heavy": {"priority": "first-come", "mix": (0.6, 0.3, 0.1)},
-}
-#: The vehicle length a spec's fit is checked with [m] (:func:`arrivals` checks the real one).
-FIT_LENGTH_M = 5.0
 #: Sample spacing of a route's centre line in the box [m].
 CURVE_STEP_M = 0.5
 
 
-@dataclass(frozen=True)
-class JunctionSpec:
-    """A four-way junction and its arrivals (module docstring). Lengths in metres, speeds in
-    m/s; ``mix`` is the (left, straight, right) share of the humans' movements."""
-
-    n_vehicles: int = 4  #: vehicles in the run, the AV included (>= 1)
-    lanes: int = 1  #: lanes per direction on every arm (1 or 2)
-    lane_width_m: float = 4.0
-    #: inbound lane length before the stop line [m] (None: long enough for every vehicle in
-    #: one lane, at least 100 m)
-    approach_m: float | None = None
-    exit_m: float = 40.0  #: exit lane length after the box [m]
-    priority: str = "major"
-    mix: tuple[float, float, float] = (0.25, 0.5, 0.25)
-    av_arm: int = 3  #: the AV's arm (0 east, 1 north, 2 west, 3 south)
-    av_movement: str = "straight"
-    #: the first vehicle's centre in a lane starts this far before the stop line [m]
-    first_m: tuple[float, float] = (10.0, 30.0)
-    #: the bumper gap to the vehicle ahead in the lane [m]
-    gap_m: tuple[float, float] = (6.0, 20.0)
-    v0_mps: tuple[float, float] = (3.0, 5.0)  #: initial speeds
-    #: the humans' kinds and their shares (any simulated human kind of the project)
-    hv_kinds: tuple[tuple[str, float], ...] = (("lfg", 1.0),)
-    duration_s: float = 30.0  #: run length [s]
-    #: whom a human plays its pair game against: ``next``, the vehicle it conflicts with next;
-    #: ``all``, every vehicle of an uncleared conflict within the prediction's reach (the
-    #: lowest of the answers, as Li et al.'s concurrent pairwise games)
-    opponents: str = "next"
-    #: how the humans arrive: ``placed``, all on the road at the start, queued in their lanes;
-    #: ``poisson``, a Poisson flow of ``flow_veh_h`` per arm, each entering at the start of its
-    #: approach at its arrival time (later while its lane's entry is blocked)
-    arrival: str = "placed"
-    flow_veh_h: float = 600.0  #: vehicles per hour on each arm (``arrival = "poisson"``)
-    #: when the AV enters at the start of its approach, into the flow [s] (``poisson``)
-    av_arrival_s: float = 10.0
-
-    def __post_init__(self) -> None:
-        def bad(name: str, allowed: str) -> ConfigError:
-            return ConfigError(f"junction.{name} = {getattr(self, name)!r} is out of range; "
-                               f"allowed: {allowed}")
-
-        if not isinstance(self.n_vehicles, (int, np.integer)) or not 1 <= self.n_vehicles <= 64:
-            raise bad("n_vehicles", "an integer in [1, 64] (the AV included)")
-        if self.lanes not in (1, 2):
-            raise bad("lanes", "1 | 2")
-        if not 2.0 <= self.lane_width_m <= 6.0:
-            raise bad("lane_width_m", "[2, 6] m")
-        if not 10.0 <= self.exit_m <= 1000.0:
-            raise bad("exit_m", "[10, 1000] m")
-        if self.priority not in PRIORITIES:
-            raise bad("priority", " | ".join(PRIORITIES))
-        mix = tuple(float(m) for m in self.mix)
-        if len(mix) != 3 or not all(math.isfinite(m) and m >= 0.0 for m in mix) or \
-                not sum(mix) > 0.0:
-            raise bad("mix", "three shares (left, straight, right) >= 0 with a positive sum")
-        object.__setattr__(self, "mix", mix)
-        if self.av_arm not in (0, 1, 2, 3):
-            raise bad("av_arm", "0 (east) | 1 (north) | 2 (west) | 3 (south)")
-        if self.av_movement not in MOVEMENTS:
-            raise bad("av_movement", " | ".join(MOVEMENTS))
-        for name, lo_min in (("first_m", 0.0), ("gap_m", 0.5), ("v0_mps", 0.0)):
-            pair = tuple(float(x) for x in getattr(self, name))
-            if len(pair) != 2 or not (lo_min <= pair[0] <= pair[1]) or \
-                    not math.isfinite(pair[1]):
-                raise bad(name, f"(lo, hi) with {lo_min:g} <= lo <= hi, finite")
-            object.__setattr__(self, name, pair)
-        need = self.first_m[1] + (self.n_vehicles - 1) * (FIT_LENGTH_M + self.gap_m[1]) \
-            + 0.5 * FIT_LENGTH_M
-        if self.approach_m is None:
-            object.__setattr__(self, "approach_m", float(max(100.0, 10.0 * math.ceil(need / 10.0))))
-        if not 20.0 <= self.approach_m <= 5000.0:
-            raise bad("approach_m", "[20, 5000] m")
-        if self.first_m[1] + 5.0 > self.approach_m:
-            raise ConfigError(f"junction.first_m = {self.first_m!r} does not fit on an approach "
-                              f"of junction.approach_m = {self.approach_m:g} m; allowed: hi <= "
-                              "approach_m - 5")
-        # every vehicle in one lane must fit (5-m vehicles; arrivals checks the real length)
-        if need > self.approach_m:
-            raise ConfigError(f"junction.n_vehicles = {self.n_vehicles} does not fit on an "
-                              f"approach of junction.approach_m = {self.approach_m:g} m (all in "
-                              f"one lane need {need:g} m); allowed: n_vehicles <= "
-                              f"{self.max_vehicles()}, or a longer approach_m or smaller gap_m")
-        kinds = _kinds(self.hv_kinds)
-        object.__setattr__(self, "hv_kinds", kinds)
-        if self.arrival not in ARRIVALS:
-            raise bad("arrival", " | ".join(ARRIVALS))
-        if not (isinstance(self.flow_veh_h, (int, float)) and 1.0 <= self.flow_veh_h <= 3600.0):
-            raise bad("flow_veh_h", "[1, 3600] vehicles per hour per arm")
-        if not (isinstance(self.av_arrival_s, (int, float)) and 0.0 <= self.av_arrival_s and
-                (self.arrival != "poisson" or self.av_arrival_s < self.duration_s)):
-            raise bad("av_arrival_s", "[0, duration_s) s")
-        if self.opponents not in OPPONENTS:
-            raise bad("opponents", " | ".join(OPPONENTS))
-        if not 1.0 <= self.duration_s <= 3600.0:
-            raise bad("duration_s", "[1, 3600] s")
-
-    @classmethod
-    def of(cls, variant: str | None = None, **fields_: Any) -> JunctionSpec:
-        """A spec from a named variant (:data:`VARIANTS`) and fields set over it."""
-        base: dict[str, Any] = {}
-        if variant is not None:
-            if variant not in VARIANTS:
-                raise ConfigError(f"junction variant = {variant!r} is out of range; allowed: "
-                                  f"{' | '.join(VARIANTS)}")
-            base.update(VARIANTS[variant])
-        known = {f.name for f in fields(cls)}
-        for name in fields_:
-            if name not in known:
-                raise ConfigError(f"junction.{name} is not a parameter; allowed: "
-                                  f"{' | '.join(sorted(known))}")
-        base.update(fields_)
-        return cls(**base)
-
-    def max_vehicles(self) -> int:
-        """The most vehicles that fit in one lane of this approach."""
-        room = self.approach_m - self.first_m[1] - 0.5 * FIT_LENGTH_M
-        return max(1, 1 + int(room // (FIT_LENGTH_M + self.gap_m[1])))
-
-    @property
-    def half_m(self) -> float:
-        """Half the side of the junction's box [m]."""
-        return self.lanes * self.lane_width_m
-
-    def with_(self, **changes: Any) -> JunctionSpec:
-        return replace(self, **changes)
-
-
-def _kinds(value) -> tuple[tuple[str, float], ...]:
-    from ..config import SIMULATED_HV_KINDS
-
-    if isinstance(value, str):  # "lfg:0.8,aggressive:0.2" or "idm"
-        items = []
-        for part in value.split(","):
-            name, _, share = part.strip().partition(":")
-            try:
-                items.append((name.strip(), float(share) if share else 1.0))
-            except ValueError:
-                raise ConfigError(f"junction.hv_kinds = {value!r} is not KIND[:SHARE],...") \
-                    from None
-        value = items
-    elif isinstance(value, dict):
-        value = list(value.items())
-    out = []
-    for item in value:
-        name, share = (item, 1.0) if isinstance(item, str) else item
-        if name not in SIMULATED_HV_KINDS or name == "replay":
-            allowed = " | ".join(k for k in SIMULATED_HV_KINDS if k != "replay")
-            raise ConfigError(f"junction.hv_kinds has {name!r}; allowed: {allowed}")
-        share = float(share)
-        if not (math.isfinite(share) and share >= 0.0):
-            raise ConfigError(f"junction.hv_kinds share of {name!r} = {share!r} is out of "
-                              "range; allowed: >= 0")
-        out.append((str(name), share))
-    if not out or not sum(s for _, s in out) > 0.0:
-        raise ConfigError("junction.hv_kinds needs at least one kind with a positive share")
-    return tuple(out)
+def pair_config(config):
+    """The configuration every pair game and planner of a junction run reads: ``config``
+    itself for a two-vehicle scenario; for ``scenario.kind = "junction"`` the same with the
+    paper's ``intersection`` as the geometry of the pair games (the humans' games and the
+    AV's planners are solved in it, docs/method.md §15.3) and no ``[junction]`` section."""
+    if config.scenario.kind != "junction":
+        return config
+    return replace(config, scenario=replace(config.scenario, kind="intersection"),
+                   junction=JunctionParams())
 
 
 # -- routes -----------------------------------------------------------------------------------
@@ -424,4 +260,5 @@ def right_of_way(spec: JunctionSpec, a: Route, b: Route, x_a: tuple[float, float
 
 
 __all__ = ["ARMS", "ARRIVALS", "Arrivals", "EXIT_OFFSET", "JunctionSpec", "MOVEMENTS", "OPPONENTS", "PRIORITIES",
-           "Route", "VARIANTS", "arrivals", "geometry_of", "lane_of", "possible_routes", "right_of_way", "route"]
+           "Route", "VARIANTS", "arrivals", "geometry_of", "lane_of", "possible_routes", "right_of_way", "route",
+           "pair_config"]

@@ -247,8 +247,19 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
     if step_ms is not None and len(step_ms):
         row["step_ms_median"] = float(np.median(step_ms))
         row["step_ms_max"] = float(np.max(step_ms))
-    return row
+    # plain Python values (a sweep's Parquet columns, JSON)
+    return {k: v.item() if isinstance(v, np.generic) else v for k, v in row.items()}
+
+
+def run_summary(config, seed: int) -> dict:
+    """The row of ``seed`` for a configuration with ``scenario.kind = "junction"``
+    (``persuasive.many.study.run_seed`` on :attr:`Config.junction_spec`, without the step
+    times, so that it is the same in every process: what
+    ``persuasive.simulation.run_summary`` returns for it)."""
+    world = JunctionWorld.of(config, seed).run()
+    reference = JunctionWorld.of(config, seed, with_av=False).run()
+    return summary(world, reference)
 
 
 __all__ = ["APPROACH_M", "DEADLOCK_S", "FOLLOW_GAP_M", "clear_times", "deadlock", "free_flow_s",
-           "passings", "pets", "summary", "wait_edges", "waiting_s"]
+           "passings", "pets", "run_summary", "summary", "wait_edges", "waiting_s"]

@@ -18,8 +18,8 @@ import numpy as np
 
 from ..config import Config
 from .junction import JunctionSpec
-from .measures import summary
-from .world import JunctionWorld
+from .measures import run_summary, summary
+from .world import JunctionWorld, warm_up
 
 
 def run_seed(config: Config, spec: JunctionSpec, seed: int) -> tuple[dict, np.ndarray]:
@@ -44,36 +44,41 @@ def _task(args) -> tuple[dict, np.ndarray]:
     return run_seed(Config.from_dict(config), spec, seed)
 
 
-def warm_up(config: Config) -> None:
-    """Load (and compile once, here) the kernels a run needs before workers start."""
-    JunctionWorld(config, JunctionSpec(n_vehicles=3, duration_s=1.0), 0).run()
-
-
 def run_study(config: Config, spec: JunctionSpec, seeds: Sequence[int], workers: int = 1,
               progress: Callable[[int, int], None] | None = None
               ) -> tuple[list[dict], np.ndarray]:
     """Every seed's row (in seed order) and all step times [ms] (module docstring)."""
+    (got,) = run_cells([(config, spec)], seeds, workers, progress)
+    return got
+
+
+def run_cells(cells: Sequence[tuple[Config, JunctionSpec]], seeds: Sequence[int],
+              workers: int = 1, progress: Callable[[int, int], None] | None = None
+              ) -> list[tuple[list[dict], np.ndarray]]:
+    """:func:`run_study` of several configurations on the same seeds, on one pool of
+    workers: per cell, its rows in seed order and its step times [ms]."""
     seeds = [int(s) for s in seeds]
-    rows: dict[int, dict] = {}
-    times: dict[int, np.ndarray] = {}
-    warm_up(config)
-    if workers <= 1 or len(seeds) <= 1:
-        for n, s in enumerate(seeds):
-            rows[n], times[n] = run_seed(config, spec, s)
+    tasks = [(c, sp, s) for c, sp in cells for s in seeds]
+    out: dict[int, tuple[dict, np.ndarray]] = {}
+    for config, _ in cells:
+        warm_up(config)
+    if workers <= 1 or len(tasks) <= 1:
+        for n, (c, sp, s) in enumerate(tasks):
+            out[n] = run_seed(c, sp, s)
             if progress is not None:
-                progress(n + 1, len(seeds))
+                progress(n + 1, len(tasks))
     else:
         from ..sweep.runner import local_client, map_bounded
 
-        data = config.to_dict()
-        tasks = [(data, spec, s) for s in seeds]
-        with local_client(min(workers, len(seeds))) as client:
-            for i, (row, t) in map_bounded(client, _task, tasks):
-                rows[i], times[i] = row, t
+        data = [(c.to_dict(), sp, s) for c, sp, s in tasks]
+        with local_client(min(workers, len(tasks))) as client:
+            for i, got in map_bounded(client, _task, data):
+                out[i] = got
                 if progress is not None:
-                    progress(len(rows), len(seeds))
-    order = range(len(seeds))
-    return [rows[i] for i in order], np.concatenate([times[i] for i in order])
+                    progress(len(out), len(tasks))
+    m = len(seeds)
+    return [([out[c * m + i][0] for i in range(m)],
+             np.concatenate([out[c * m + i][1] for i in range(m)])) for c in range(len(cells))]
 
 
 def aggregate(rows: Sequence[dict], step_ms: np.ndarray) -> dict:
@@ -115,4 +120,4 @@ def aggregate(rows: Sequence[dict], step_ms: np.ndarray) -> dict:
     }
 
 
-__all__ = ["aggregate", "run_seed", "run_study", "warm_up"]
+__all__ = ["aggregate", "run_cells", "run_seed", "run_study", "run_summary", "warm_up"]

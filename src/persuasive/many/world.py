@@ -58,7 +58,7 @@ from ..envs.external import (CROSSING, FOLLOW, MERGE, Conflict, ExternalPlanner,
 from ..kinematics import saturated_step
 from ..policies.kinds import HV as _HV
 from ..policies.kinds import LOG_SIZE
-from .junction import (Arrivals, JunctionSpec, Route, arrivals, possible_routes,
+from .junction import (ARMS, Arrivals, JunctionSpec, Route, arrivals, pair_config, possible_routes,
                        right_of_way)
 
 #: Vehicle status codes (PENDING: arrives later, not on the road yet).
@@ -237,6 +237,7 @@ class JunctionWorld:
         from ..scenarios import build_scenario
         from ..world import GameCache
 
+        config = pair_config(config)
         self.config, self.spec, self.seed, self.with_av = config, spec, int(seed), with_av
         self.dt = float(config.simulation.dt_s)
         self.n_steps = int(round(spec.duration_s / self.dt))
@@ -591,6 +592,62 @@ class JunctionWorld:
             return s_av - rc.ego_at_m >= 0.0 and s_av - rc.ego_at_m > s_h - rc.other_at_m
         return False
 
+    def frame(self):
+        """The run so far per step and vehicle, as a pandas DataFrame (long format, one row
+        per vehicle on the road at a step): ``step``, ``t_s``, ``vehicle`` (0 the AV),
+        ``kind`` (``av`` or the human's), ``arm``, ``movement``, ``lane``, ``s_m`` (arc
+        length along its route), ``v_mps``,
+        ``a_mps2`` (over the step that follows; NaN at the last), ``x_m``, ``y_m``,
+        ``heading_rad`` and ``opponent`` (the vehicle a human played that step, -1: none)."""
+        import pandas as pd
+
+        n_k = self.k + 1
+        cols: dict[str, list] = {name: [] for name in (
+            "step", "t_s", "vehicle", "kind", "arm", "movement", "lane", "s_m",
+            "v_mps", "a_mps2", "x_m", "y_m", "heading_rad", "opponent")}
+        for i, r in enumerate(self.routes):
+            s = self.S[:n_k, i]
+            on = np.isfinite(s)
+            if not on.any():
+                continue
+            k = np.flatnonzero(on)
+            sk = s[k]
+            p = r.line.at(np.concatenate([sk, sk - 0.25, sk + 0.25]))
+            m = k.size
+            d = p[2 * m:] - p[m:2 * m]
+            a = np.full(m, np.nan)
+            inside = k < self.A.shape[0]
+            a[inside] = self.A[k[inside], i]
+            opp = np.full(m, -1, np.int64)
+            opp[inside] = self.opponents[k[inside], i]
+            cols["step"].append(k)
+            cols["t_s"].append(k * self.dt)
+            cols["vehicle"].append(np.full(m, i))
+            cols["kind"].append(np.full(m, "av" if i == 0 else self.arrivals.kinds[i],
+                                        dtype=object))
+            cols["arm"].append(np.full(m, ARMS[r.arm], dtype=object))
+            cols["movement"].append(np.full(m, r.movement, dtype=object))
+            cols["lane"].append(np.full(m, r.lane))
+            cols["s_m"].append(sk)
+            cols["v_mps"].append(self.V[k, i])
+            cols["a_mps2"].append(a)
+            cols["x_m"].append(p[:m, 0])
+            cols["y_m"].append(p[:m, 1])
+            cols["heading_rad"].append(np.arctan2(d[:, 1], d[:, 0]))
+            cols["opponent"].append(opp)
+        frame = pd.DataFrame({name: np.concatenate(v) if v else [] for name, v in cols.items()})
+        return frame.sort_values(["step", "vehicle"], kind="stable").reset_index(drop=True)
+
+    @classmethod
+    def of(cls, config: Config, seed: int, with_av: bool = True) -> JunctionWorld:
+        """The world of a configuration with ``scenario.kind = "junction"`` (its
+        ``[junction]`` section, :attr:`Config.junction_spec`)."""
+        spec = config.junction_spec
+        if spec is None:
+            raise ConfigError(f"scenario.kind = {config.scenario.kind} is a two-vehicle "
+                              "scenario; the junction world needs scenario.kind = junction")
+        return cls(config, spec, seed, with_av)
+
     def run(self) -> JunctionWorld:
         """Step until the run is over; returns itself."""
         while not self.step().done:
@@ -598,5 +655,10 @@ class JunctionWorld:
         return self
 
 
+def warm_up(config: Config) -> None:
+    """Load (and compile once, here) the kernels a run needs before workers start."""
+    JunctionWorld(config, JunctionSpec(n_vehicles=3, duration_s=1.0), 0).run()
+
+
 __all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "KIND_IDS",
-           "PENDING", "Row", "StepInfo", "WAIT_V_MPS", "conflict_table"]
+           "PENDING", "Row", "StepInfo", "WAIT_V_MPS", "conflict_table", "warm_up"]

@@ -47,14 +47,21 @@ def _footprint(world, i: int, k: int) -> np.ndarray | None:
     return _corners(p[1], u, lim.length_m, lim.width_m)
 
 
-def topview_figure(world, snapshots: int = 4, view_m: float = 45.0) -> Figure:
-    """The figure of a finished :class:`persuasive.many.world.JunctionWorld` run."""
+def topview_figure(world, snapshots: int = 4, view_m: float = 45.0,
+                   every_s: float | None = None) -> Figure:
+    """The figure of a finished :class:`persuasive.many.world.JunctionWorld` run: footprints
+    at ``snapshots + 1`` evenly spaced times, or every ``every_s`` seconds."""
     fig = _new_figure(6.0, 6.0)
     ax = fig.add_subplot(1, 1, 1)
     reach = view_m
     _roads(ax, world.spec, reach)
     n_k = world.k
-    times = np.linspace(0, n_k, snapshots + 1).round().astype(int)
+    if every_s is None:
+        times = np.linspace(0, n_k, snapshots + 1).round().astype(int)
+    else:
+        times = np.unique(np.arange(0.0, n_k * world.dt + 1e-9, every_s) / world.dt
+                          ).round().astype(int)
+        times = times[times <= n_k]
     colors = [_COLORS["av"]] + [_COLORS["hv"]] * (world.n - 1)
     for i, r in enumerate(world.routes):
         s = world.S[: n_k + 1, i]
@@ -76,9 +83,29 @@ def topview_figure(world, snapshots: int = 4, view_m: float = 45.0) -> Figure:
             if np.isfinite(sk):
                 x, y = world.routes[v].line.at(np.array([sk]))[0]
                 ax.plot(x, y, marker="x", color="k", ms=8, zorder=5)
+    shown = ("at " + ", ".join(f"{k * world.dt:.0f}" for k in times) + " s"
+             if len(times) <= 8 else f"every {every_s:g} s")
     ax.set_title(f"junction, {world.n} vehicles, seed {world.seed}: AV (thick) and humans; "
-                 f"footprints at {', '.join(f'{k * world.dt:.0f}' for k in times)} s",
-                 fontsize=7)
+                 f"footprints {shown}", fontsize=7)
+    return fig
+
+
+def profile_figure(world) -> Figure:
+    """Every vehicle's speed and acceleration over a finished run (the AV thick and red, the
+    humans thin and blue; a line ends where its vehicle leaves the road)."""
+    fig = _new_figure(7.0, 5.0)
+    ax_v, ax_a = fig.subplots(2, 1, sharex=True)
+    t = np.arange(world.k + 1) * world.dt
+    for i in range(world.n - 1, -1, -1):  # the AV drawn last, on top
+        color, lw = (_COLORS["av"], 2.0) if i == 0 else (_COLORS["hv"], 0.8)
+        ax_v.plot(t, world.V[: world.k + 1, i], color=color, lw=lw, alpha=0.9)
+        a = world.A[: world.k, i]
+        ax_a.step(t[:-1], a, where="post", color=color, lw=lw, alpha=0.9)
+    ax_v.set_ylabel("speed [m/s]")
+    ax_a.set_ylabel("acceleration [m/s$^2$]")
+    ax_a.set_xlabel("t [s]")
+    ax_v.set_title(f"junction, {world.n} vehicles, seed {world.seed}: the AV (thick) and the "
+                   "humans", fontsize=8)
     return fig
 
 
@@ -104,12 +131,13 @@ def frames(world, view_m: float = 45.0, dpi: float = 80.0):
             p.remove()
 
 
-def video(world, path: str | Path) -> Path:
-    """The run as a video (MP4 or GIF, by extension), one frame per step at the run's rate,
-    atomically."""
+def video(world, path: str | Path, fps: int | None = None) -> Path:
+    """The run as a video (MP4 or GIF, by extension), one frame per step, at ``fps`` frames
+    per second (unset: the run's rate, real time), atomically."""
     from .files import write_frames
 
-    return write_frames(frames(world), path, fps=max(1, int(round(1.0 / world.dt))))
+    rate = fps if fps is not None else max(1, int(round(1.0 / world.dt)))
+    return write_frames(frames(world), path, fps=rate)
 
 
 def topview(world, path: str | Path) -> Path:
@@ -120,4 +148,4 @@ def topview(world, path: str | Path) -> Path:
     return save_figure(fig, path, dpi=150.0)
 
 
-__all__ = ["frames", "topview", "topview_figure", "video"]
+__all__ = ["frames", "profile_figure", "topview", "topview_figure", "video"]

@@ -33,8 +33,17 @@ SCENARIOS: dict[str, Callable] = {
 
 
 def build_scenario(config) -> Scenario:
-    """The :class:`Scenario` that ``config.scenario.kind`` names, built from ``config``."""
-    return SCENARIOS[config.scenario.kind](config)
+    """The :class:`Scenario` that ``config.scenario.kind`` names, built from ``config``; a
+    many-vehicle kind (``junction``) is refused in one line: it is no pair of paths but
+    ``persuasive.many``'s world."""
+    build = SCENARIOS.get(config.scenario.kind)
+    if build is None:
+        from ..config import ConfigError
+
+        raise ConfigError(f"scenario.kind = {config.scenario.kind} is a world of many vehicles "
+                          "(persuasive.many); this needs a two-vehicle scenario: "
+                          + " | ".join(SCENARIOS))
+    return build(config)
 
 
 __all__ = ["SCENARIOS", "InitialStateError", "Scenario", "build_scenario", "first_arrival"]

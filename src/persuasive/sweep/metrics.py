@@ -21,7 +21,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from ..config import ConfigError
-from .store import load, read_manifest
+from .store import load, read_manifest, summary_columns
 
 #: z of a two-sided 95 % interval.
 Z95 = 1.959963984540054
@@ -64,8 +64,8 @@ METRICS: dict[str, Metric] = {
     "av_first_through_pct": Metric("AV first through the conflict point [% of runs]",
                                    "proportion", ("av_first_through",),
                                    lambda f: f["av_first_through"].astype(bool)),
-    "deadlock_pct": Metric("standoffs [% of runs]", "proportion", ("deadlock",),
-                           lambda f: f["deadlock"].astype(bool)),
+    "deadlock_pct": Metric("standoffs (two vehicles) or deadlocks (a junction) [% of runs]",
+                           "proportion", ("deadlock",), lambda f: f["deadlock"].astype(bool)),
     "wait_s": Metric("longer wait of the two, mean [s]", "mean", ("av_wait_s", "hv_wait_s"),
                      lambda f: np.maximum(f["av_wait_s"], f["hv_wait_s"])),
     # what the shield's overrides cost (issue 25 item 6)
@@ -73,6 +73,21 @@ METRICS: dict[str, Metric] = {
                            ("override_share",), lambda f: 100.0 * f["override_share"]),
     "override_mps2": Metric("change the shield made to the proposal, mean [m/s^2]", "mean",
                             ("override_mps2",), lambda f: f["override_mps2"]),
+    # the junction of many vehicles (scenario.kind = "junction", docs/method.md §15.6)
+    "av_through_pct": Metric("AV through the junction [% of runs]", "proportion",
+                             ("av_through",), lambda f: f["av_through"].astype(bool)),
+    "av_caused_collision_pct": Metric("runs with an AV-caused collision [% of runs]",
+                                      "proportion", ("av_caused_collisions",),
+                                      lambda f: f["av_caused_collisions"] > 0),
+    "human_collision_pct": Metric("runs with a collision between humans [% of runs]",
+                                  "proportion", ("human_collisions",),
+                                  lambda f: f["human_collisions"] > 0),
+    "caused_delay_s": Metric("delay the AV caused the humans, mean [s]", "mean",
+                             ("caused_delay_s",), lambda f: f["caused_delay_s"]),
+    "mean_wait_s": Metric("the humans' waiting time, mean [s]", "mean", ("mean_wait_s",),
+                          lambda f: f["mean_wait_s"]),
+    "throughput_veh_h": Metric("throughput, mean [vehicles per hour]", "mean",
+                               ("throughput_veh_h",), lambda f: f["throughput_veh_h"]),
 }
 
 
@@ -159,6 +174,12 @@ def metric_grid(folder: str | Path, metric: str, x: str, y: str | None = None,
             raise ConfigError(f"--where {name} = {value!r} is not a value of the axis; "
                               f"allowed: {shown}")
     spec = METRICS[metric]
+    have = set(summary_columns(folder))
+    missing = [c for c in spec.columns if c not in have]
+    if missing:
+        usable = ", ".join(m for m, sp in METRICS.items() if set(sp.columns) <= have)
+        raise ConfigError(f"metric {metric!r} reads {', '.join(missing)}, which the runs of this "
+                          f"sweep do not have; allowed here: {usable or 'none'}")
     frame = load(folder, columns=list(dict.fromkeys([x, *([y] if y else []), *where,
                                                      *spec.columns])))
     for name, value in where.items():

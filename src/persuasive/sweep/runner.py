@@ -126,7 +126,13 @@ def _warm_up(grid: Grid) -> None:
 
     warm_up()
     try:  # the grid's own kind of run, in case it uses kernels warm_up does not
-        simulate(grid.config(0).with_overrides({"simulation.n_steps": 1}), grid.seed_start)
+        config = grid.config(0)
+        if config.scenario.kind == "junction":
+            from ..many.world import warm_up as junction_warm_up
+
+            junction_warm_up(config)
+        else:
+            simulate(config.with_overrides({"simulation.n_steps": 1}), grid.seed_start)
     except Exception:  # noqa: BLE001 - only a warm-up; the sweep reports real failures
         pass
 

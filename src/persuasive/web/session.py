@@ -70,6 +70,7 @@ from typing import Any, Awaitable, Callable
 
 import numpy as np
 
+from .._files import json_safe
 from ..config import ConfigError
 from .human import INPUT_SOURCES, HumanInput, LiveHuman
 from .scene import poses, scene_of
@@ -93,20 +94,6 @@ OPTIONAL = {"input": ("seq",)}
 
 def _now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-
-
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, (np.bool_, bool)):
-        return bool(value)
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return None if not math.isfinite(value) else float(value)
-    return value
 
 
 class Hub:
@@ -237,7 +224,7 @@ class Trial:
         rec.save(self.out_dir / name, extra={"trial": self.metadata(complete)})
         entry["file"] = name
         o = rec.outcome
-        entry["outcome"] = _json_safe({f: getattr(o, f) for f in OUTCOME_FIELDS})
+        entry["outcome"] = json_safe({f: getattr(o, f) for f in OUTCOME_FIELDS})
         entry["outcome"]["first_at_line_label"] = ARRIVAL_LABELS[o.first_at_line]
         lat = self.latency_ms[:self.steps]
         lat = lat[np.isfinite(lat)]
@@ -533,7 +520,7 @@ class Session:
     def summary(self) -> dict[str, Any]:
         study = self.study
         done = [e for e in self.entries if e.get("complete")]
-        return _json_safe({
+        return json_safe({
             "participant": self.participant, "session": self.stem, "study": study.title,
             "study_source": study.source, "version": _version(),
             "started_utc": self.started, "updated_utc": _now(),
