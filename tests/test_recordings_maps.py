@@ -143,7 +143,7 @@ def test_replay_takes_the_right_of_way_from_the_map(capsys, runs, tmp_path, monk
                       "neither": expected.count("") * n}
     monkeypatch.undo()
     code, out, err = run(capsys, "recordings", "replay", str(pairs), "--shield",
-                         "responsibility")
+                         "responsibility", "--quiet")
     assert code == 0 and err == "", err
     line = f"the map's right of way: the AV's in {n} runs, the other's in {n}, neither in 0"
     assert (line in out) == (rule != "all-way-stop")

@@ -25,7 +25,7 @@ import math
 import click
 
 from ..config import AV_KINDS, MODES, SHIELD_KINDS, ConfigError
-from ._common import lock_output
+from ._common import check_workers, compile_notice, lock_output, progress_bar, workers_type
 
 #: The files ``recordings logs`` writes (``<kind>-<angle>-p<pair>-hv<1|2>.parquet``).
 LOGS_FILES = ("*-p*-hv[12].parquet",)
@@ -71,12 +71,14 @@ def _print_summary(info: dict) -> None:
             f"{k}: {v}" for k, v in info["angle_histogram"].items()))
     if info["merge_angle_median_deg"] is not None:
         click.echo(f"merge angles: median {info['merge_angle_median_deg']:.1f} deg")
-    q = info["pet_quantiles_s"]
-    if q:
-        click.echo(f"PET [s] over {info['pet_defined']} pairs: " + ", ".join(
-            f"{k} {v:.2f}" for k, v in q.items()))
-    else:
-        click.echo("PET: defined for no pair")
+    for key, label in (("pet_area", "PET at the conflict area (pet_area_s)"),
+                       ("pet", "PET on the occupancy intervals (pet_s)")):
+        q = info[f"{key}_quantiles_s"]
+        if q:
+            click.echo(f"{label} [s] over {info[f'{key}_defined']} pairs: " + ", ".join(
+                f"{k} {v:.2f}" for k, v in q.items()))
+        else:
+            click.echo(f"{label}: defined for no pair")
     first = info["first"]
     click.echo("first through the conflict point: " + ", ".join(
         f"{('vehicle ' + k) if k in ('1', '2') else k} {v}" for k, v in first.items()))
@@ -311,6 +313,22 @@ def _print_replay(info: dict, runs: list) -> None:
                    f"{e['steps']} recorded steps beyond ({share:.1f} %), in "
                    f"{e['runs_beyond']} of {info['runs']} runs; accelerations "
                    f"{e['accel_min_mps2']:.2f} to {e['accel_max_mps2']:.2f} m/s^2")
+    from ..recordings.envelope import short
+
+    premise = info.get("premise_by_envelope") or {}
+    if premise:
+        click.echo("premise held (the driver within the envelope on every tested step, the "
+                   "start certified), by envelope:")
+    for name, p in premise.items():
+        if name == "configured":
+            bounds = (f"u in [{runs[0].u_min_mps2:g}, {runs[0].u_max_mps2:g}] m/s^2, v up to "
+                      "the pair's highest speed" if runs else "the runs' own")
+        else:
+            v = f", v <= {short(p['v_max_mps'])} m/s" if p["v_max_mps"] is not None else ""
+            bounds = f"u in [{short(p['u_min_mps2'])}, {short(p['u_max_mps2'])}] m/s^2{v}"
+        share = f" ({100.0 * p['share']:.1f} %)" if p["share"] is not None else ""
+        click.echo(f"  {name} ({bounds}): {p['runs']} of {info['runs']} runs{share}; driver "
+                   f"within in {p['within_envelope']}")
     invalid = sum(info["invalid"].values())
     if info["other"] == "replay":
         detail = ", ".join(f"{k} {v}" for k, v in sorted(info["invalid"].items()))
@@ -350,9 +368,12 @@ def _print_replay(info: dict, runs: list) -> None:
               help="Round each pair's angle to a multiple of this (as recordings logs).")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write one row per run (.parquet or .csv).")
+@click.option("--workers", type=workers_type(), default=None,
+              help="Worker processes [all cores]; the runs do not depend on it.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, angle_step, out,
-                   as_json) -> None:
+                   workers, quiet, as_json) -> None:
     """Put the AV in each recorded driver's seat at the start of each pair: collisions, the
     shield's uncertified steps, the recorded driver against the shield's envelope, who passed
     first and the time to clear against the recorded driver's own."""
@@ -374,7 +395,16 @@ def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, an
         _guard(check_output_file, out, (".parquet", ".csv"), "replay table")
         _guard(lock_output, out, "replay table")
     frame, _ = _guard(read_pairs, pairs_file)
-    result = _guard(replay_pairs, frame, settings, Config(mode=mode), str(pairs_file))
+    n_pairs = int(frame["pair"].nunique()) if len(frame) else 0
+    workers = check_workers(workers, max(1, n_pairs // 25))
+    compile_notice()
+    bar = progress_bar(quiet, unit="pair")
+    try:
+        result = _guard(replay_pairs, frame, settings, Config(mode=mode), str(pairs_file),
+                        workers, bar)
+    finally:
+        if bar is not None:
+            bar.close()  # type: ignore[attr-defined]
     if out:
         table = result.frame()
         write = (lambda p: table.to_parquet(p, index=False)) if out.lower().endswith(
@@ -392,5 +422,124 @@ def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, an
         click.echo(f"written: {out}")
 
 
-__all__ = ["export_command", "logs_command", "pairs_command", "recordings",
-           "replay_command"]
+def _pct(share: float | None) -> str:
+    return "-" if share is None else f"{100.0 * share:.2f} %"
+
+
+def _print_envelope(result, info: dict, quantile: float) -> None:
+    from ..recordings.envelope import QUANTILES, VEHICLES
+    from ..recordings.formats import VEHICLE_CLASSES
+
+    files = len(info["files"])
+    click.echo(f"{files} recording file{'s' * (files != 1)}; steps from the smoothed speeds "
+               f"(window {result.smoothing.window}, speed from the {result.smoothing.speed}), "
+               f"those reading a track's first or last {result.edge_samples} samples left out")
+    names = [name for name, _ in QUANTILES] + ["max"]
+    kinds = [g for g in info["classes"] if g in VEHICLE_CLASSES]
+    groups = {g: c for g, c in info["classes"].items() if g != VEHICLES or len(kinds) > 1}
+    for group, c in groups.items():
+        what = "the vehicle classes pooled" if group == VEHICLES else "class"
+        click.echo(f"{group} ({what}): {c['tracks']} tracks ({c['short_tracks']} shorter than "
+                   f"{result.smoothing.min_track_s:g} s left out), {c['steps']} steps tested "
+                   f"({c['edge_steps']} at the tracks' ends left out)")
+        if not c["steps"]:
+            continue
+        click.echo(f"| {group} | " + " | ".join(names) + f" | q = {quantile:g} |")
+        click.echo("|---" * (len(names) + 2) + "|")
+        for key, label in (("speed_mps", "speed [m/s]"), ("accel_mps2", "acceleration [m/s^2]"),
+                           ("braking_mps2", "braking [m/s^2]")):
+            row = [_fmt(c[key][n]) for n in names] + [_fmt(c["at_quantile"][key])]
+            click.echo(f"| {label} | " + " | ".join(row) + " |")
+    click.echo("steps beyond each envelope (braking below u_min, acceleration above u_max or "
+               "speed above v_max; a step can count on two sides):")
+    click.echo("| envelope | bounds | class | steps beyond | share | braking | acceleration | "
+               "speed | tracks beyond |")
+    click.echo("|---" * 9 + "|")
+    for env in result.envelopes:
+        for group, c in groups.items():
+            if not c["steps"]:
+                continue
+            b = c["beyond"][env.name]
+            click.echo(f"| {env.name} | {env.text()} | {group} | {b['steps']} of {c['steps']} | "
+                       f"{_pct(b['share'])} | {b['braking']} | {b['acceleration']} | "
+                       f"{b['speed']} | {b['tracks']} of {c['tracks']} |")
+    click.echo("sources:")
+    for env in result.envelopes:
+        click.echo(f"  {env.name}: {env.source}")
+    est = info["estimate"]
+    pooled = "the vehicle classes" if len(kinds) > 1 else f"the {kinds[0]} class" \
+        if kinds else "the vehicle classes"
+    if est is None:
+        click.echo(f"no envelope at q = {quantile:g}: no vehicle step tested, or a quantile "
+                   "of 0")
+    else:
+        click.echo(f"the envelope of {pooled} at q = {quantile:g}, as configuration "
+                   "overrides:")
+        click.echo(est["toml"].rstrip("\n"))
+
+
+@recordings.command("envelope")
+@click.argument("paths", nargs=-1, required=True, type=click.Path())
+@click.option("--quantile", type=float, default=0.999, show_default=True, metavar="Q",
+              help="The quantile of the estimated envelope, in (0, 1).")
+@click.option("--bound", "bounds", multiple=True, metavar="U_MIN,U_MAX[,V_MAX]",
+              help="A candidate envelope of your own [m/s^2, m/s] (repeatable), tested beside "
+                   "the named ones (no V_MAX: the speed is not bounded).")
+@click.option("--types", "types", multiple=True, type=click.Path(dir_okay=False),
+              metavar="FILE", help="SUMO route or additional file whose vType elements the "
+                                   "fcd files' vehicles use (fcd input only; repeatable).")
+@click.option("--speed-from", "speed_from", default="file", show_default=True,
+              metavar="SOURCE",
+              help="Speeds from the files' velocities, smoothed ('file'), or from the smoothed "
+                   "positions ('positions'), as recordings pairs.")
+@click.option("--window", type=int, default=7, show_default=True, metavar="SAMPLES",
+              help="The Savitzky-Golay filter's window (odd, at least 3), as recordings pairs.")
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Write the whole result (.json).")
+@click.option("--json", "as_json", is_flag=True, help="Print the whole result as one JSON "
+                                                       "object.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def envelope_command(paths, quantile, bounds, types, speed_from, window, out, as_json,
+                     quiet) -> None:
+    """The human envelope of recorded drivers, per class: quantiles of their speed,
+    acceleration and braking, and the share of steps beyond each named envelope (paper,
+    sumo, real-driver) and each --bound (files or folders of INTERACTION
+    vehicle_tracks_NNN.csv, inD NN_tracks.csv, SUMO fcd .xml)."""
+    from .._files import atomic_write, check_output_file, json_safe
+    from ..recordings.envelope import candidate_envelopes, estimate_envelope, recording_files
+    from ..recordings.tracks import SPEED_SOURCES, SmoothingParams
+
+    if not (math.isfinite(quantile) and 0.0 < quantile < 1.0):
+        raise _BadInput(f"--quantile = {quantile:g} is out of range; allowed: (0, 1), e.g. "
+                        "0.999")
+    if speed_from not in SPEED_SOURCES:
+        raise _BadInput(f"--speed-from = {speed_from!r} is not allowed; allowed: "
+                        f"{', '.join(SPEED_SOURCES)}")
+    envelopes = _guard(candidate_envelopes, bounds)
+    smoothing = _guard(SmoothingParams, window=window, speed=speed_from)
+    files = _guard(recording_files, paths)
+    if types and not any(fmt == "fcd" for _, fmt in files):
+        raise _BadInput("--types is read with SUMO fcd files (.xml) only")
+    if out:
+        _guard(check_output_file, out, (".json",), "envelope")
+        _guard(lock_output, out, "envelope")
+    progress = progress_bar(quiet, unit="file")
+    try:
+        result = _guard(estimate_envelope, paths, envelopes, smoothing, types, progress)
+    finally:
+        if progress is not None:
+            progress.close()  # type: ignore[attr-defined]
+    info = json_safe(result.to_dict(quantile))
+    if out:
+        text = json.dumps(info, allow_nan=False, indent=1)
+        _guard(atomic_write, out, lambda p: p.write_text(text + "\n", encoding="utf-8"))
+    if as_json:
+        click.echo(json.dumps(info, allow_nan=False))
+        return
+    _print_envelope(result, info, quantile)
+    if out:
+        click.echo(f"written: {out}")
+
+
+__all__ = ["envelope_command", "export_command", "logs_command", "pairs_command",
+           "recordings", "replay_command"]

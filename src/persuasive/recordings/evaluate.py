@@ -40,6 +40,15 @@ point, or is inside its occupancy interval, at the moment) or when it has no fir
 open: a horizon counted back from the first arrival gives it away once it is shorter than the
 pair's post-encroachment time.
 
+**No PET selects or labels a pair here.** The pairs file carries two
+(:mod:`persuasive.recordings.pairs`): ``pet_area_s``, the literature's, at the conflict area
+with the vehicles' lengths, and ``pet_s``, on the occupancy intervals; both ride along in
+:class:`PairData`, and neither is read. Every pair of the file is a candidate whatever its PET
+(``recordings pairs`` keeps every approaching pair); the outcome is who reaches the conflict
+point first (the centres, ``t_pass_s``), the statuses above read the pair's steps, its
+conflict point and its occupancy intervals (``decided``: a vehicle inside its interval at the
+moment), never a PET.
+
 **P(vehicle 1 passes first).**
 
 - ``lfg``, ``stubborn``, ``noisy``: in the model the leader goes first. Each view's forward
@@ -149,7 +158,7 @@ class PairData:
     widths_m: tuple[float, float]
     occupancy: np.ndarray = field(repr=False)  #: (2, 2): per vehicle (lo, hi) [m]
     first: str = ""
-    pet_s: float = math.nan
+    pet_s: float = math.nan  #: PET on the occupancy intervals [s] (never read here)
     t_pass_s: tuple[float, float] = (math.nan, math.nan)
     t: np.ndarray = field(default=None, repr=False)
     s: np.ndarray = field(default=None, repr=False)
@@ -161,6 +170,8 @@ class PairData:
     control: str = "unknown"
     priority: int = 0
     stop_s: tuple[float, float] = (math.nan, math.nan)
+    #: PET at the conflict area [s] (never read here; NaN from a file written before it)
+    pet_area_s: float = math.nan
 
     @property
     def n(self) -> int:
@@ -215,6 +226,7 @@ def pairs_of(frame, site: str, prefix: bool) -> list[PairData]:
             occupancy=np.array([[r0["occupancy_1_lo_m"], r0["occupancy_1_hi_m"]],
                                 [r0["occupancy_2_lo_m"], r0["occupancy_2_hi_m"]]], float),
             first=str(r0["first"]), pet_s=float(r0["pet_s"]),
+            pet_area_s=float(r0["pet_area_s"]) if "pet_area_s" in rows else math.nan,
             t_pass_s=(float(r0["t_pass_1_s"]), float(r0["t_pass_2_s"])),
             t=rows["t_s"].to_numpy(float), s=both("s", "m"), v=both("v", "mps"),
             a=both("a", "mps2"), x=both("x", "m"), y=both("y", "m"),

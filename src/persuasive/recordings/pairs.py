@@ -30,11 +30,38 @@ differs near a track's ends, ``persuasive.recordings.tracks.acceleration_band``)
 - ``first``: who passed the conflict point first: the vehicle whose ``s`` reaches 0 earlier
   (linear interpolation between steps); ``"same time"`` on equal times, ``"neither"`` when
   neither reaches it while recorded, the one that does when only one does;
-- ``pet_s``: the post-encroachment time on the footprints, as the simulator's
+- ``pet_area_s``: the **post-encroachment time at the conflict area**, the literature's
+  (Allen, Shin and Cooper 1978, with the vehicles' lengths): from the moment the first
+  vehicle's rear leaves the conflict area to the moment the second vehicle's front reaches
+  it. The conflict area (:func:`conflict_area`, paths taken as straight lines through the
+  conflict point at the pair's recorded angle ``theta``) is, for a crossing, the intersection
+  of the two swept paths, each the strip of its own vehicle's recorded width ``w_k`` about
+  its path (the recordings have no lanes; a vehicle's swept path stands for its lane): a
+  parallelogram that reaches ``a_k = (w_o / 2 + |cos theta| w_k / 2) / sin theta`` either
+  side of the conflict point along vehicle ``k``'s path (``o`` the other vehicle; the first
+  term is where ``k``'s centre line lies within ``w_o / 2`` of the other path, the second the
+  corners of ``k``'s own width, 0 at right angles). Vehicle ``k``'s footprint (a rectangle
+  ``L_k`` by ``w_k`` along its path) overlaps the area while its centre is in ``[-a_k - L_k /
+  2, a_k + L_k / 2]``: its front reaches the area at ``s = -a_k - L_k / 2``, its rear leaves
+  at ``s = a_k + L_k / 2``. For a merge the area is the merge point itself, a line across the
+  shared lane (``a_k = 0``: past it the two paths are one lane, and any stretch of it would be
+  an arbitrary length): the first vehicle's rear passes it at ``s = L / 2``, the second's
+  front reaches it at ``s = -L / 2``; two footprints on it at once are side by side where the
+  merging vehicle's centre line is within ``merge_gap_m`` of the lane's. Times are
+  interpolated linearly between steps. The first vehicle is the one whose front reaches the
+  area first; 0 when both footprints
+  overlapped the area at once (a conflict: two footprints in the area at one time, which
+  never happens to vehicles that pass each other side by side clear of it); NaN when one
+  never reaches it while recorded, or the first is still in it when its track ends before the
+  other arrives;
+- ``pet_s``: the post-encroachment time on the **occupancy intervals**, as the simulator's
   (``persuasive.safety.measures``): from the moment the vehicle that entered its occupancy
   interval first leaves it to the moment the other enters its own; 0 when both were inside
-  at once (the intervals are conservative); NaN when one never enters while recorded, or the
-  first never leaves and its track ends before the other enters;
+  at once; NaN as ``pet_area_s``. The intervals are where a footprint can touch the other's
+  path (widened by both widths, a lateral margin and the sampling step: 9.7-18 m long on a
+  real junction, issue 42), so two vehicles that pass side by side, centres metres apart,
+  often read 0 here and more than 0 in ``pet_area_s``; it is kept for the simulator's measure
+  and for files that read it;
 - ``second_slowed``: the second passer (the other than ``first``) slowed down: its speed
   fell by at least ``slow_drop_mps`` (default 1 m/s) below the highest speed it had earlier in
   its approach, the stretch from the moment it is within ``near_m`` before the conflict
@@ -125,7 +152,8 @@ class Pair:
     occupancy: tuple[tuple[float, float], tuple[float, float]]  #: [m], per vehicle
     conflict_xy: tuple[float, float]  #: the conflict point on vehicle 1's path [m]
     first: str
-    pet_s: float
+    pet_s: float  #: post-encroachment time on the occupancy intervals [s] (module docstring)
+    pet_area_s: float  #: post-encroachment time at the conflict area [s] (module docstring)
     t_pass_s: tuple[float, float]  #: when each reached its conflict point (NaN: never) [s]
     second_slowed: bool | None  #: None: no second passer
     second_speed_drop_mps: float
@@ -264,15 +292,21 @@ def _cut(tracks: Tracks, i: int, s_at: float, reach: float):
     return Polyline.of(xy), float(s[a])
 
 
-def _time_at(t: np.ndarray, s: np.ndarray, target: float) -> float:
-    """When ``s`` (non-decreasing, at times ``t``) first reaches ``target``, interpolated; NaN
-    when it never does (at the first sample already: the moment is unobserved, NaN too)."""
-    k = int(np.searchsorted(s, target, side="left"))
-    if k == 0 or k == s.shape[0]:
-        return math.nan
-    ds = s[k] - s[k - 1]
-    f = (target - s[k - 1]) / ds if ds > 0 else 1.0
-    return float(t[k - 1] + f * (t[k] - t[k - 1]))
+def _times_at(t: np.ndarray, s: np.ndarray, targets: Sequence[float]) -> list[float]:
+    """When ``s`` (non-decreasing, at times ``t``) first reaches each of ``targets`` [m],
+    interpolated linearly between samples [s]; NaN where it never does (at the first sample
+    already: the moment is unobserved, NaN too). One search for all targets (a pair's few
+    targets: cheaper than array operations on them)."""
+    n = s.shape[0]
+    out = []
+    for target, k in zip(targets, np.searchsorted(s, targets, side="left").tolist()):
+        if k == 0 or k == n:
+            out.append(math.nan)
+            continue
+        ds = s[k] - s[k - 1]
+        f = (target - s[k - 1]) / ds if ds > 0 else 1.0
+        out.append(float(t[k - 1] + f * (t[k] - t[k - 1])))
+    return out
 
 
 def _near_window(t: np.ndarray, s: np.ndarray, near: float) -> tuple[float, float]:
@@ -329,10 +363,16 @@ def _project(tracks: Tracks, params: PairParams, i: int, j: int, kind: str, si: 
     b0, b1 = _near_window(tj, s_j, params.near_m)
     if max(a0, b0) > min(a1, b1) + 1e-9:
         return None
-    # labels
-    t_pass = (_time_at(ti, s_i, 0.0), _time_at(tj, s_j, 0.0))
+    # labels: when each reaches its conflict point, enters and leaves its occupancy interval
+    # and the conflict area (one search per vehicle)
+    area = conflict_area(rc.kind, angle, (size_i[0], size_j[0]), (size_i[1], size_j[1]))
+    at_i = _times_at(ti, s_i, (0.0, *occ[0], *area[0]))
+    at_j = _times_at(tj, s_j, (0.0, *occ[1], *area[1]))
+    t_pass = (at_i[0], at_j[0])
     first = _first(*t_pass)
-    pet = _pet(ti, s_i, occ[0], tj, s_j, occ[1])
+    ends = (float(ti[-1]), float(tj[-1]))
+    pet = _pet_of_times((at_i[1], at_j[1]), (at_i[2], at_j[2]), ends)
+    pet_area = _pet_of_times((at_i[3], at_j[3]), (at_i[4], at_j[4]), ends)
     second = {"1": 1, "2": 0}.get(first)
     if second is None:
         slowed, drop = None, math.nan
@@ -354,7 +394,8 @@ def _project(tracks: Tracks, params: PairParams, i: int, j: int, kind: str, si: 
         classes=(str(tracks.agent_class[i]), str(tracks.agent_class[j])),
         lengths_m=(size_i[0], size_j[0]), widths_m=(size_i[1], size_j[1]), occupancy=occ,
         conflict_xy=(float(xy[0]), float(xy[1])), first=first, pet_s=pet,
-        t_pass_s=t_pass, second_slowed=slowed, second_speed_drop_mps=float(drop),
+        pet_area_s=pet_area, t_pass_s=t_pass, second_slowed=slowed,
+        second_speed_drop_mps=float(drop),
         t=np.round(ti[ki], 1), s=np.stack([s_i[ki], s_j[kj]]),
         v=np.stack([tracks.v[gi], tracks.v[gj]]), a=np.stack([tracks.a[gi], tracks.a[gj]]),
         x=np.stack([tracks.x[gi], tracks.x[gj]]), y=np.stack([tracks.y[gi], tracks.y[gj]]),
@@ -372,16 +413,69 @@ def _first(t1: float, t2: float) -> str:
     return "same time"
 
 
-def _pet(t1, s1, occ1, t2, s2, occ2) -> float:
-    """Post-encroachment time on the footprints [s] (module docstring)."""
-    in1, out1 = _time_at(t1, s1, occ1[0]), _time_at(t1, s1, occ1[1])
-    in2, out2 = _time_at(t2, s2, occ2[0]), _time_at(t2, s2, occ2[1])
+def conflict_area(kind: str, angle_deg: float, lengths_m: tuple[float, float],
+                  widths_m: tuple[float, float]) -> tuple[tuple[float, float],
+                                                          tuple[float, float]]:
+    """Per vehicle, the centre positions ``(enter, leave)`` [m] (relative to its conflict
+    point, along its path) at which its footprint starts and stops overlapping the conflict
+    area (module docstring, ``pet_area_s``): ``(-a_k - L_k / 2, a_k + L_k / 2)``.
+
+    ``kind``: :data:`CROSSING` or :data:`MERGE`; ``angle_deg``: the crossing angle in [0, 180]
+    (0 the same direction, 90 right angles, 180 head on); ``lengths_m``, ``widths_m``: ``(L_1,
+    L_2)``, ``(w_1, w_2)`` [m], at least 0. A crossing's area is the intersection of the two
+    strips ``|lateral| <= w_k / 2`` about two straight paths crossing at ``theta``: along path
+    ``k`` it reaches ``a_k = (w_o / 2 + |cos theta| w_k / 2) / sin theta`` either side of the
+    point (its far corner, where ``k``'s outer edge meets the other strip's far edge). A
+    merge's is the merge point, ``a_k = 0``. At ``sin theta = 0`` (within 1e-12) the strips are
+    parallel and the area unbounded: ``(-inf, inf)``, which no vehicle ever enters or leaves.
+    :class:`RecordingError` (one line) for another kind or a value out of range."""
+    if kind not in (CROSSING, MERGE):
+        raise RecordingError(f"kind = {kind!r} is not allowed; allowed: {CROSSING}, {MERGE}")
+    for name, values in (("lengths_m", lengths_m), ("widths_m", widths_m)):
+        if not all(math.isfinite(v) and v >= 0.0 for v in values):
+            raise RecordingError(f"{name} = {tuple(values)!r} is out of range; allowed: two "
+                                 "finite numbers >= 0 m")
+    if kind == MERGE:
+        return tuple((-0.5 * length, 0.5 * length) for length in lengths_m)
+    if not 0.0 <= angle_deg <= 180.0:
+        raise RecordingError(f"angle_deg = {angle_deg!r} is out of range; allowed: [0, 180] "
+                             "degrees")
+    theta = math.radians(angle_deg)
+    sin, cos = math.sin(theta), abs(math.cos(theta))
+    out = []
+    for k in (0, 1):
+        w_own, w_other = widths_m[k], widths_m[1 - k]
+        # sin(pi) is 1.2e-16, not 0: parallel to the rounding of the angle
+        a = (0.5 * w_other + cos * 0.5 * w_own) / sin if sin > 1e-12 else math.inf
+        out.append((-a - 0.5 * lengths_m[k], a + 0.5 * lengths_m[k]))
+    return tuple(out)
+
+
+def post_encroachment(t1: np.ndarray, s1: np.ndarray, span1: tuple[float, float],
+                      t2: np.ndarray, s2: np.ndarray, span2: tuple[float, float]) -> float:
+    """Post-encroachment time [s] of two vehicles over a region each enters when its centre
+    ``s`` [m] (non-decreasing, at times ``t`` [s]) reaches ``span[0]`` and leaves when it
+    reaches ``span[1]`` (the occupancy intervals for ``pet_s``, :func:`conflict_area` for
+    ``pet_area_s``): from the first to enter leaving to the other entering, times interpolated
+    linearly between samples; 0 when both were in at once; NaN when one never enters while
+    recorded (or is in at its first sample), or the first never leaves and its track ends
+    before the other enters."""
+    in1, out1 = _times_at(t1, s1, span1)
+    in2, out2 = _times_at(t2, s2, span2)
+    return _pet_of_times((in1, in2), (out1, out2), (float(t1[-1]), float(t2[-1])))
+
+
+def _pet_of_times(enter: tuple[float, float], leave: tuple[float, float],
+                  end: tuple[float, float]) -> float:
+    """:func:`post_encroachment` from each vehicle's times [s] of entering and leaving the
+    region (NaN: not seen) and the end of its track."""
+    (in1, in2), (out1, out2) = enter, leave
     if math.isnan(in1) or math.isnan(in2):
         return math.nan
     if in1 <= in2:
-        first_out, first_end, second_in = out1, float(t1[-1]), in2
+        first_out, first_end, second_in = out1, end[0], in2
     else:
-        first_out, first_end, second_in = out2, float(t2[-1]), in1
+        first_out, first_end, second_in = out2, end[1], in1
     if math.isnan(first_out):
         # still inside when its track ends: inside when the other came in, if it was seen
         return 0.0 if first_end >= second_in else math.nan
@@ -405,8 +499,11 @@ def _speed_drop(t: np.ndarray, s: np.ndarray, v: np.ndarray, near: float) -> flo
 PAIR_COLUMNS = ("pair", "recording", "kind", "angle_deg", "track_1", "track_2", "class_1",
                 "class_2", "length_1_m", "width_1_m", "length_2_m", "width_2_m",
                 "occupancy_1_lo_m", "occupancy_1_hi_m", "occupancy_2_lo_m", "occupancy_2_hi_m",
-                "conflict_x_m", "conflict_y_m", "first", "pet_s", "t_pass_1_s", "t_pass_2_s",
-                "second_slowed", "second_speed_drop_mps")
+                "conflict_x_m", "conflict_y_m", "first", "pet_s", "pet_area_s", "t_pass_1_s",
+                "t_pass_2_s", "second_slowed", "second_speed_drop_mps")
+#: Pair columns that files written before them lack; :func:`read_pairs` reads them as NaN
+#: (``pet_area_s``: write the pairs again to have it).
+LATER_PAIR_COLUMNS = ("pet_area_s",)
 #: Where the steps lie in each vehicle's track (per pair; optional when read: pairs files
 #: written before them have none, and their fit filters every step as an interior one).
 TRACK_COLUMNS = ("track_k0_1", "track_n_1", "track_k0_2", "track_n_2")
@@ -453,6 +550,7 @@ def pairs_frame(pairs: Sequence[Pair]):
         "conflict_y_m": rep([p.conflict_xy[1] for p in pairs], float),
         "first": rep([p.first for p in pairs], object),
         "pet_s": rep([p.pet_s for p in pairs], float),
+        "pet_area_s": rep([p.pet_area_s for p in pairs], float),
         "t_pass_1_s": rep([p.t_pass_s[0] for p in pairs], float),
         "t_pass_2_s": rep([p.t_pass_s[1] for p in pairs], float),
         "second_slowed": pd.array(np.repeat(np.array([p.second_slowed for p in pairs],
@@ -505,7 +603,8 @@ def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
 
 def read_pairs(path):
     """The pairs file ``path`` as ``(frame, metadata)``; :class:`RecordingError` (one line
-    naming it) when it is not one. ``frame.attrs["smoothing"]``: the tracks' filter
+    naming it) when it is not one. Columns of :data:`LATER_PAIR_COLUMNS` a file lacks are
+    NaN. ``frame.attrs["smoothing"]``: the tracks' filter
     (:class:`~persuasive.recordings.tracks.SmoothingParams` as a dict; None for a file written
     before it was recorded), which the fit's measurement model needs."""
     import json
@@ -525,13 +624,18 @@ def read_pairs(path):
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise RecordingError(f"pairs file {name!r} cannot be read: {text}") from None
     raw = (table.schema.metadata or {}).get(PAIRS_METADATA)
-    missing = [c for c in (*PAIR_COLUMNS, *STEP_COLUMNS) if c not in table.column_names]
+    missing = [c for c in (*PAIR_COLUMNS, *STEP_COLUMNS)
+               if c not in table.column_names and c not in LATER_PAIR_COLUMNS]
     if raw is None or missing:
         raise RecordingError(f"pairs file {name!r} is not a pairs file (write it with "
                              "'persuasive recordings pairs PATHS... --out FILE.parquet')")
     frame = table.to_pandas()
     if frame.empty:
         raise RecordingError(f"pairs file {name!r} holds no pair")
+    for col in LATER_PAIR_COLUMNS:
+        if col not in frame:  # a file written before the column: NaN, in its place
+            before = PAIR_COLUMNS[PAIR_COLUMNS.index(col) - 1]
+            frame.insert(frame.columns.get_loc(before) + 1, col, math.nan)
     meta = json.loads(raw)
     # the filter its accelerations went through (files of before it was kept: unknown)
     frame.attrs["smoothing"] = meta.get("smoothing")
@@ -539,13 +643,26 @@ def read_pairs(path):
 
 
 def summary(result: PairsResult) -> dict:
-    """Counts and distributions of a set of pairs (what ``recordings pairs`` prints)."""
+    """Counts and distributions of a set of pairs (what ``recordings pairs`` prints). The
+    PETs' quantiles [s] over the pairs that define them: ``pet_area_quantiles_s`` of
+    ``pet_area_s`` (at the conflict area), ``pet_quantiles_s`` of ``pet_s`` (on the
+    occupancy intervals); ``pet_area_defined``, ``pet_defined``: how many pairs define
+    each."""
     pairs = result.pairs
     kinds = [p.kind for p in pairs]
     angles = np.array([p.angle_deg for p in pairs if p.kind == CROSSING])
     merge_angles = np.array([p.angle_deg for p in pairs if p.kind == MERGE])
-    pet = np.array([p.pet_s for p in pairs], float)
-    pet = pet[np.isfinite(pet)]
+
+    def defined(values):
+        values = np.array(values, float)
+        return values[np.isfinite(values)]
+
+    def quantiles(values):
+        return {f"{q}%": float(np.percentile(values, q)) for q in (5, 25, 50, 75, 95)} \
+            if values.size else {}
+
+    pet = defined([p.pet_s for p in pairs])
+    pet_area = defined([p.pet_area_s for p in pairs])
     edges = np.arange(0.0, 181.0, 20.0)
     hist = np.histogram(angles, edges)[0] if angles.size else np.zeros(edges.size - 1, int)
     slowed = [p.second_slowed for p in pairs if p.second_slowed is not None]
@@ -560,9 +677,10 @@ def summary(result: PairsResult) -> dict:
                             zip(edges[:-1], edges[1:], hist) if c},
         "merge_angle_median_deg": float(np.median(merge_angles)) if merge_angles.size
         else None,
+        "pet_area_defined": int(pet_area.size),
+        "pet_area_quantiles_s": quantiles(pet_area),
         "pet_defined": int(pet.size),
-        "pet_quantiles_s": {f"{q}%": float(np.percentile(pet, q)) for q in (5, 25, 50, 75, 95)}
-        if pet.size else {},
+        "pet_quantiles_s": quantiles(pet),
         "first": {label: sum(p.first == label for p in pairs) for label in FIRST_LABELS},
         "second_slowed": int(sum(slowed)),
         "second_known": len(slowed),
@@ -580,7 +698,7 @@ def pair_of(result: PairsResult, pair_id: int) -> Pair:
                          f"[0, {len(result.pairs) - 1}]")
 
 
-__all__ = ["CROSSING", "FIRST_LABELS", "MAP_COLUMNS", "MERGE", "PAIRS_METADATA", "PAIR_COLUMNS",
-           "Pair",
-           "PairParams", "PairsResult", "STEP_COLUMNS", "TRACK_COLUMNS", "candidates",
-           "find_pairs", "pair_of", "pairs_frame", "read_pairs", "summary", "write_pairs"]
+__all__ = ["CROSSING", "FIRST_LABELS", "LATER_PAIR_COLUMNS", "MAP_COLUMNS", "MERGE",
+           "PAIRS_METADATA", "PAIR_COLUMNS", "Pair", "PairParams", "PairsResult", "STEP_COLUMNS",
+           "TRACK_COLUMNS", "candidates", "conflict_area", "find_pairs", "pair_of",
+           "pairs_frame", "post_encroachment", "read_pairs", "summary", "write_pairs"]

@@ -29,7 +29,11 @@ recorded driver is tested whichever ``other`` drives; its steps beyond are count
 of a pair's configuration is raised to the pair's highest speed, so only an acceleration can
 leave the envelope.) Steps that read one of its track's first or last samples
 (``persuasive.recordings.tracks.edge_samples``) are not tested: there the filter's values are
-its edge windows' extrapolations, not the driver's.
+its edge windows' extrapolations, not the driver's. Each run keeps its tested steps' extremes
+(the strongest braking and acceleration, the lowest and highest speed), so the summary also
+says, per named envelope of :mod:`persuasive.recordings.envelope` (``paper``, ``sumo``,
+``real-driver``, each with its own ``v_max``), in how many runs the premise held: the driver
+within that envelope on every tested step and the start certified (:func:`premise_by_envelope`).
 
 **Whether the start is certified.** The AV's recorded start is in the shield's invariant set
 ``S`` when it can stand before its occupancy interval by braking
@@ -60,12 +64,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from ..config import AV_KINDS, SHIELD_KINDS, Config
 from ..safety.measures import restricted_mean
+# the envelope test lives with the envelopes (one concept, one module); kept importable here
+from .envelope import ENVELOPE_TOL, ENVELOPES, envelope_excess
 from .formats import STEP_S, RecordingError
 from .logs import ANGLE_STEP_DEG, view_log
 from .tracks import SmoothingParams, edge_samples
@@ -74,8 +80,6 @@ from .tracks import SmoothingParams, edge_samples
 OTHERS = ("replay", "fitted")
 #: The human models a ``fitted`` other can be.
 FITTED_MODELS = ("lfg", "stubborn", "noisy", "idm")
-#: Tolerance of the envelope test [m/s^2, m/s]: float rounding of the speed differences.
-ENVELOPE_TOL = 1e-9
 #: Reasons of an invalid run (module docstring).
 INVALID_YIELDED, INVALID_REAR_END = "yielded", "rear-end"
 
@@ -150,6 +154,12 @@ class SeatRun:
     #: (the base configuration's: neither)
     right_of_way: str = ""
     fitted: dict = field(default_factory=dict)  #: the fitted model's parameters, if any
+    # the tested steps' extremes, against which any envelope is judged (:func:`within`;
+    # NaN when no step was tested)
+    tested_accel_min_mps2: float = math.nan  #: the strongest tested braking (signed) [m/s^2]
+    tested_accel_max_mps2: float = math.nan  #: the strongest tested acceleration [m/s^2]
+    tested_v_min_mps: float = math.nan  #: the lowest speed at a tested step's end [m/s]
+    tested_v_max_mps: float = math.nan  #: the highest [m/s]
 
 
 @dataclass(frozen=True)
@@ -183,9 +193,50 @@ def _share(k: int, n: int) -> float | None:
     return k / n if n else None
 
 
+def within(run: SeatRun, envelope) -> bool:
+    """Whether the run's recorded driver stayed within ``envelope`` (any object with
+    ``u_min_mps2, u_max_mps2, v_min_mps, v_max_mps``, such as
+    :class:`persuasive.recordings.envelope.Envelope`) on every tested step, by
+    :func:`envelope_excess`'s test (to :data:`ENVELOPE_TOL`) applied to the run's tested
+    extremes; a run with no tested step is within every envelope."""
+    if run.envelope_steps == 0:
+        return True
+    tol = ENVELOPE_TOL
+    return bool(run.tested_accel_min_mps2 >= envelope.u_min_mps2 - tol
+                and run.tested_accel_max_mps2 <= envelope.u_max_mps2 + tol
+                and run.tested_v_min_mps >= envelope.v_min_mps - tol
+                and run.tested_v_max_mps <= envelope.v_max_mps + tol)
+
+
+def premise_by_envelope(runs: Sequence[SeatRun], envelopes=None) -> dict:
+    """Per envelope, the runs whose guarantee's premise held: the recorded driver within it on
+    every tested step (:func:`within`) and the start certified. ``configured``: the run's
+    own configuration's envelope (``within_envelope``; ``v_max`` raised to the pair's highest
+    speed), then each of ``envelopes`` (default: the named ones,
+    :data:`persuasive.recordings.envelope.ENVELOPES`) with its numbers. Each entry:
+    ``within_envelope`` (runs whose driver stayed within), ``runs`` (the premise held) and
+    ``share`` (of all runs; None without runs)."""
+    runs = list(runs)
+    envelopes = ENVELOPES.values() if envelopes is None else envelopes
+    n = len(runs)
+    inside = [r.within_envelope for r in runs]
+    held = sum(w and r.start_certified for w, r in zip(inside, runs))
+    out = {"configured": {"within_envelope": sum(inside), "runs": held,
+                          "share": _share(held, n)}}
+    for env in envelopes:
+        inside = [within(r, env) for r in runs]
+        held = sum(w and r.start_certified for w, r in zip(inside, runs))
+        out[env.name] = {"u_min_mps2": env.u_min_mps2, "u_max_mps2": env.u_max_mps2,
+                         "v_max_mps": env.v_max_mps if math.isfinite(env.v_max_mps) else None,
+                         "within_envelope": sum(inside), "runs": held,
+                         "share": _share(held, n)}
+    return out
+
+
 def summarise(runs: Sequence[SeatRun], settings: ReplaySettings) -> dict:
     """Counts over the runs: collisions (AV-caused or not, split by the envelope and the
-    start), the shield's uncertified steps, the envelope's excesses, the invalid runs, who
+    start), the shield's uncertified steps, the envelope's excesses, the runs whose premise
+    held under each named envelope (:func:`premise_by_envelope`), the invalid runs, who
     passed first and the times to clear over the valid runs."""
     runs = list(runs)
     premises = [r for r in runs if r.within_envelope and r.start_certified]
@@ -237,6 +288,7 @@ def summarise(runs: Sequence[SeatRun], settings: ReplaySettings) -> dict:
         "both_cleared": len(both),
         "clear_s_paired_diff_mean": float(np.mean([r.av_clear_s - r.recorded_clear_s
                                                    for r in both])) if both else None,
+        "premise_by_envelope": premise_by_envelope(runs),
     }
 
 
@@ -257,15 +309,6 @@ def replay_accelerations(v: np.ndarray, dt: float = STEP_S) -> np.ndarray:
     """The open-loop accelerations that reproduce the speeds ``v`` ``(n,)`` step by step:
     ``(v_{k+1} - v_k) / dt``, ``(n - 1,)`` [m/s^2]."""
     return np.diff(np.asarray(v, float)) / dt
-
-
-def envelope_excess(a: np.ndarray, v: np.ndarray, vehicle) -> np.ndarray:
-    """Per replayed step, whether the driver left the envelope: its acceleration ``a[k]``
-    outside ``[u_min, u_max]`` or its speed ``v[k + 1]`` outside ``[v_min, v_max]`` (both to
-    :data:`ENVELOPE_TOL`); ``(n - 1,)`` bool for ``a`` ``(n - 1,)`` and ``v`` ``(n,)``."""
-    tol = ENVELOPE_TOL
-    return ((a < vehicle.u_min_mps2 - tol) | (a > vehicle.u_max_mps2 + tol)
-            | (v[1:] < vehicle.v_min_mps - tol) | (v[1:] > vehicle.v_max_mps + tol))
 
 
 def start_in_s(record, s0: float, v0: float) -> bool:
@@ -364,6 +407,9 @@ def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: st
     veh = config.vehicle_of("hv")
     tested = ~edge_steps(rows, human, edge)
     excess = envelope_excess(a_rec, v_hv, veh) & tested
+    a_tested, v_tested = a_rec[tested], v_hv[1:][tested]
+    extremes = (float(a_tested.min()), float(a_tested.max()), float(v_tested.min()),
+                float(v_tested.max())) if a_tested.size else (math.nan,) * 4
     first_rec = _recorded_first(str(rows["first"].iloc[0]), seat)
     label = ARRIVAL_LABELS[out.first_at_conflict_point]
     first_replay = {"HV": "other"}.get(label, label)
@@ -390,7 +436,9 @@ def run_seat(rows, seat: int, settings: ReplaySettings, base: Config, source: st
         min_gap_m=out.min_gap_m, first_recorded=first_rec, first_replay=first_replay,
         av_clear_s=out.av_time_to_clear_s, recorded_clear_s=recorded_clear,
         other_clear_s=out.hv_time_to_clear_s, valid=not reason, invalid_reason=reason,
-        right_of_way=right_of_way or "", fitted=params)
+        right_of_way=right_of_way or "", fitted=params,
+        tested_accel_min_mps2=extremes[0], tested_accel_max_mps2=extremes[1],
+        tested_v_min_mps=extremes[2], tested_v_max_mps=extremes[3])
 
 
 # -- the fitted other ---------------------------------------------------------------------------
@@ -462,27 +510,61 @@ def fit_left_out(frame, settings: ReplaySettings, base: Config) -> dict[str, dic
 
 
 def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | None = None,
-                 source: str = "") -> ReplayResult:
+                 source: str = "", workers: int = 1,
+                 progress: Callable[[int, int], None] | None = None) -> ReplayResult:
     """Every pair of a pairs frame (:func:`persuasive.recordings.pairs.read_pairs`) replayed
-    with the AV in each seat of ``settings.seats`` (module docstring)."""
+    with the AV in each seat of ``settings.seats`` (module docstring), in pair order; with
+    ``workers > 1`` the pairs run on the worker processes of a local Dask cluster
+    (``persuasive.sweep.runner.local_client``), the same runs bit for bit (each pair's runs
+    depend on that pair, the settings and, with a fitted other, the fits made here first);
+    ``progress(done, total)`` after each pair."""
     settings = settings or ReplaySettings()
     base = base if base is not None else Config(mode=settings.mode)
     fits = fit_left_out(frame, settings, base) if settings.other == "fitted" else {}
     smoothing = frame.attrs.get("smoothing")
     edge = edge_samples(SmoothingParams(**smoothing) if smoothing else None)
-    runs = []
+    tasks = []
     for _, rows in frame.groupby("pair", sort=True):
         rows = rows.sort_values("step")
         if len(rows) < 2:
             raise RecordingError(f"pair {int(rows['pair'].iloc[0])} has {len(rows)} step; a "
                                  "replay needs two")
-        rec = str(rows["recording"].iloc[0])
-        for seat in settings.seats:
-            runs.append(run_seat(rows, seat, settings, base, source, fits.get(rec), edge))
+        tasks.append(rows)
+    by_pair: dict[int, list[SeatRun]] = {}
+    if workers <= 1 or len(tasks) <= 1:
+        for i, rows in enumerate(tasks):
+            by_pair[i] = _replay_pair(rows, settings, base, source, fits, edge)
+            if progress is not None:
+                progress(i + 1, len(tasks))
+    else:
+        from ..sweep.runner import local_client, map_bounded
+
+        data = base.to_dict()
+        args = [(rows, settings, data, source, fits, edge) for rows in tasks]
+        with local_client(min(workers, len(tasks))) as client:
+            for i, got in map_bounded(client, _replay_task, args):
+                by_pair[i] = got
+                if progress is not None:
+                    progress(len(by_pair), len(tasks))
+    runs = [run for i in range(len(tasks)) for run in by_pair[i]]
     return ReplayResult(runs, settings, {k: v["params"] for k, v in fits.items()})
+
+
+def _replay_pair(rows, settings: ReplaySettings, base: Config, source: str, fits: dict,
+                 edge: int) -> list[SeatRun]:
+    """One pair's runs, one per seat of ``settings.seats``."""
+    rec = str(rows["recording"].iloc[0])
+    return [run_seat(rows, seat, settings, base, source, fits.get(rec), edge)
+            for seat in settings.seats]
+
+
+def _replay_task(args) -> list[SeatRun]:
+    rows, settings, data, source, fits, edge = args
+    return _replay_pair(rows, settings, Config.from_dict(data), source, fits, edge)
 
 
 __all__ = ["ENVELOPE_TOL", "FITTED_MODELS", "INVALID_REAR_END", "INVALID_YIELDED", "OTHERS",
            "ReplayResult", "ReplaySettings", "SeatRun", "envelope_excess", "fit_left_out",
            "fitted_overrides", "pair_run_logs", "replay_accelerations", "replay_pairs",
-           "edge_steps", "run_from", "run_seat", "seat_right_of_way", "summarise"]
+           "edge_steps", "premise_by_envelope", "run_from", "run_seat", "seat_right_of_way",
+           "summarise", "within"]
