@@ -244,7 +244,8 @@ def test_the_evaluation_reports_every_model_and_baseline(evaluation):
 
 
 def test_fit_evaluates_a_pairs_file_held_out(capsys, pairs_file, tmp_path):
-    code, out, err = run(capsys, "fit", pairs_file, "--holdout", "0.34", "--model", "lfg")
+    code, out, err = run(capsys, "fit", pairs_file, "--holdout", "0.34", "--model", "lfg",
+                         "--quiet")
     assert code == 0 and err == ""
     assert "0.34 of the recording files held out (seed 0); 6 recording files, 6 pairs" in out
     assert "| predictor | log-lik/step | accuracy | AUC | Brier | log-loss | ECE | vs " in out
@@ -252,12 +253,20 @@ def test_fit_evaluates_a_pairs_file_held_out(capsys, pairs_file, tmp_path):
     assert "strongest baseline (smallest log-loss): " in out
     report = tmp_path / "report.json"
     code, out, err = run(capsys, "fit", pairs_file, "--folds", "2", "--model", "stubborn",
-                         "--json", "--out", report, "--seed", "3")
+                         "--json", "--out", report, "--seed", "3", "--quiet")
     assert code == 0 and err == ""
     payload = json.loads(out)
     assert json.loads(report.read_text()) == {**payload, "seconds": payload["seconds"]}
     assert payload["split"]["k"] == 2 and payload["split"]["seed"] == 3
     assert [r["name"] for r in payload["rows"]][0] == "stubborn"
+    # the folds on two worker processes: the same report, a progress bar over the folds
+    code, out, err = run(capsys, "fit", pairs_file, "--folds", "2", "--model", "stubborn",
+                         "--json", "--seed", "3", "--workers", "2")
+    assert code == 0 and "2/2" in err and "fold" in err, err
+    two = json.loads(out)
+    assert {**two, "seconds": 0} == {**payload, "seconds": 0}
+    code, _, err = run(capsys, "fit", pairs_file, "--workers", "0")
+    assert code == 2 and "--workers" in err
 
 
 def test_bad_input_ends_in_one_line_and_exit_2_writing_nothing(capsys, pairs_file, tmp_path):

@@ -27,7 +27,8 @@ import click
 
 from .._compile import StudyClock
 from ..config import SCENARIO_KINDS
-from ._common import check_readable, compile_report, lock_output
+from ._common import (check_readable, check_workers, compile_report, lock_output,
+                      progress_bar, workers_type)
 
 MODEL_CHOICES = ("lfg", "stubborn", "noisy", "idm", "all")
 
@@ -185,7 +186,7 @@ def _print_evaluation(d: dict, elapsed: float, out: str | None) -> None:
 
 
 def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_site,
-                    seed) -> None:
+                    seed, workers=None, quiet=False) -> None:
     """``fit PAIRS.parquet...``: the held-out evaluation (module docstring)."""
     from click.core import ParameterSource
 
@@ -224,12 +225,19 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
     models = MODELS if model == "all" else (model,)
     params = EvalParams(seed=seed if seed is not None else 0, sigma_min=sigma_min)
     clock = StudyClock()
+    n_folds = 1 if split.kind != "folds" else (folds or 5)
+    workers = check_workers(workers, n_folds)
+    bar = None
     try:
         sites = read_sites(paths)
         _notice_compile()
-        result = evaluate(sites, split, models, params)
+        bar = progress_bar(quiet, unit="fold")
+        result = evaluate(sites, split, models, params, workers=workers, progress=bar)
     except RecordingError as exc:
         raise _BadInput(str(exc)) from None
+    finally:
+        if bar is not None:
+            bar.close()  # type: ignore[attr-defined]
     elapsed = clock.seconds
     payload = result.to_dict()
     payload["seconds"] = round(elapsed, 3)
@@ -273,8 +281,12 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
                    "(its file name without .parquet).")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=None,
               help="Pairs files: seed of the split and of the bootstrap [0].")
+@click.option("--workers", type=workers_type(), default=None,
+              help="Pairs files: worker processes, one fold each at a time [all cores, at "
+                   "most the folds]; the evaluation does not depend on it.")
+@click.option("--quiet", is_flag=True, help="Pairs files: no progress bar over the folds.")
 def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_json, holdout,
-        folds, test_site, seed) -> None:
+        folds, test_site, seed, workers, quiet) -> None:
     """Fit human models to recorded driving (simulate --out logs, drive trials), or evaluate
     them held out on recorded pairs (pairs files of 'persuasive recordings pairs').
 
@@ -299,10 +311,11 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
                             "('persuasive recordings pairs --out FILE.parquet') or logs, not "
                             "both")
         check_distinct(logs)
-        _evaluate_pairs(logs, model, sigma_min, out, as_json, holdout, folds, test_site, seed)
+        _evaluate_pairs(logs, model, sigma_min, out, as_json, holdout, folds, test_site, seed,
+                        workers, quiet)
         return
     for value, flag in ((holdout, "--holdout"), (folds, "--folds"), (test_site, "--test-site"),
-                        (seed, "--seed")):
+                        (seed, "--seed"), (workers, "--workers")):
         if value is not None:
             raise _BadInput(f"{flag} applies to pairs files ('persuasive recordings pairs --out "
                             "FILE.parquet'), not to logs")

@@ -76,7 +76,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -690,10 +690,15 @@ class Evaluation:
 
 def evaluate(sites: Sequence[tuple[str, object]], split: Split,
              models: Sequence[str] | None = None, params: EvalParams | None = None,
-             mode: str = "corrected") -> Evaluation:
+             mode: str = "corrected", workers: int = 1,
+             progress: Callable[[int, int], None] | None = None) -> Evaluation:
     """The held-out evaluation of ``models`` on the pairs frames ``sites`` (``(name,
     frame)`` each, :func:`persuasive.recordings.pairs.read_pairs`); module docstring.
-    :class:`RecordingError` for a split the files do not allow or no pair to predict."""
+    :class:`RecordingError` for a split the files do not allow or no pair to predict. With
+    ``workers > 1`` the folds run on the worker processes of a local Dask cluster
+    (``persuasive.sweep.runner.local_client``), the same evaluation bit for bit (a fold
+    depends on the pairs, the split and the parameters only); ``progress(done, total)`` after
+    each fold."""
     from ..fitting.estimate import MODELS
 
     params = params or EvalParams()
@@ -710,8 +715,29 @@ def evaluate(sites: Sequence[tuple[str, object]], split: Split,
         counts = {s: sum(st[0] == s for st in status) for s in STATUSES if s != KEPT}
         raise RecordingError(f"no pair left to predict among the {len(pairs)} pairs of the test "
                              "files: " + ", ".join(f"{s} {c}" for s, c in counts.items()))
-    folds = [evaluate_fold(pairs, status, set(t), models, params, mode) for t in tests]
+    done: dict[int, FoldResult] = {}
+    if progress is not None:
+        progress(0, len(tests))
+    if workers <= 1 or len(tests) <= 1:
+        for i, t in enumerate(tests):
+            done[i] = evaluate_fold(pairs, status, set(t), models, params, mode)
+            if progress is not None:
+                progress(i + 1, len(tests))
+    else:
+        from ..sweep.runner import local_client, map_bounded
+
+        args = [(pairs, status, set(t), models, params, mode) for t in tests]
+        with local_client(min(workers, len(tests))) as client:
+            for i, fold in map_bounded(client, _fold_task, args, in_flight=workers):
+                done[i] = fold
+                if progress is not None:
+                    progress(len(done), len(tests))
+    folds = [done[i] for i in range(len(tests))]
     return score(split, params, models, pairs, status, folds)
+
+
+def _fold_task(args) -> FoldResult:
+    return evaluate_fold(*args)
 
 
 def score(split: Split, params: EvalParams, models: list[str], pairs: list[PairData],
