@@ -62,7 +62,7 @@ def test_round_trip_simulate_export_pairs_logs_fit(capsys, runs, tmp_path):
     pairs = tmp_path / "pairs.parquet"
     figure = tmp_path / "pair.png"
     code, out, err = run(capsys, "recordings", "pairs", str(tracks), "--out", str(pairs),
-                         "--figure", str(figure), "--pair", "1")
+                         "--figure", str(figure), "--pair", "1", "--quiet")
     assert code == 0 and err == "", err
     assert "pairs found: 2 (2 crossing, 0 merge)" in out and "80-100: 2" in out
     assert figure.stat().st_size > 10_000

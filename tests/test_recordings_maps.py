@@ -72,7 +72,7 @@ def test_export_then_pairs_with_the_map_label_every_pair(capsys, runs, tmp_path,
     assert sorted(p.name for p in tracks.iterdir()) == ["map.osm", "vehicle_tracks_000.csv",
                                                         "vehicle_tracks_001.csv"]
     code, out, err = run(capsys, "recordings", "pairs", str(tracks), "--map",
-                         str(tracks / "map.osm"), "--out", str(pairs))
+                         str(tracks / "map.osm"), "--out", str(pairs), "--quiet")
     assert code == 0 and err == "", err
     assert f"the map's rule: {control.replace('_', ' ')} 2" in out
     frame, meta = read_pairs(pairs)

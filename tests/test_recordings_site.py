@@ -104,7 +104,7 @@ def test_the_map_reads_back_in_the_tracks_frame(site):
 def test_pairs_with_the_map_give_the_major_road_the_right_of_way(capsys, site, tmp_path):
     out = tmp_path / "pairs.parquet"
     code, text, err = run(capsys, "recordings", "pairs", site, "--map", site / MAP_NAME,
-                          "--out", out)
+                          "--out", out, "--quiet")
     assert code == 0 and err == "", err
     assert "the map's rule: right of way" in text
     frame, meta = read_pairs(out)
@@ -241,3 +241,59 @@ def test_a_folder_in_use_is_refused_and_an_interrupted_run_leaves_nothing(tmp_pa
     with pytest.raises(KeyboardInterrupt):
         make_site(out, TINY, progress=stop)
     assert not out.exists() and list(tmp_path.iterdir()) == [used]
+
+
+def test_the_site_paired_file_by_file_is_the_site_paired_at_once(site, tmp_path):
+    """``recordings pairs`` pairs each file on its own (on worker processes) and copies the
+    parts into one file: the same rows, IDs, labels, metadata and summary as pairing every
+    track at once (``find_pairs`` on the whole site, then ``write_pairs``), floats to
+    rounding; one worker or two, the same file."""
+    from dataclasses import asdict, replace
+
+    import pandas as pd
+
+    from persuasive.recordings.formats import read_tracks
+    from persuasive.recordings.lanelet_map import annotate_pairs, read_map
+    from persuasive.recordings.pairs import PairParams, find_pairs, summary, write_pairs
+    from persuasive.recordings.streaming import pair_and_tracks, site_pairs
+    from persuasive.recordings.tracks import SmoothingParams, smooth_tracks
+
+    params, smoothing = PairParams(), SmoothingParams()
+    road = read_map(site / MAP_NAME)
+    whole = find_pairs(smooth_tracks(read_tracks([site]), smoothing), params)
+    whole = replace(whole, pairs=annotate_pairs(whole.pairs, road),
+                    road_map={"path": str(site / MAP_NAME), "origin": list(road.origin)})
+    at_once = tmp_path / "at-once.parquet"
+    write_pairs(at_once, whole, [site])
+    frame_0, meta_0 = read_pairs(at_once)
+    assert len(whole.pairs) > 10 and len(find_track_files([site])) == 2
+    for workers in (1, 2):
+        out = tmp_path / f"by-file-{workers}.parquet"
+        got = site_pairs([site], params, smoothing, (str(site / MAP_NAME), (0.0, 0.0)), out,
+                         workers)
+        frame, meta = read_pairs(out)
+        # the same rows; floats to rounding (the whole site's arc lengths are summed over
+        # more tracks): s within 1e-10 m, times and PETs within 1e-12 s
+        pd.testing.assert_frame_equal(frame, frame_0, check_exact=False, rtol=0, atol=1e-10)
+        for col in frame.columns:
+            if frame[col].dtype.kind not in "f":
+                assert frame[col].equals(frame_0[col]), col
+        assert meta == meta_0
+        info, info_0 = got.summary, summary(whole)
+        for key in ("pet_quantiles_s", "pet_area_quantiles_s"):
+            assert info.pop(key) == pytest.approx(info_0.pop(key), rel=0, abs=1e-9)
+        assert info == info_0
+        assert list(tmp_path.iterdir()).count(out) == 1 and not [
+            p for p in tmp_path.iterdir() if p.name.endswith(".parts")]  # scratch removed
+    # a pair of the second file, found again for a figure, is the site's pair
+    last = len(whole.pairs) - 1
+    pair, tracks = pair_and_tracks(got, find_track_files([site]), last, params, smoothing,
+                                   (str(site / MAP_NAME), (0.0, 0.0)))
+    assert pair.pair == last and pair.tracks == whole.pairs[last].tracks
+    assert asdict(pair)["pet_area_s"] == pytest.approx(asdict(whole.pairs[last])["pet_area_s"],
+                                                       rel=0, abs=1e-9)
+    # one worker or two: the same file, bit for bit
+    one, _ = read_pairs(tmp_path / "by-file-1.parquet")
+    two, _ = read_pairs(tmp_path / "by-file-2.parquet")
+    pd.testing.assert_frame_equal(one, two, check_exact=True)
+    assert tracks.n_tracks < whole.tracks.n_tracks

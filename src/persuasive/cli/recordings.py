@@ -115,15 +115,20 @@ def _print_summary(info: dict) -> None:
 @click.option("--map-origin", default="0,0", show_default=True, metavar="LAT,LON",
               help="The map's projection origin [deg] (INTERACTION: 0,0; inD: the "
                    "recording's latLocation,lonLocation).")
+@click.option("--workers", type=workers_type(), default=None,
+              help="Worker processes, one track file each at a time [all cores, at most the "
+                   "files]; the pairs do not depend on it.")
+@click.option("--quiet", is_flag=True, help="No progress bar over the files.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, speed_from,
-                  window, map_path, map_origin, as_json) -> None:
+                  window, map_path, map_origin, workers, quiet, as_json) -> None:
     """Find the crossing and merging pairs of recorded tracks (files or folders of
     INTERACTION vehicle_tracks_NNN.csv, inD NN_tracks.csv with NN_tracksMeta.csv)."""
     from .._files import check_output_file
-    from ..recordings.formats import read_tracks
-    from ..recordings.pairs import PairParams, find_pairs, pair_of, summary, write_pairs
-    from ..recordings.tracks import SPEED_SOURCES, SmoothingParams, smooth_tracks
+    from ..recordings.formats import find_track_files
+    from ..recordings.pairs import PairParams
+    from ..recordings.streaming import pair_and_tracks, site_pairs
+    from ..recordings.tracks import SPEED_SOURCES, SmoothingParams
 
     if speed_from not in SPEED_SOURCES:
         raise _BadInput(f"--speed-from = {speed_from!r} is not allowed; allowed: "
@@ -151,30 +156,29 @@ def pairs_command(paths, out, figure, pair_id, angle_min, angle_max, near_m, spe
         except ValueError:
             raise _BadInput(f"--map-origin = {map_origin!r} is out of range; allowed: LAT,LON "
                             "in degrees") from None
-        road_map = _guard(read_map, map_path, origin)
-    table = _guard(read_tracks, paths)
-    result = _guard(find_pairs, _guard(smooth_tracks, table, smoothing), params)
-    if not result.pairs:
-        raise _BadInput(f"no crossing pair: {result.tracks.n_tracks} vehicle tracks, "
-                        f"{result.candidates} candidate pairs, none crossing at "
+        road_map = (str(map_path), tuple(_guard(read_map, map_path, origin).origin))
+    files = _guard(find_track_files, paths)
+    workers = check_workers(workers, len(files))
+    bar = progress_bar(quiet or len(files) < 2, unit="file")
+    try:
+        site = _guard(site_pairs, paths, params, smoothing, road_map, out, workers, bar,
+                      pair_id if figure else None)
+    finally:
+        if bar is not None:
+            bar.close()  # type: ignore[attr-defined]
+    info = site.summary
+    if not info["pairs"]:
+        raise _BadInput(f"no crossing pair: {info['vehicle_tracks']} vehicle tracks, "
+                        f"{info['candidates']} candidate pairs, none crossing at "
                         f"[{angle_min:g}, {angle_max:g}] deg or merging with both approaching "
                         f"within {near_m:g} m at one time")
-    if road_map is not None:
-        from dataclasses import replace
-
-        from ..recordings.lanelet_map import annotate_pairs
-
-        result = replace(result, pairs=annotate_pairs(result.pairs, road_map),
-                         road_map={"path": str(map_path), "origin": list(road_map.origin)})
-    chosen = _guard(pair_of, result, pair_id) if figure else None
-    if out:
-        write_pairs(out, result, paths)
     if figure:
         from ..plots.files import save_figure
         from ..plots.recordings import pair_figure
 
-        save_figure(pair_figure(chosen, result.tracks), figure)
-    info = summary(result)
+        chosen, tracks = _guard(pair_and_tracks, site, files, pair_id, params, smoothing,
+                                road_map)
+        save_figure(pair_figure(chosen, tracks), figure)
     if as_json:
         click.echo(json.dumps(info))
         return

@@ -726,8 +726,10 @@ def evaluate(sites: Sequence[tuple[str, object]], split: Split,
     else:
         from ..sweep.runner import local_client, map_bounded
 
-        args = [(pairs, status, set(t), models, params, mode) for t in tests]
         with local_client(min(workers, len(tests))) as client:
+            # the pairs go to each worker once, not with every fold
+            shared = client.scatter((pairs, status), broadcast=True)
+            args = [(shared, set(t), models, params, mode) for t in tests]
             for i, fold in map_bounded(client, _fold_task, args, in_flight=workers):
                 done[i] = fold
                 if progress is not None:
@@ -737,7 +739,8 @@ def evaluate(sites: Sequence[tuple[str, object]], split: Split,
 
 
 def _fold_task(args) -> FoldResult:
-    return evaluate_fold(*args)
+    (pairs, status), test, models, params, mode = args
+    return evaluate_fold(pairs, status, test, models, params, mode)
 
 
 def score(split: Split, params: EvalParams, models: list[str], pairs: list[PairData],

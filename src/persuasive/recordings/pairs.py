@@ -623,7 +623,10 @@ def read_pairs(path):
     except Exception as exc:  # noqa: BLE001 - pyarrow raises several kinds for a bad file
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise RecordingError(f"pairs file {name!r} cannot be read: {text}") from None
-    raw = (table.schema.metadata or {}).get(PAIRS_METADATA)
+    # a file written part by part (persuasive.recordings.streaming) holds its final metadata
+    # among the file's key-value metadata, the schema's being the one it started with
+    raw = (pq.read_metadata(Path(path)).metadata or {}).get(PAIRS_METADATA) or \
+        (table.schema.metadata or {}).get(PAIRS_METADATA)
     missing = [c for c in (*PAIR_COLUMNS, *STEP_COLUMNS)
                if c not in table.column_names and c not in LATER_PAIR_COLUMNS]
     if raw is None or missing:
@@ -642,13 +645,39 @@ def read_pairs(path):
     return frame, meta
 
 
+@dataclass(frozen=True)
+class PairLabels:
+    """What :func:`summary_of` reads of a pair (a pair without its steps)."""
+
+    kind: str
+    angle_deg: float
+    pet_s: float
+    pet_area_s: float
+    first: str
+    second_slowed: bool | None
+    control: str
+
+    @classmethod
+    def of(cls, pair: Pair) -> PairLabels:
+        return cls(pair.kind, pair.angle_deg, pair.pet_s, pair.pet_area_s, pair.first,
+                   pair.second_slowed, pair.control)
+
+
 def summary(result: PairsResult) -> dict:
     """Counts and distributions of a set of pairs (what ``recordings pairs`` prints). The
     PETs' quantiles [s] over the pairs that define them: ``pet_area_quantiles_s`` of
     ``pet_area_s`` (at the conflict area), ``pet_quantiles_s`` of ``pet_s`` (on the
     occupancy intervals); ``pet_area_defined``, ``pet_defined``: how many pairs define
     each."""
-    pairs = result.pairs
+    return summary_of(result.pairs, result.tracks.n_tracks,
+                      int(np.unique(result.tracks.recording).size), result.candidates)
+
+
+def summary_of(pairs: Sequence, vehicle_tracks: int, recordings: int, candidates: int) -> dict:
+    """:func:`summary` from the pairs' labels alone (objects with ``kind``, ``angle_deg``,
+    ``pet_s``, ``pet_area_s``, ``first``, ``second_slowed`` and ``control``, such as
+    :class:`Pair` or :class:`PairLabels`) and the counts of tracks, recordings and candidate
+    pairs they came from."""
     kinds = [p.kind for p in pairs]
     angles = np.array([p.angle_deg for p in pairs if p.kind == CROSSING])
     merge_angles = np.array([p.angle_deg for p in pairs if p.kind == MERGE])
@@ -667,9 +696,9 @@ def summary(result: PairsResult) -> dict:
     hist = np.histogram(angles, edges)[0] if angles.size else np.zeros(edges.size - 1, int)
     slowed = [p.second_slowed for p in pairs if p.second_slowed is not None]
     return {
-        "vehicle_tracks": result.tracks.n_tracks,
-        "recordings": int(np.unique(result.tracks.recording).size),
-        "candidates": result.candidates,
+        "vehicle_tracks": int(vehicle_tracks),
+        "recordings": int(recordings),
+        "candidates": int(candidates),
         "pairs": len(pairs),
         "crossing": kinds.count(CROSSING),
         "merge": kinds.count(MERGE),
@@ -699,6 +728,7 @@ def pair_of(result: PairsResult, pair_id: int) -> Pair:
 
 
 __all__ = ["CROSSING", "FIRST_LABELS", "LATER_PAIR_COLUMNS", "MAP_COLUMNS", "MERGE",
-           "PAIRS_METADATA", "PAIR_COLUMNS", "Pair", "PairParams", "PairsResult", "STEP_COLUMNS",
-           "TRACK_COLUMNS", "candidates", "conflict_area", "find_pairs", "pair_of",
-           "pairs_frame", "post_encroachment", "read_pairs", "summary", "write_pairs"]
+           "PAIRS_METADATA", "PAIR_COLUMNS", "Pair", "PairLabels", "PairParams", "PairsResult",
+           "STEP_COLUMNS", "TRACK_COLUMNS", "candidates", "conflict_area", "find_pairs",
+           "pair_of", "pairs_frame", "post_encroachment", "read_pairs", "summary", "summary_of",
+           "write_pairs"]
