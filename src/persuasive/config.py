@@ -657,12 +657,17 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "right-before-left": {"priority": "right-before-left", "mix": (0.25, 0.5, 0.25)},
     "left-heavy": {"priority": "first-come", "mix": (0.6, 0.3, 0.1)},
 }
-#: The vehicle length a spec's fit is checked with [m] (:func:`arrivals` checks the real one).
+#: The vehicle length a spec's fit is checked with [m] (``persuasive.many.junction.arrivals``
+#: checks the real one).
 FIT_LENGTH_M = 5.0
+
+
 @dataclass(frozen=True)
 class JunctionSpec:
-    """A four-way junction and its arrivals (module docstring). Lengths in metres, speeds in
-    m/s; ``mix`` is the (left, straight, right) share of the humans' movements."""
+    """A four-way junction and its arrivals (``persuasive.many.junction``'s module docstring;
+    here, in the parameters layer, so that :class:`Config` checks its ``[junction]`` section
+    without importing ``persuasive.many``). Lengths in metres, speeds in m/s; ``mix`` is the
+    (left, straight, right) share of the humans' movements."""
 
     n_vehicles: int = 4  #: vehicles in the run, the AV included (>= 1)
     lanes: int = 1  #: lanes per direction on every arm (1 or 2)
@@ -819,8 +824,7 @@ def _junction_kinds(value) -> tuple[tuple[str, float], ...]:
 @dataclass(frozen=True)
 class JunctionParams:
     """The four-way unsignalised junction of ``scenario.kind = "junction"`` (docs/method.md
-    §15; ``persuasive.many.junction.JunctionSpec`` holds the meaning and checks of every
-    field). Every field unset takes the named variant's value, else the spec's default
+    §15; :class:`JunctionSpec` holds the meaning and checks of every field). Every field unset takes the named variant's value, else the spec's default
     (``variant`` unset: ``major``); the section is read only with ``scenario.kind =
     "junction"``. Lengths in metres, speeds in m/s, times in s."""
 
