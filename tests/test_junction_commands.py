@@ -149,13 +149,22 @@ def test_simulate_refuses_bad_junction_input_in_one_line(capsys, args, message):
     assert code == 2 and err.startswith(message) and len(err.strip().splitlines()) == 1
 
 
-def test_the_hv_option_sets_every_human_at_a_junction(capsys):
-    code, text, err = run_cli(capsys, "simulate", *SHORT, "--hv", "idm", "--json")
-    assert code == 0, err
+def test_the_hv_option_sets_every_human_at_a_junction(capsys, tmp_path):
+    """--hv is every human's kind at a junction, whether --scenario or a --config file names
+    the junction: the printed row is the idm crowd's run, not the lfg crowd's."""
     config = JUNCTION.with_overrides({"junction.hv_kinds": "idm"})
-    assert _same(json.loads(text)["av_through"], run_summary(config, 1)["av_through"])
-    world = JunctionWorld.of(config, 1)
-    assert world.arrivals.kinds[1:] == ("idm",) * 2
+    want, lfg = run_summary(config, 3), run_summary(JUNCTION, 3)
+    assert not _same(want, lfg)  # the two crowds' runs differ on this seed
+    assert JunctionWorld.of(config, 3).arrivals.kinds[1:] == ("idm",) * 2
+    toml = tmp_path / "junction.toml"
+    toml.write_text('mode = "corrected"\n[scenario]\nkind = "junction"\n'
+                    '[junction]\nn_vehicles = 3\nduration_s = 8.0\n')
+    for args in (SHORT, ("--config", toml)):
+        code, text, err = run_cli(capsys, "simulate", *args, "--hv", "idm", "--seed", 3,
+                                  "--json")
+        assert code == 0, err
+        got = {k: v for k, v in json.loads(text).items() if k in want}
+        assert _same(got, json.loads(json.dumps(want, default=str).replace("NaN", "null")))
 
 
 # -- plots ----------------------------------------------------------------------------------

@@ -217,9 +217,9 @@ def config_of(options: dict[str, Any]) -> Config:
     junction's options last (:func:`junction_config`), and a junction in corrected mode
     unless a mode is given (:func:`mode_given`)."""
     explicit = run_explicit(options)
-    hv = None
-    if options.get("scenario") == "junction" or options.get("vehicles") is not None:
-        hv = explicit.pop("hv.kind")  # the humans of a junction: junction.hv_kinds
+    # --hv is hv.kind for two vehicles, junction.hv_kinds at a junction (which the kind may
+    # come from --config or --set): applied once the scenario is known
+    hv = explicit.pop("hv.kind")
     config = build_config(options.get("config_file"), options.get("sets", ()), explicit)
     if hv is not None and config.scenario.kind != "junction":
         config = config.with_overrides({"hv.kind": hv})

@@ -49,8 +49,7 @@ def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, vehicl
     if as_json:
         click.echo(json.dumps(result))
         return
-    m = result["machine"]
-    click.echo(f"machine: {m['cpus']} cpus, {m['processor']}, Python {m['python']}")
+    _echo_machine(result)
     click.echo(f"game solve (libraries included): median {result['game_solve_us_median']:.1f} us,"
                f" p99 {result['game_solve_us_p99']:.1f} us")
     click.echo(f"{av} AV decision ({scenario}): median "
@@ -78,6 +77,11 @@ def bench(n_runs, repeats, full, workers, reference, sweep, av, scenario, vehicl
                    f"{result['reproduce_peak_rss_mb']:.0f} MB")
 
 
+def _echo_machine(result: dict) -> None:
+    m = result["machine"]
+    click.echo(f"machine: {m['cpus']} cpus, {m['processor']}, Python {m['python']}")
+
+
 def _bench_junction(scenario: str, vehicles: int | None, av: str, runs: int, full: bool,
                     reference: bool, sweep: bool, as_json: bool) -> None:
     """``bench --scenario junction``: :func:`persuasive.bench.bench_junction`."""
@@ -99,8 +103,7 @@ def _bench_junction(scenario: str, vehicles: int | None, av: str, runs: int, ful
     if as_json:
         click.echo(json.dumps(result))
         return
-    m = result["machine"]
-    click.echo(f"machine: {m['cpus']} cpus, {m['processor']}, Python {m['python']}")
+    _echo_machine(result)
     click.echo(f"junction, {result['vehicles']} vehicles, {av} AV with the {result['shield']} "
                f"shield, {result['runs']} runs ({result['steps']} steps)")
     click.echo(f"closed-loop step (every vehicle decides, all advance, every conflict "

@@ -50,6 +50,23 @@ def _guard(call, *args, **kwargs):
         raise _BadInput(str(exc)) from None
 
 
+def _smoothing_options(func):
+    """``--speed-from`` and ``--window``: the tracks' smoothing (``SmoothingParams``), shared
+    by every command that reads track files."""
+    for option in reversed([
+        click.option("--speed-from", "speed_from", default="file", show_default=True,
+                     metavar="SOURCE",
+                     help="Speed and acceleration from the files' velocities, smoothed "
+                          "('file'), or from the smoothed positions' derivatives "
+                          "('positions')."),
+        click.option("--window", type=int, default=7, show_default=True, metavar="SAMPLES",
+                     help="The Savitzky-Golay filter's window (odd, at least 3; 7 = 0.6 s "
+                          "at 10 Hz)."),
+    ]):
+        func = option(func)
+    return func
+
+
 @click.group()
 def recordings() -> None:
     """Real drivers from recorded tracks (INTERACTION, inD): crossing pairs, fit logs, the AV in
@@ -102,12 +119,7 @@ def _print_summary(info: dict) -> None:
               help="Largest crossing angle kept.")
 @click.option("--near-m", type=float, default=40.0, show_default=True, metavar="M",
               help="Both vehicles within this of the conflict point at one time.")
-@click.option("--speed-from", "speed_from", default="file", show_default=True,
-              metavar="SOURCE",
-              help="Speed and acceleration from the files' velocities, smoothed ('file'), or "
-                   "from the smoothed positions' derivatives ('positions').")
-@click.option("--window", type=int, default=7, show_default=True, metavar="SAMPLES",
-              help="The Savitzky-Golay filter's window (odd, at least 3; 7 = 0.6 s at 10 Hz).")
+@_smoothing_options
 @click.option("--map", "map_path", type=click.Path(dir_okay=False), default=None,
               metavar="FILE.osm",
               help="Lanelet2 map of the recordings' site: each pair's rule (right of way, "
@@ -492,12 +504,7 @@ def _print_envelope(result, info: dict, quantile: float) -> None:
 @click.option("--types", "types", multiple=True, type=click.Path(dir_okay=False),
               metavar="FILE", help="SUMO route or additional file whose vType elements the "
                                    "fcd files' vehicles use (fcd input only; repeatable).")
-@click.option("--speed-from", "speed_from", default="file", show_default=True,
-              metavar="SOURCE",
-              help="Speeds from the files' velocities, smoothed ('file'), or from the smoothed "
-                   "positions ('positions'), as recordings pairs.")
-@click.option("--window", type=int, default=7, show_default=True, metavar="SAMPLES",
-              help="The Savitzky-Golay filter's window (odd, at least 3), as recordings pairs.")
+@_smoothing_options
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write the whole result (.json).")
 @click.option("--json", "as_json", is_flag=True, help="Print the whole result as one JSON "
