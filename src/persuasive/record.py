@@ -200,6 +200,68 @@ class RunRecord:
         return {"av_decision_ms_median": float(np.median(t)),
                 "av_decision_ms_p99": float(np.percentile(t, 99))}
 
+    def trace(self):
+        """The run as the tables' N = 2 case (``persuasive.tables.Trace``; docs/method.md
+        §15.1): vehicle 0 the AV, 1 the human, on their scenario paths; one conflict row,
+        a :data:`~persuasive.tables.MERGE` where the lanes are shared past ``s = 0``, else a
+        :data:`~persuasive.tables.CROSSING`, both conflict points at ``s = 0`` and the paths'
+        occupancy intervals; ``through_m`` each path's ``clear_s``; the right of way the
+        configuration's ``responsibility.right_of_way``. The two-vehicle loop never takes a
+        vehicle off the road: every status is active. The collisions list holds at most one
+        event, at the first overlap, caused by the AV when the outcome's
+        ``collision_caused_by_av`` is; the human's opponent is the AV at every step.
+        ``persuasive.many.measures`` reads it as it reads a junction's run."""
+        from .packing import RIGHT_OF_WAY_IDS
+        from .safety.shield import verdict_name
+        from .tables import (CROSSING, MERGE, ConflictTable, Limits, RouteConflict, Row, Trace,
+                             Vehicles)
+
+        c, scene, states, log = self.config, self.scenario, self.states, self.log
+        dt = c.simulation.dt_s
+        n_steps = states.shape[0] - 1
+        kind = MERGE if scene.lane_shared else CROSSING
+        occ_av, occ_hv = tuple(scene.av.occupancy), tuple(scene.hv.occupancy)
+        row = Row(0, 1, kind, RouteConflict(kind, 0.0, 0.0, occ_av, occ_hv),
+                  RouteConflict(kind, 0.0, 0.0, occ_hv, occ_av), math.nan,
+                  int(RIGHT_OF_WAY_IDS[c.responsibility.right_of_way]))
+        vehicles = Vehicles(("av", c.hv.kind), (Limits.of(c, "av"), Limits.of(c, "hv")),
+                            states[0, [0, 2]].copy(), states[0, [1, 3]].copy(), np.zeros(2),
+                            np.array([scene.av.clear_s, scene.hv.clear_s]),
+                            {"path": ("av", "hv")})
+        codes = log.get("shield_verdict")
+        verdicts = ([None] * n_steps if codes is None
+                    else [verdict_name(int(v)) for v in codes])
+        collisions = []
+        if self.outcome.collision:
+            hit = np.flatnonzero(scene.collides(states[1:, 0], states[1:, 2]))
+            collisions.append(((int(hit[0]) + 1) * dt, 0, 1,
+                               bool(self.outcome.collision_caused_by_av)))
+        opponents = np.zeros((n_steps, 2), np.int16)
+        opponents[:, 0] = -1
+
+        def place(i: int, s: np.ndarray):
+            return scene.positions(("av", "hv")[i], s)
+
+        return Trace(vehicles, ConflictTable.of_rows([row], 2), self.seed, dt, n_steps * dt,
+                     True, states[:, [0, 2]], states[:, [1, 3]],
+                     np.column_stack([log["av_accel_mps2"], log["hv_accel_mps2"]]),
+                     np.zeros((n_steps + 1, 2), np.int8), n_steps, verdicts, collisions,
+                     float(self.outcome.min_gap_m), opponents, place)
+
+    def vehicles_frame(self):
+        """The run per step and vehicle (:meth:`trace`'s long table,
+        ``persuasive.tables.Trace.frame``): the same columns as a junction's run, with the
+        label ``path`` (``av`` or ``hv``)."""
+        return self.trace().frame()
+
+    def measures(self) -> dict[str, Any]:
+        """The measures of many vehicles (``persuasive.many.measures.summary``: wait-for
+        graph and deadlocks, waiting, clear times, PET, AV first per conflict) of this run,
+        read from :meth:`trace` as from a junction's run."""
+        from .many.measures import summary
+
+        return summary(self.trace())
+
     def frame(self):
         """The per-step log as a pandas DataFrame (one row per step)."""
         import pandas as pd

@@ -105,9 +105,9 @@ def run_summary(config: Config, seed: int) -> dict:
     ``interactions = K`` and ``by_interaction``, a list per :data:`BY_INTERACTION` value
     (``pa_hat_final`` only online) over the K interactions (what the sweeps and ``compare``
     store). With ``scenario.kind = "junction"``: the junction run's row
-    (``persuasive.many.measures.run_summary``)."""
+    (``persuasive.many.world.run_summary``)."""
     if config.scenario.kind == "junction":  # N vehicles: persuasive.many's row
-        from .many.measures import run_summary as junction_summary
+        from .many.world import run_summary as junction_summary
 
         return junction_summary(config, seed)
     k = config.simulation.interactions or 1

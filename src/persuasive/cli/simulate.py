@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import click
 
@@ -30,13 +31,28 @@ def write_log(record, path: str) -> None:
         record.save(path)
 
 
+def write_vehicles(frame, path: str) -> None:
+    """Write a run per step and vehicle (the tables' long format,
+    ``persuasive.tables.Trace.frame``): Parquet or CSV, by extension, atomically."""
+    from .._files import atomic_write
+
+    if path.endswith(".csv"):
+        atomic_write(path, lambda p: frame.to_csv(p, index=False))
+    else:
+        atomic_write(path, lambda p: frame.to_parquet(p, index=False))
+
+
 @click.command()
 @run_options(seed_help="Run seed.")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write the per-step log here: .parquet or .csv (the folder must exist).")
+@click.option("--vehicles-out", type=click.Path(dir_okay=False), default=None,
+              help="Write the run per step and vehicle here, in the same columns for two "
+                   "vehicles and for a junction (.parquet or .csv; a junction's --out writes "
+                   "the same).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--interactions", type=Count(1, 1000), default=None, help=INTERACTIONS_HELP)
-def simulate(out, as_json, interactions, **run) -> None:
+def simulate(out, vehicles_out, as_json, interactions, **run) -> None:
     """Simulate one closed-loop run (two vehicles, one conflict; or, with --scenario
     junction, the AV among --vehicles vehicles at a four-way junction, docs/guide/junction.md).
 
@@ -44,7 +60,6 @@ def simulate(out, as_json, interactions, **run) -> None:
     2); the same fields from --config or --set are run as given, and the summary line says
     which of them the run ignores.
     """
-    from .._files import check_output_file
     from ..simulation import ARRIVAL_LABELS, simulate as simulate_run
 
     config = config_of(run)
@@ -54,26 +69,27 @@ def simulate(out, as_json, interactions, **run) -> None:
         if interactions is not None:
             raise click.UsageError("--interactions repeats one human's encounter with the AV; "
                                    "a junction run has many humans (--scenario junction)")
-        _junction(config, run["seed"], out, as_json)
+        _junction(config, run["seed"], out, vehicles_out, as_json)
         return
     if interactions is not None:
         config = config.with_overrides({"simulation.interactions": interactions})
     if (config.simulation.interactions or 1) > 1:
-        if out:
-            raise click.UsageError("--out writes one run's log; with several interactions use "
+        if out or vehicles_out:
+            raise click.UsageError("--out and --vehicles-out write one run; with several "
+                                   "interactions use "
                                    "persuasive.simulation.simulate_interactions")
         compile_notice()
         _interactions(config, run["seed"], as_json)
         return
-    if out:
-        check_output_file(out, LOG_EXTENSIONS, "log")  # before any work
-        lock_output(out, "log")
+    outputs = _check_outputs(out, vehicles_out)
     compile_notice()
     clock = StudyClock()
     record = simulate_run(config, run["seed"])
     elapsed = clock.seconds
     if out:
         write_log(record, out)
+    if vehicles_out:
+        write_vehicles(record.vehicles_frame(), vehicles_out)
     summary = record.summary()
     compile_report(clock)
     if as_json:
@@ -101,22 +117,42 @@ def simulate(out, as_json, interactions, **run) -> None:
     elif config.av.kind in ("persuasive", "passive", "cv"):
         changes += f"; steps where the chance constraint failed: {o.infeasible_steps}"
     click.echo(changes)
-    click.echo(f"time: {elapsed:.3f} s" + (f"; per-step log written to {out}" if out else ""))
+    click.echo(f"time: {elapsed:.3f} s" + outputs)
 
 
-def _junction(config, seed: int, out: str | None, as_json: bool) -> None:
+def _check_outputs(*paths: str | None) -> str:
+    """Check and lock the output files before any work (``--out``, ``--vehicles-out``; they
+    may not be one file); the summary line's words for them."""
+    from .._files import check_output_file
+
+    given = [p for p in paths if p]
+    if len(given) == 2 and os.path.abspath(given[0]) == os.path.abspath(given[1]):
+        raise click.UsageError(f"--out and --vehicles-out name the same file {given[0]}; "
+                               "allowed: two different files")
+    for p in given:
+        check_output_file(p, LOG_EXTENSIONS, "log")
+        lock_output(p, "log")
+    words = []
+    if paths[0]:
+        words.append(f"per-step log written to {paths[0]}")
+    if len(paths) > 1 and paths[1]:
+        words.append(f"per-vehicle table written to {paths[1]}")
+    return "".join("; " + w for w in words)
+
+
+def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
+              as_json: bool) -> None:
     """``simulate --scenario junction``: one seed of the junction (the AV's run and, for the
     delay it causes, the same seed without it), its row as text or JSON; ``--out`` writes
-    the AV's run per step and vehicle (``JunctionWorld.frame``)."""
+    the AV's run per step and vehicle (``JunctionWorld.frame``), and so does
+    ``--vehicles-out``."""
     import math
 
-    from .._files import atomic_write, check_output_file, json_safe
+    from .._files import json_safe
     from ..many.measures import summary
     from ..many.world import JunctionWorld
 
-    if out:
-        check_output_file(out, LOG_EXTENSIONS, "log")  # before any work
-        lock_output(out, "log")
+    outputs = _check_outputs(out, vehicles_out)
     spec = config.junction_spec
     junction_compile_notice()
     clock = StudyClock()
@@ -124,12 +160,11 @@ def _junction(config, seed: int, out: str | None, as_json: bool) -> None:
     reference = JunctionWorld.of(config, seed, with_av=False).run()
     elapsed = clock.seconds
     row = summary(world, reference)
-    if out:
+    if out or vehicles_out:
         frame = world.frame()
-        if out.endswith(".csv"):
-            atomic_write(out, lambda p: frame.to_csv(p, index=False))
-        else:
-            atomic_write(out, lambda p: frame.to_parquet(p, index=False))
+        for path in (out, vehicles_out):
+            if path:
+                write_vehicles(frame, path)
     compile_report(clock)
     if as_json:
         click.echo(json.dumps(json_safe({
@@ -163,8 +198,7 @@ def _junction(config, seed: int, out: str | None, as_json: bool) -> None:
                f"{row['throughput_veh_h']:.0f} veh/h; min PET of the AV "
                f"{secs(row['min_pet_av_s'])}, of all {secs(row['min_pet_s'])}; AV's closest "
                f"gap {row['min_gap_av_m']:.2f} m")
-    click.echo(f"time: {elapsed:.3f} s (both runs)"
-               + (f"; per-step log written to {out}" if out else ""))
+    click.echo(f"time: {elapsed:.3f} s (both runs)" + outputs)
 
 
 def _interactions(config, seed: int, as_json: bool) -> None:

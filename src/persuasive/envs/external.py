@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Hashable, Sequence
 
 import numpy as np
@@ -49,60 +49,8 @@ from ..packing import RIGHT_OF_WAY_IDS, SHIELD_KIND_IDS
 from ..safety import shield as sh
 from ..safety.filter import ShieldFilter
 from ..safety.responsibility import POS_TOL_M, DutyWatch
-
-#: Kinds of conflict: the paths cross once; the other joins the ego's lane (a merge); the
-#: other is ahead in the ego's lane (follow).
-CROSSING, MERGE, FOLLOW = "crossing", "merge", "follow"
-
-
-@dataclass(frozen=True)
-class Limits:
-    """A vehicle's size and actuation limits."""
-
-    length_m: float
-    width_m: float
-    u_min_mps2: float
-    u_max_mps2: float
-    v_min_mps: float
-    v_max_mps: float
-
-    @classmethod
-    def of(cls, config: Config, who: str) -> Limits:
-        v = config.vehicle_of(who)
-        return cls(v.length_m, v.width_m, v.u_min_mps2, v.u_max_mps2, v.v_min_mps, v.v_max_mps)
-
-
-@dataclass(frozen=True)
-class Conflict:
-    """One outside vehicle on its conflict with the ego's path (module docstring)."""
-
-    key: Hashable  #: the vehicle's identity in the simulator
-    kind: str  #: :data:`CROSSING`, :data:`MERGE` or :data:`FOLLOW`
-    ego_s_m: float  #: the ego's position relative to the conflict point, along its path [m]
-    other_s_m: float  #: the other's, along its own path [m]
-    other_v_mps: float  #: the other's speed [m/s]
-    #: where the ego's footprint can touch the other's path [m] (a merge: up to the merge
-    #: point, 0; follow: unused)
-    ego_occupancy: tuple[float, float] = (-math.inf, math.inf)
-    #: where the other's footprint can touch the ego's path [m] (a merge: its side zone)
-    other_occupancy: tuple[float, float] = (-math.inf, math.inf)
-    other: Limits | None = None  #: its limits (default: the configuration's human vehicle)
-    #: the adapter's own data; ``"stand_in": True`` marks a vehicle not in the simulator yet
-    #: (highway-env's spawns), which the shield checks and the planner does not plan against;
-    #: ``"placeholder": True`` one that stands for vehicles still to be inserted (SUMO's
-    #: entries), planned against but, like a stand-in, no driver with duties under the
-    #: responsibility rule (``persuasive.safety.responsibility``); ``"wreck": True`` a
-    #: crashed vehicle, a standing obstacle with no duty either (highway-env's)
-    extra: dict = field(default_factory=dict, compare=False)
-    #: the ego's yield line relative to the conflict point [m]: where the shield makes it
-    #: stand when it yields (docs/method.md §12.8; e.g. before a junction's polygon); None:
-    #: ``ego_occupancy[0]`` less the configuration's ``av.yield_line_m``; never after
-    #: ``ego_occupancy[0]``
-    ego_line_m: float | None = None
-    #: who has the right of way here under the responsibility rule (docs/method.md §12.13):
-    #: 1 the ego, -1 the other, 0 neither (the simulator's own road, e.g. highway-env's lane
-    #: priorities); None: the configuration's ``responsibility.right_of_way``
-    right_of_way: float | None = None
+# the conflict's data, shared with the closed loops' tables (persuasive.tables)
+from ..tables import CROSSING, FOLLOW, MERGE, Conflict, Limits, RouteConflict
 
 
 def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
@@ -355,40 +303,6 @@ class Polyline:
         return s, self.at(s)
 
 
-@dataclass(frozen=True)
-class RouteConflict:
-    """The conflict of another route with the ego's, in each route's arc length: the kind,
-    the conflict point on each route (``ego_at_m``, ``other_at_m``) and the occupancy
-    intervals relative to it (what :class:`Conflict` takes)."""
-
-    kind: str
-    ego_at_m: float
-    other_at_m: float
-    ego_occupancy: tuple[float, float]
-    other_occupancy: tuple[float, float]
-    #: the ego's yield line relative to its conflict point (:attr:`Conflict.ego_line_m`;
-    #: None: the configuration's)
-    ego_line_m: float | None = None
-
-    def conflict(self, key: Hashable, ego_arc_m: float, other_arc_m: float, other_v_mps: float,
-                 other: Limits | None = None, extra: dict | None = None,
-                 ego_occupancy: tuple[float, float] | None = None) -> Conflict:
-        """The :class:`Conflict` of vehicles whose centres are at these arc lengths of their
-        routes. A merge the ego has passed (it is in the shared lane) with the other ahead
-        is a :data:`FOLLOW` conflict. ``ego_occupancy``: the ego's interval to hand on in
-        place of :attr:`ego_occupancy` (e.g. widened for a simulator's integration; a
-        follow conflict keeps its own)."""
-        s_R, s_H = ego_arc_m - self.ego_at_m, other_arc_m - self.other_at_m
-        kind = self.kind
-        occupancy = self.ego_occupancy if ego_occupancy is None else ego_occupancy
-        if kind == MERGE and s_R >= self.ego_occupancy[1] and s_H > s_R:
-            kind, occupancy = FOLLOW, self.ego_occupancy
-        return Conflict(key, kind, float(s_R), float(s_H), float(other_v_mps),
-                        occupancy, self.other_occupancy, other,
-                        extra if extra is not None else {},
-                        ego_line_m=None if kind == FOLLOW else self.ego_line_m)
-
-
 def route_conflict(ego: Polyline, other: Polyline, ego_size: tuple[float, float],
                    other_size: tuple[float, float], lateral_margin_m: float = 0.5,
                    long_margin_m: float = 0.05, merge_at: tuple[float, float] | None = None,
@@ -444,7 +358,6 @@ def route_conflict(ego: Polyline, other: Polyline, ego_size: tuple[float, float]
     return RouteConflict(CROSSING, a0, b0,
                          (float(a.min()) - widen_e - a0, float(a.max()) + widen_e - a0),
                          (float(b.min()) - widen_o - b0, float(b.max()) + widen_o - b0))
-
 
 
 __all__ = ["CROSSING", "FOLLOW", "MERGE", "Conflict", "Decision", "ExternalPlanner", "Limits",

@@ -1,4 +1,7 @@
-"""Liveness and safety of a run of many vehicles (docs/method.md §15.5).
+"""Liveness and safety of a run of many vehicles (docs/method.md §15.5), read from the run's
+tables (``persuasive.tables.Trace``): a junction's run (``JunctionWorld.trace``) or a
+two-vehicle run, their N = 2 case (``persuasive.record.RunRecord.trace``). Every function
+takes a trace or a world that has one.
 
 - **Wait-for graph** (:func:`wait_edges`): at a step, vehicle ``i`` waits for ``j`` when ``i``
   is slower than ``WAIT_V_MPS`` before leaving the box, and either ``j`` is ahead of it in a
@@ -29,8 +32,7 @@ import math
 
 import numpy as np
 
-from ..envs.external import CROSSING, FOLLOW, MERGE
-from .world import ACTIVE, CRASHED, DONE, WAIT_V_MPS, JunctionWorld
+from ..tables import ACTIVE, CRASHED, CROSSING, DONE, FOLLOW, MERGE, WAIT_V_MPS, Trace
 
 #: A follower within this bumper gap of its leader waits for it [m].
 FOLLOW_GAP_M = 15.0
@@ -41,8 +43,14 @@ APPROACH_M = 20.0
 DEADLOCK_S = 5.0
 
 
-def clear_times(world: JunctionWorld) -> np.ndarray:
+def _trace(world) -> Trace:
+    """The trace of a world (``JunctionWorld``), or the trace itself."""
+    return world if isinstance(world, Trace) else world.trace()
+
+
+def clear_times(world: Trace) -> np.ndarray:
     """Per vehicle: the time it left the box [s] (NaN: never), linear between steps."""
+    world = _trace(world)
     S, dt = world.S, world.dt
     out = np.full(world.n, np.nan)
     for i in range(world.n):
@@ -76,8 +84,9 @@ def free_flow_s(s0: float, v0: float, s1: float, u_max: float, v_max: float) -> 
     return (v_max - v0) / u_max + (d - d_acc) / v_max
 
 
-def wait_edges(world: JunctionWorld, k: int) -> list[tuple[int, int]]:
+def wait_edges(world: Trace, k: int) -> list[tuple[int, int]]:
     """The wait-for graph at step ``k`` (module docstring), as ``(waiter, waited for)``."""
+    world = _trace(world)
     s, v, st = world.S[k], world.V[k], world.STATUS[k]
     waiting = [(st[i] == ACTIVE and v[i] < WAIT_V_MPS and s[i] < world.through_m(i))
                for i in range(world.n)]
@@ -120,13 +129,14 @@ def _may_cycle(edges: list[tuple[int, int]]) -> bool:
     return False
 
 
-def deadlock(world: JunctionWorld, hold_s: float = DEADLOCK_S
+def deadlock(world: Trace, hold_s: float = DEADLOCK_S
              ) -> tuple[float, tuple[int, ...]] | None:
     """The first deadlock of the run (module docstring): ``(time it began [s], members)``,
     or None."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
+    world = _trace(world)
     hold = max(1, int(round(hold_s / world.dt)))
     current: frozenset = frozenset()
     since = 0
@@ -147,8 +157,9 @@ def deadlock(world: JunctionWorld, hold_s: float = DEADLOCK_S
     return None
 
 
-def waiting_s(world: JunctionWorld) -> np.ndarray:
+def waiting_s(world: Trace) -> np.ndarray:
     """Per vehicle: its waiting time [s] (module docstring)."""
+    world = _trace(world)
     through = np.array([world.through_m(i) for i in range(world.n)])
     S, V = world.S[: world.k + 1], world.V[: world.k + 1]
     with np.errstate(invalid="ignore"):
@@ -156,14 +167,15 @@ def waiting_s(world: JunctionWorld) -> np.ndarray:
     return w.sum(axis=0) * world.dt
 
 
-def pets(world: JunctionWorld) -> list[tuple[int, int, float]]:
+def pets(world: Trace) -> list[tuple[int, int, float]]:
     """``(i, j, PET [s])`` of every crossing and merge both vehicles passed."""
     return [(i, j, abs(ti - tj)) for i, j, ti, tj in passings(world)]
 
 
-def passings(world: JunctionWorld) -> list[tuple[int, int, float, float]]:
+def passings(world: Trace) -> list[tuple[int, int, float, float]]:
     """``(i, j, t_i, t_j)``: when each centre passed its conflict point [s] (linear between
     steps), for every crossing and merge both vehicles passed."""
+    world = _trace(world)
     S, dt = world.S[: world.k + 1], world.dt
     out = []
 
@@ -185,11 +197,13 @@ def passings(world: JunctionWorld) -> list[tuple[int, int, float, float]]:
     return out
 
 
-def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
+def summary(world: Trace, reference: Trace | None = None,
             step_ms: np.ndarray | None = None) -> dict:
     """One row of a study: the run's outcome and measures (module docstring);
     ``reference``: the same seed without the AV (for the delay it causes)."""
-    spec, dt = world.spec, world.dt
+    world = _trace(world)
+    reference = None if reference is None else _trace(reference)
+    dt = world.dt
     t_end = world.k * dt
     clear = clear_times(world)
     n = world.n
@@ -199,7 +213,7 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
     n_through = int(through.sum())
     last = float(np.nanmax(clear)) if n_through else math.nan
     throughput = 3600.0 * n_through / (last if n_through == (n if world.with_av else n - 1)
-                                       and last > 0 else spec.duration_s)
+                                       and last > 0 else world.duration_s)
     lock = deadlock(world)
     wait = waiting_s(world)
     passed = passings(world)
@@ -212,8 +226,8 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
         "steps": world.k,
         "av_through": bool(through[0]),
         "av_clear_s": float(clear[0]),
-        "av_delay_s": float(clear[0] - world.t0[0] - free_flow_s(world.arrivals.s0_m[0],
-                                                   world.arrivals.v0_mps[0],
+        "av_delay_s": float(clear[0] - world.t0[0] - free_flow_s(world.vehicles.s0_m[0],
+                                                   world.vehicles.v0_mps[0],
                                                    world.through_m(0), av.u_max_mps2,
                                                    av.v_max_mps)),
         "av_collisions": sum(1 for _, i, _, _ in world.collisions if i == 0),
@@ -240,9 +254,9 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
         "t_end_s": t_end,
     }
     if reference is not None:
-        with_av = np.where(np.isfinite(clear[1:]), clear[1:], spec.duration_s)
+        with_av = np.where(np.isfinite(clear[1:]), clear[1:], world.duration_s)
         ref = clear_times(reference)[1:]
-        without = np.where(np.isfinite(ref), ref, spec.duration_s)
+        without = np.where(np.isfinite(ref), ref, reference.duration_s)
         row["caused_delay_s"] = float(np.mean(with_av - without)) if n > 1 else 0.0
     if step_ms is not None and len(step_ms):
         row["step_ms_median"] = float(np.median(step_ms))
@@ -251,15 +265,5 @@ def summary(world: JunctionWorld, reference: JunctionWorld | None = None,
     return {k: v.item() if isinstance(v, np.generic) else v for k, v in row.items()}
 
 
-def run_summary(config, seed: int) -> dict:
-    """The row of ``seed`` for a configuration with ``scenario.kind = "junction"``
-    (``persuasive.many.study.run_seed`` on :attr:`Config.junction_spec`, without the step
-    times, so that it is the same in every process: what
-    ``persuasive.simulation.run_summary`` returns for it)."""
-    world = JunctionWorld.of(config, seed).run()
-    reference = JunctionWorld.of(config, seed, with_av=False).run()
-    return summary(world, reference)
-
-
 __all__ = ["APPROACH_M", "DEADLOCK_S", "FOLLOW_GAP_M", "clear_times", "deadlock", "free_flow_s",
-           "passings", "pets", "run_summary", "summary", "wait_edges", "waiting_s"]
+           "passings", "pets", "summary", "wait_edges", "waiting_s"]

@@ -18,8 +18,8 @@ import numpy as np
 
 from ..config import Config
 from .junction import JunctionSpec
-from .measures import run_summary, summary
-from .world import JunctionWorld, warm_up
+from .measures import summary
+from .world import JunctionWorld, run_summary, warm_up
 
 
 def run_seed(config: Config, spec: JunctionSpec, seed: int) -> tuple[dict, np.ndarray]:

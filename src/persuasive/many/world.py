@@ -53,39 +53,20 @@ from typing import Hashable
 import numpy as np
 
 from ..config import Config, ConfigError
-from ..envs.external import (CROSSING, FOLLOW, MERGE, Conflict, ExternalPlanner, Limits,
-                             RouteConflict, idm_follow, route_conflict)
+from ..envs.external import ExternalPlanner, idm_follow, route_conflict
 from ..kinematics import saturated_step
 from ..policies.kinds import HV as _HV
 from ..policies.kinds import LOG_SIZE
+from ..tables import (ACTIVE, CRASHED, CROSSING, DONE, FOLLOW, MERGE, PENDING, WAIT_V_MPS,
+                      Conflict, ConflictTable, Limits, RouteConflict, Row, Trace, Vehicles)
 from .junction import (ARMS, Arrivals, JunctionSpec, Route, arrivals, pair_config, possible_routes,
                        right_of_way)
 
-#: Vehicle status codes (PENDING: arrives later, not on the road yet).
-ACTIVE, DONE, CRASHED, PENDING = 0, 1, 2, 3
 #: Conflict kind codes of the flat row views (:meth:`JunctionWorld._prepare_views`).
 K_FOLLOW, K_MERGE, K_CROSSING = 0, 1, 2
 KIND_IDS = {FOLLOW: K_FOLLOW, MERGE: K_MERGE, CROSSING: K_CROSSING}
 #: The gap between two routes' centre lines laid end to end (:meth:`JunctionWorld.poses`) [m].
 _LINE_SPACING_M = 1000.0
-#: A vehicle slower than this waits [m/s] (the wait-for graph, ``persuasive.many.measures``).
-WAIT_V_MPS = 0.5
-
-
-@dataclass(frozen=True)
-class Row:
-    """One conflict (module docstring): vehicles ``i < j``; ``ij`` is the conflict seen from
-    ``i`` (``i`` the ego of :class:`~persuasive.envs.external.RouteConflict`), ``ji`` from
-    ``j``; ``shared_until_m``: for a follow row, the arc up to which the lane is shared;
-    ``priority``: +1 ``i`` has the right of way, -1 ``j``, 0 neither."""
-
-    i: int
-    j: int
-    kind: str
-    ij: RouteConflict | None
-    ji: RouteConflict | None
-    shared_until_m: float
-    priority: int
 
 
 @lru_cache(maxsize=4096)
@@ -110,14 +91,6 @@ def _route_pair(a: Route, b: Route, size_a: tuple[float, float], size_b: tuple[f
     ab = replace(ab, ego_line_m=min(a.entry_m - ab.ego_at_m, ab.ego_occupancy[0]))
     ba = replace(ba, ego_line_m=min(b.entry_m - ba.ego_at_m, ba.ego_occupancy[0]))
     return kind, ab, ba, math.nan
-
-
-@dataclass
-class ConflictTable:
-    """Every conflict of a run (module docstring) and, per vehicle, the rows it is in."""
-
-    rows: list[Row]
-    of: list[list[int]]  #: per vehicle: indices of its rows
 
 
 def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits]) -> ConflictTable:
@@ -592,51 +565,35 @@ class JunctionWorld:
             return s_av - rc.ego_at_m >= 0.0 and s_av - rc.ego_at_m > s_h - rc.other_at_m
         return False
 
-    def frame(self):
-        """The run so far per step and vehicle, as a pandas DataFrame (long format, one row
-        per vehicle on the road at a step): ``step``, ``t_s``, ``vehicle`` (0 the AV),
-        ``kind`` (``av`` or the human's), ``arm``, ``movement``, ``lane``, ``s_m`` (arc
-        length along its route), ``v_mps``,
-        ``a_mps2`` (over the step that follows; NaN at the last), ``x_m``, ``y_m``,
-        ``heading_rad`` and ``opponent`` (the vehicle a human played that step, -1: none)."""
-        import pandas as pd
+    def vehicles(self) -> Vehicles:
+        """The vehicles table (``persuasive.tables``): the AV (vehicle 0) and the arrivals."""
+        arr = self.arrivals
+        through = np.array([self.through_m(i) for i in range(self.n)])
+        return Vehicles(("av", *arr.kinds[1:]), tuple(self.limits), arr.s0_m, arr.v0_mps,
+                        arr.t0_s, through,
+                        {"arm": tuple(ARMS[r.arm] for r in self.routes),
+                         "movement": tuple(r.movement for r in self.routes),
+                         "lane": tuple(r.lane for r in self.routes)})
 
-        n_k = self.k + 1
-        cols: dict[str, list] = {name: [] for name in (
-            "step", "t_s", "vehicle", "kind", "arm", "movement", "lane", "s_m",
-            "v_mps", "a_mps2", "x_m", "y_m", "heading_rad", "opponent")}
-        for i, r in enumerate(self.routes):
-            s = self.S[:n_k, i]
-            on = np.isfinite(s)
-            if not on.any():
-                continue
-            k = np.flatnonzero(on)
-            sk = s[k]
-            p = r.line.at(np.concatenate([sk, sk - 0.25, sk + 0.25]))
-            m = k.size
-            d = p[2 * m:] - p[m:2 * m]
-            a = np.full(m, np.nan)
-            inside = k < self.A.shape[0]
-            a[inside] = self.A[k[inside], i]
-            opp = np.full(m, -1, np.int64)
-            opp[inside] = self.opponents[k[inside], i]
-            cols["step"].append(k)
-            cols["t_s"].append(k * self.dt)
-            cols["vehicle"].append(np.full(m, i))
-            cols["kind"].append(np.full(m, "av" if i == 0 else self.arrivals.kinds[i],
-                                        dtype=object))
-            cols["arm"].append(np.full(m, ARMS[r.arm], dtype=object))
-            cols["movement"].append(np.full(m, r.movement, dtype=object))
-            cols["lane"].append(np.full(m, r.lane))
-            cols["s_m"].append(sk)
-            cols["v_mps"].append(self.V[k, i])
-            cols["a_mps2"].append(a)
-            cols["x_m"].append(p[:m, 0])
-            cols["y_m"].append(p[:m, 1])
-            cols["heading_rad"].append(np.arctan2(d[:, 1], d[:, 0]))
-            cols["opponent"].append(opp)
-        frame = pd.DataFrame({name: np.concatenate(v) if v else [] for name, v in cols.items()})
-        return frame.sort_values(["step", "vehicle"], kind="stable").reset_index(drop=True)
+    def _place(self, i: int, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vehicle ``i``'s centres and headings at arc lengths ``s`` (the heading: the chord
+        of its centre line 0.25 m either side)."""
+        m = s.size
+        p = self.routes[i].line.at(np.concatenate([s, s - 0.25, s + 0.25]))
+        d = p[2 * m:] - p[m:2 * m]
+        return p[:m, 0], p[:m, 1], np.arctan2(d[:, 1], d[:, 0])
+
+    def trace(self) -> Trace:
+        """The run so far as the tables' trace (``persuasive.tables.Trace``; its arrays are
+        this world's, not copies)."""
+        return Trace(self.vehicles(), self.table, self.seed, self.dt, self.spec.duration_s,
+                     self.with_av, self.S, self.V, self.A, self.STATUS, self.k, self.verdicts,
+                     self.collisions, self.min_gap_av_m, self.opponents, self._place)
+
+    def frame(self):
+        """The run so far per step and vehicle (``persuasive.tables.Trace.frame``; the labels
+        ``arm``, ``movement``, ``lane``)."""
+        return self.trace().frame()
 
     @classmethod
     def of(cls, config: Config, seed: int, with_av: bool = True) -> JunctionWorld:
@@ -660,5 +617,18 @@ def warm_up(config: Config) -> None:
     JunctionWorld(config, JunctionSpec(n_vehicles=3, duration_s=1.0), 0).run()
 
 
+def run_summary(config: Config, seed: int) -> dict:
+    """The row of ``seed`` for a configuration with ``scenario.kind = "junction"`` (what
+    ``persuasive.many.study.run_seed`` returns for :attr:`Config.junction_spec`, without the
+    step times, so that it is the same in every process: what
+    ``persuasive.simulation.run_summary`` returns for it)."""
+    from .measures import summary
+
+    world = JunctionWorld.of(config, seed).run()
+    reference = JunctionWorld.of(config, seed, with_av=False).run()
+    return summary(world, reference)
+
+
 __all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "KIND_IDS",
-           "PENDING", "Row", "StepInfo", "WAIT_V_MPS", "conflict_table", "warm_up"]
+           "PENDING", "Row", "StepInfo", "WAIT_V_MPS", "conflict_table", "run_summary",
+           "warm_up"]
