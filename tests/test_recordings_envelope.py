@@ -438,3 +438,44 @@ def test_replay_command_prints_the_premise_per_envelope(capsys, three_drivers):
         "within in 2"]
     code, out, _ = run_cli(capsys, "recordings", "replay", pairs, "--seat", "1", "--json")
     assert json.loads(out)["premise_by_envelope"]["real-driver"]["runs"] == 2
+
+
+def test_a_named_envelope_is_a_configuration_choice_the_shield_reads(capsys):
+    """``hv.envelope`` sets the human's braking, acceleration and top speed from the same
+    table the recordings measure against; the shield's human limits are those; unset, every
+    configuration keeps its text and digest."""
+    from persuasive import packing as slot
+    from persuasive.config import HUMAN_ENVELOPES, ConfigError
+    from persuasive.record import static_setup
+    from persuasive.safety import shield as sh
+
+    from _cli import run_cli
+
+    base = Config(mode="corrected")
+    real = base.with_overrides({"hv.envelope": "real-driver"})
+    hv = real.vehicle_of("hv")
+    assert (hv.u_min_mps2, hv.u_max_mps2, hv.v_max_mps) == HUMAN_ENVELOPES["real-driver"][:3]
+    assert real.vehicle_of("av") == base.vehicle_of("av")
+    assert hv.length_m == base.vehicle_of("hv").length_m
+    for name, env in ENVELOPES.items():
+        if name != "paper":
+            assert (env.u_min_mps2, env.u_max_mps2, env.v_max_mps, env.source) == \
+                HUMAN_ENVELOPES[name]
+    assert "envelope" not in base.to_toml() and "envelope" in real.to_toml()
+    import tomllib
+
+    assert Config.from_dict(tomllib.loads(real.to_toml())) == real
+    # the shield's conflict row carries the envelope (widened by the acceleration noise)
+    _, P_av, P_hv, _ = static_setup(real)
+    row = np.zeros(sh.N_CONFLICT)
+    sh.conflict_vector(P_av, P_hv, row)
+    w = P_av[slot.ACCEL_NOISE]
+    assert (row[sh.C_H_UMIN], row[sh.C_H_UMAX], row[sh.C_H_VMAX]) == (-3.7 - w, 3.5 + w, 16.5)
+    # refused: a name not in the table; the envelope with the fields it sets
+    with pytest.raises(ConfigError, match=r"hv.envelope = 'moon'.*sumo \| real-driver"):
+        base.with_overrides({"hv.envelope": "moon"})
+    with pytest.raises(ConfigError, match="hv.vehicle.u_min_mps2, which is set too"):
+        base.with_overrides({"hv.envelope": "sumo", "hv.vehicle.u_min_mps2": -3.0})
+    base.with_overrides({"hv.envelope": "sumo", "hv.vehicle.length_m": 4.0})  # not its field
+    code, out, err = run_cli(capsys, "simulate", "--set", "hv.envelope=moon")
+    assert code == 2 and "hv.envelope" in err and len(err.strip().splitlines()) == 1

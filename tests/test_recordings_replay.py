@@ -358,3 +358,32 @@ def test_replay_on_worker_processes_is_the_same_bit_for_bit(capsys, simulated, t
     assert seen == [(1, 3), (2, 3), (3, 3)]
     code, _, err = run_cli(capsys, "recordings", "replay", pairs, "--workers", 2)
     assert code == 0 and "3/3" in err and "pair" in err, err
+
+
+def test_the_real_driver_envelope_is_what_the_shield_and_the_premise_read(tmp_path, capsys):
+    """``--envelope real-driver`` (``hv.envelope``): the driver who brakes at -4 m/s^2 is
+    beyond the paper's envelope and beyond real drivers' -3.7 only while it brakes; the
+    human's limits the run and the premise read are the named envelope's."""
+    brake = np.concatenate([np.full(20, 9.0), np.linspace(9.0, 3.0, 16), np.full(150, 3.0)])
+    write(tmp_path / "vehicle_tracks_000.csv", straight(1, (-50.0, 0.0), 0.0, [9.0] * 186),
+          straight(2, (0.0, -60.0), 90.0, brake))
+    frame = pairs_frame(pairs_of(tmp_path).pairs)
+    paper = replay_pairs(frame, ReplaySettings(seats=(1,))).runs[0]
+    real = replay_pairs(frame, ReplaySettings(seats=(1,), envelope="real-driver")).runs[0]
+    assert (paper.u_min_mps2, paper.u_max_mps2) == (-2.0, 1.0)
+    assert (real.u_min_mps2, real.u_max_mps2) == (-3.7, 3.5)
+    assert 0 < real.excess_steps < paper.excess_steps  # only the hardest braking is beyond
+    # the same, through the command line; a name that is not an envelope is one line, exit 2
+    pairs = tmp_path / "pairs.parquet"
+    write_pairs(pairs, pairs_of(tmp_path), [str(tmp_path)])
+    code, text, err = run_cli(capsys, "recordings", "replay", pairs, "--seat", "1",
+                              "--envelope", "real-driver", "--json", "--quiet")
+    assert code == 0, err
+    import json
+
+    info = json.loads(text)
+    assert info["human_envelope"] == "real-driver"
+    assert info["envelope"]["excess_steps"] == real.excess_steps
+    code, text, err = run_cli(capsys, "recordings", "replay", pairs, "--envelope", "moon")
+    assert code == 2 and "--envelope = 'moon' is not allowed" in err
+    assert len(err.strip().splitlines()) == 1

@@ -553,12 +553,46 @@ class HVParams:
     replay: ReplayParams = field(default_factory=ReplayParams)
     random: RandomHumanParams = field(default_factory=RandomHumanParams)
     vehicle: VehicleOverrides = field(default_factory=VehicleOverrides)
+    #: a named human envelope (:data:`HUMAN_ENVELOPES`: ``sumo`` | ``real-driver``) for the
+    #: human's braking, acceleration and top speed: what the simulated human can do and what
+    #: the shield assumes of it (and, in a replay, of the recorded driver); unset: the
+    #: ``[vehicle]`` and ``[hv.vehicle]`` limits (the paper's). Not with those three fields
+    #: of ``[hv.vehicle]`` set
+    envelope: str | None = None
 
     def __post_init__(self) -> None:
         _choice("hv.kind", self.kind, HV_KINDS)
         _choice("hv.role", self.role, ROLES)
+        if self.envelope is not None:
+            _choice("hv.envelope", self.envelope, tuple(HUMAN_ENVELOPES))
+            both = [f for f in ENVELOPE_FIELDS if getattr(self.vehicle, f) is not None]
+            if both:
+                raise ConfigError(f"hv.envelope = {self.envelope!r} sets hv.vehicle.{both[0]}, "
+                                  "which is set too; allowed: one of the two")
         if self.kind == "replay" and not self.replay.file:
             raise ConfigError("hv.replay.file is required with hv.kind = 'replay'")
+
+
+#: The named human envelopes (docs/method.md §12.2): ``hv.envelope`` names one, and
+#: ``persuasive recordings envelope`` measures recorded drivers against each. Per name:
+#: ``(u_min [m/s^2], u_max [m/s^2], v_max [m/s], source)``.
+HUMAN_ENVELOPES: dict[str, tuple[float, float, float, str]] = {
+    "sumo": (-4.5, 2.6, 200.0 / 3.6,
+             "SUMO's default vehicle type DEFAULT_VEHTYPE (vClass passenger): accel 2.6, "
+             "decel 4.5 m/s^2, maxSpeed 200 km/h = 55.56 m/s (SUMO's documentation, 'Vehicle "
+             "Type Parameter Defaults' and 'Definition of Vehicles, Vehicle Types, and "
+             "Routes'; read back through TraCI from SUMO 1.28.0); its emergencyDecel of 9 "
+             "m/s^2 is not the envelope"),
+    "real-driver": (-3.7, 3.5, 16.5,
+                    "the p99.9 of real drivers in the INTERACTION dataset, "
+                    "DR_USA_Intersection_GL and DR_USA_Intersection_MA (13,500 cars over 6.1 h, "
+                    "speeds smoothed with a 1-s Savitzky-Golay filter): acceleration p99.9 "
+                    "3.4-3.5, braking p99.9 3.4-3.7 m/s^2 (the larger of the two sites), speed "
+                    "p99.9 16.1 m/s rounded up to the next 0.5 m/s (maxima 5.4, 5.5 m/s^2 and "
+                    "19.7 m/s)"),
+}
+#: The vehicle fields a named envelope sets.
+ENVELOPE_FIELDS = ("u_min_mps2", "u_max_mps2", "v_max_mps")
 
 
 #: Quirk values of each mode (docs/method.md §9). Q4, Q6 and Q7 are kept in both modes.
@@ -1024,7 +1058,15 @@ class Config:
 
     @functools.cached_property
     def _vehicles(self) -> dict[str, VehicleParams]:
-        return {who: getattr(self, who).vehicle.resolve(self.vehicle, who) for who in ("av", "hv")}
+        out = {who: getattr(self, who).vehicle.resolve(self.vehicle, who) for who in ("av", "hv")}
+        if self.hv.envelope is not None:  # the named envelope's limits (HVParams.envelope)
+            u_min, u_max, v_max, _ = HUMAN_ENVELOPES[self.hv.envelope]
+            try:
+                out["hv"] = replace(out["hv"], u_min_mps2=u_min, u_max_mps2=u_max,
+                                    v_max_mps=v_max)
+            except ConfigError as exc:
+                raise ConfigError(f"hv.envelope = {self.hv.envelope!r}: {exc}") from None
+        return out
 
     def vehicle_of(self, who: str) -> VehicleParams:
         """The size and limits of the ``"av"`` or ``"hv"``: ``[vehicle]`` with its overrides."""

@@ -304,6 +304,12 @@ def _print_replay(info: dict, runs: list) -> None:
         f"the {info['model']} model fitted on the other recordings"
     click.echo(f"{info['runs']} runs of {info['pairs']} pairs: AV {info['av']} with shield "
                f"{info['shield']} in a recorded driver's seat, the other vehicle {other}")
+    if info.get("human_envelope", "paper") != "paper":
+        from ..config import HUMAN_ENVELOPES
+
+        u_min, u_max, v_max, _ = HUMAN_ENVELOPES[info["human_envelope"]]
+        click.echo(f"the shield's human envelope: {info['human_envelope']} (u in [{u_min:g}, "
+                   f"{u_max:g}] m/s^2, v <= {v_max:.4g} m/s)")
     click.echo(f"collisions: {c['collisions']} of {c['runs']} runs (AV-caused "
                f"{c['av_caused']}, rear-end by the human {c['rear_end_by_human']})")
     for key, label in (("within_envelope_certified_start", "driver within the envelope, start "
@@ -382,14 +388,18 @@ def _print_replay(info: dict, runs: list) -> None:
               show_default=True, help="The configuration mode (docs/method.md §9).")
 @click.option("--angle-step", type=float, default=5.0, show_default=True, metavar="DEG",
               help="Round each pair's angle to a multiple of this (as recordings logs).")
+@click.option("--envelope", default="paper", show_default=True, metavar="NAME",
+              help="The human envelope the shield assumes of the other vehicle and the "
+                   "premise tests the recorded driver against: paper (the configuration's), "
+                   "sumo or real-driver (hv.envelope).")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write one row per run (.parquet or .csv).")
 @click.option("--workers", type=workers_type(), default=None,
               help="Worker processes [all cores]; the runs do not depend on it.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
-def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, angle_step, out,
-                   workers, quiet, as_json) -> None:
+def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, angle_step,
+                   envelope, out, workers, quiet, as_json) -> None:
     """Put the AV in each recorded driver's seat at the start of each pair: collisions, the
     shield's uncertified steps, the recorded driver against the shield's envelope, who passed
     first and the time to clear against the recorded driver's own."""
@@ -406,7 +416,7 @@ def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, an
     seats = (1, 2) if seat == "both" else (int(seat),)
     settings = _guard(ReplaySettings, av=av, shield=shield, other=other,
                       model=model or "lfg", extra_s=extra_s, seats=seats, mode=mode,
-                      angle_step_deg=angle_step)
+                      angle_step_deg=angle_step, envelope=envelope)
     if out:
         _guard(check_output_file, out, (".parquet", ".csv"), "replay table")
         _guard(lock_output, out, "replay table")

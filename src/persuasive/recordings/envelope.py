@@ -147,25 +147,19 @@ def _paper() -> Envelope:
                     hv.v_min_mps)
 
 
-#: SUMO's default passenger car's maxSpeed [m/s]: 200 km/h.
-SUMO_MAX_SPEED_MPS = 200.0 / 3.6
+def _named(name: str) -> Envelope:
+    """A named envelope of the configuration (``persuasive.config.HUMAN_ENVELOPES``, what
+    ``hv.envelope`` sets)."""
+    from ..config import HUMAN_ENVELOPES
 
-#: The named candidate envelopes (module docstring), read-only.
+    u_min, u_max, v_max, source = HUMAN_ENVELOPES[name]
+    return Envelope(name, u_min, u_max, v_max, source)
+
+
+#: The named candidate envelopes (module docstring), read-only: the paper's and those of the
+#: configuration's ``hv.envelope``.
 ENVELOPES: Mapping[str, Envelope] = MappingProxyType({e.name: e for e in (
-    _paper(),
-    Envelope("sumo", -4.5, 2.6, SUMO_MAX_SPEED_MPS,
-             "SUMO's default vehicle type DEFAULT_VEHTYPE (vClass passenger): accel 2.6, "
-             "decel 4.5 m/s^2, maxSpeed 200 km/h = 55.56 m/s (SUMO's documentation, 'Vehicle "
-             "Type Parameter Defaults' and 'Definition of Vehicles, Vehicle Types, and "
-             "Routes'; read back through TraCI from SUMO 1.28.0); its emergencyDecel of 9 "
-             "m/s^2 is not the envelope"),
-    Envelope("real-driver", -3.7, 3.5, 16.5,
-             "the p99.9 of real drivers in the INTERACTION dataset, DR_USA_Intersection_GL "
-             "and DR_USA_Intersection_MA (13,500 cars over 6.1 h, speeds smoothed with a 1-s "
-             "Savitzky-Golay filter): acceleration p99.9 3.4-3.5, braking p99.9 3.4-3.7 "
-             "m/s^2 (the larger of the two sites), speed p99.9 16.1 m/s rounded up to the "
-             "next 0.5 m/s (maxima 5.4, 5.5 m/s^2 and 19.7 m/s)"),
-)})
+    _paper(), _named("sumo"), _named("real-driver"))})
 
 
 def parse_bound(text: str) -> Envelope:

@@ -96,8 +96,17 @@ class ReplaySettings:
     seats: tuple[int, ...] = (1, 2)  #: the vehicles whose place the AV takes, in turn
     mode: str = "corrected"  #: the configuration's mode (docs/method.md §9)
     angle_step_deg: float = ANGLE_STEP_DEG  #: the pair's angle rounded to this [deg]
+    #: the human envelope the shield assumes of the other vehicle and the premise tests the
+    #: recorded driver against: ``paper`` (the configuration's ``hv`` limits) or a name of
+    #: ``persuasive.config.HUMAN_ENVELOPES`` (``hv.envelope``)
+    envelope: str = "paper"
 
     def __post_init__(self) -> None:
+        from ..config import HUMAN_ENVELOPES
+
+        if self.envelope != "paper" and self.envelope not in HUMAN_ENVELOPES:
+            raise RecordingError(f"--envelope = {self.envelope!r} is not allowed; allowed: "
+                                 f"{', '.join(('paper', *HUMAN_ENVELOPES))}")
         for name, value, allowed in (("--av", self.av, AV_KINDS),
                                      ("--shield", self.shield, SHIELD_KINDS),
                                      ("--other", self.other, OTHERS),
@@ -263,6 +272,7 @@ def summarise(runs: Sequence[SeatRun], settings: ReplaySettings) -> dict:
     excess = sum(r.excess_steps for r in runs)
     return {
         "av": settings.av, "shield": settings.shield, "other": settings.other,
+        "human_envelope": settings.envelope,
         "model": settings.model if settings.other == "fitted" else None,
         "runs": len(runs), "pairs": len({r.pair for r in runs}),
         "collisions": collisions(runs),
@@ -520,6 +530,8 @@ def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | N
     ``progress(done, total)`` after each pair."""
     settings = settings or ReplaySettings()
     base = base if base is not None else Config(mode=settings.mode)
+    if settings.envelope != "paper":
+        base = base.with_overrides({"hv.envelope": settings.envelope})
     fits = fit_left_out(frame, settings, base) if settings.other == "fitted" else {}
     smoothing = frame.attrs.get("smoothing")
     edge = edge_samples(SmoothingParams(**smoothing) if smoothing else None)
