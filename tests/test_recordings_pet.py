@@ -316,3 +316,15 @@ def test_the_summary_and_the_command_give_both_pets_named(tmp_path):
     assert "PET on the occupancy intervals (pet_s): defined for no pair" in result.output
     info = json.loads(runner.invoke(cli, ["recordings", "pairs", a, "--json"]).output)
     assert info["pet_area_quantiles_s"]["5%"] == pytest.approx(2.0, abs=1e-9)
+
+
+def test_the_pair_figure_names_both_pets(tmp_path):
+    from persuasive.plots.recordings import pair_figure
+    from persuasive.recordings.formats import read_tracks
+    from persuasive.recordings.tracks import smooth_tracks
+
+    p = crossing(tmp_path, 7.75, v2=8.0, size2=(5.0, 2.0))
+    tracks = smooth_tracks(read_tracks([str(tmp_path)]))
+    title = pair_figure(p, tracks).axes[0].get_title()
+    assert f"PET at the area {p.pet_area_s:.2f} s" in title
+    assert f"on the intervals {p.pet_s:.2f} s" in title and "2.00 s" in title

@@ -213,3 +213,16 @@ def test_simulate_writes_any_run_per_vehicle_in_the_same_columns(tmp_path, capsy
                               "--out", same)
     assert code == 2 and "--vehicles-out" in err and not same.exists()
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_saved_run_read_back_has_the_same_tables(tmp_path):
+    import pandas as pd
+
+    from persuasive.record import load_record
+
+    (run,) = _runs("left-turn", "lfg", "worst-case", [4])
+    run.save(tmp_path / "run.parquet")
+    back = load_record(tmp_path / "run.parquet")
+    pd.testing.assert_frame_equal(back.vehicles_frame(), run.vehicles_frame())
+    pd.testing.assert_frame_equal(back.trace().conflicts_frame(), run.trace().conflicts_frame())
+    np.testing.assert_equal(back.measures(), run.measures())

@@ -75,9 +75,14 @@ def pair_figure(pair, tracks) -> Figure:
     ax.set_xlabel("x [m]", fontsize=_FONT["label"])
     ax.set_ylabel("y [m]", fontsize=_FONT["label"])
     _style(ax)
-    pet = "-" if math.isnan(pair.pet_s) else f"{pair.pet_s:.2f} s"
+    def secs(x: float) -> str:
+        return "-" if math.isnan(x) else f"{x:.2f} s"
+
+    # both PETs, each named (persuasive.recordings.pairs): at the conflict area with the
+    # lengths, and on the occupancy intervals
     ax.set_title(f"{pair.recording}, pair {pair.pair}: {pair.kind} at {pair.angle_deg:.0f} deg\n"
-                 f"first: vehicle {pair.first}, PET {pet}; footprints at t = "
+                 f"first: vehicle {pair.first}, PET at the area {secs(pair.pet_area_s)}, on the intervals "
+                 f"{secs(pair.pet_s)}; footprints at t = "
                  f"{pair.t[k_ref]:.1f} s", fontsize=_FONT["title"])
     ax.legend(handles=[
         Line2D([], [], color=_COLORS[0], lw=1.8,
