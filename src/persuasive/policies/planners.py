@@ -94,8 +94,9 @@ def shield_allowed(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib,
     """Which candidates may count as feasible, into ``allowed`` (docs/method.md §12.3); returns
     how many. ``robust`` (the confidence filter, ``mpc.confidence_filter``: the model does not
     explain the human): only those that stand before the conflict at their end or that the
-    worst-case shield certifies to cross now, whatever the shield's own kind, on or off (if
-    none, as if not robust). Otherwise, with a shield on and ``mpc.shield_aware``, those whose
+    worst-case shield certifies to cross now, or, once the human is past its interval, that
+    the worst-case shield admits (following it in a shared lane), whatever the shield's own
+    kind, on or off (if none, as if not robust). Otherwise, with a shield on and ``mpc.shield_aware``, those whose
     first acceleration the shield admits (the AV held to its yield line while the line binds,
     §12.8); without, all of them."""
     n_traj = allowed.shape[0]
@@ -114,8 +115,13 @@ def shield_allowed(s_R: float, v_R: float, s_H: float, v_H: float, lib_r: Lib,
         t_in, t_out, past = human_window(s_H, v_H, C)
         for c in range(n_traj):
             a = lib_r.A[0, c]
+            # once the human is past its interval (in a merge: ahead in the lane) there is
+            # nothing left to persuade it of: what the worst-case shield admits, following
+            # it included, is allowed (else a human merged ahead kept the AV at its line)
             allowed[c] = (yields_before(lib_r.S[n - 1, c], lib_r.V[n - 1, c], C)
-                          or go_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in, t_out, past))
+                          or go_certified(s_R, v_R, a, dt, s_H, v_H, C, t_in, t_out, past)
+                          or (past and admissible(s_R, v_R, a, dt, s_H, v_H, C, t_in, t_out,
+                                                  past)))
             count += allowed[c]
         C[C_KIND] = kind
         if count > 0:
