@@ -25,6 +25,16 @@ steps lie in each vehicle's track (``track_k0``: the track's sample of the pair'
 ``track_n``: the track's samples), which the fit's measurement model needs (the filter
 differs near a track's ends, ``persuasive.recordings.tracks.acceleration_band``).
 
+**Speed.** :func:`find_pairs` projects every candidate at once, in one compiled kernel
+(:func:`project_candidates`) that computes, bit for bit, what :func:`_project` computes for
+one pair through ``Polyline`` and ``route_conflict``: the cut, the samples, the pairs of
+samples within reach, the labels, with numpy's arithmetic written out (``searchsorted``,
+``linspace``, ``interp``, the C library's ``hypot``); a candidate it leaves (a merge that
+route_conflict refuses) goes through :func:`_project`. The steps of all the pairs are then
+gathered at once. On the site-size recording of docs/guide/recordings.md a file's 650 or so
+candidates take about 20 ms in the kernel, against about 0.4 s through :func:`_project`
+(issue 42).
+
 **Labels** (every approaching pair is kept; the labels never filter):
 
 - ``first``: who passed the conflict point first: the vehicle whose ``s`` reaches 0 earlier
@@ -76,6 +86,7 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+from numba import njit, prange
 
 from .formats import STEP_S, RecordingError
 from .geometry import (CHUNK, G_CROSS, G_CROSS_ANGLE, G_CROSS_SI, G_CROSS_SJ, G_MERGE_IJ,
@@ -235,8 +246,23 @@ def _track_boxes(tracks: Tracks) -> np.ndarray:
 
 def find_pairs(tracks: Tracks, params: PairParams | None = None) -> PairsResult:
     """Every approaching crossing or merging pair of ``tracks`` (module docstring), in order
-    of recording and time; pair IDs count from 0 in that order."""
+    of recording and time; pair IDs count from 0 in that order.
+
+    Every candidate is projected at once by the compiled :func:`project_candidates` (module
+    docstring, "Speed"), which computes what :func:`_project` computes per pair, bit for
+    bit; :func:`_project` itself runs only for a candidate the kernel leaves to it."""
     params = params or PairParams()
+    n_candidates, meets = meetings(tracks, params)
+    return PairsResult(_pairs_of(tracks, params, meets), tracks, n_candidates, params)
+
+
+def meetings(tracks: Tracks, params: PairParams) -> tuple[int, list[tuple]]:
+    """The candidate pairs of ``tracks`` whose paths cross or merge
+    (:mod:`persuasive.recordings.geometry`), with each one's roles: ``(number of candidates,
+    [(i, j, kind, s_i, s_j, angle_deg)])``, ``i`` vehicle 1 (route_conflict's ego: the
+    merging vehicle, or the lower track ID of a crossing), ``s_i``, ``s_j`` the arcs [m] on
+    each track's path where the paths meet, in candidate order. :func:`_project` of each is
+    its pair, or None."""
     ci, cj = candidates(tracks, params)
     out = np.zeros((ci.shape[0], N_GEOMETRY))
     if ci.shape[0]:
@@ -245,32 +271,128 @@ def find_pairs(tracks: Tracks, params: PairParams | None = None) -> PairsResult:
         pair_geometry(tracks.x, tracks.y, tracks.s, tracks.starts, cstart, v0, v1, box, ci,
                       cj, float(lo), float(hi), params.merge_gap_m, params.merge_apart_m,
                       params.merge_run_m, out)
-    pairs: list[Pair] = []
+    meets = []
     for p in np.flatnonzero((out[:, G_CROSS] > 0) | (out[:, G_MERGE_JI] > 0)
                             | (out[:, G_MERGE_IJ] > 0)):
         i, j, g = int(ci[p]), int(cj[p]), out[p]
         if g[G_CROSS] > 0:
             if tracks.track[i] > tracks.track[j]:
-                i, j = j, i
-                si, sj = g[G_CROSS_SJ], g[G_CROSS_SI]
+                meets.append((j, i, CROSSING, g[G_CROSS_SJ], g[G_CROSS_SI], g[G_CROSS_ANGLE]))
             else:
-                si, sj = g[G_CROSS_SI], g[G_CROSS_SJ]
-            found = _project(tracks, params, i, j, CROSSING, si, sj, g[G_CROSS_ANGLE])
+                meets.append((i, j, CROSSING, g[G_CROSS_SI], g[G_CROSS_SJ], g[G_CROSS_ANGLE]))
+        # the merging vehicle is vehicle 1; both merging: the steeper approach merges
+        elif g[G_MERGE_JI] > 0 and (g[G_MERGE_IJ] == 0
+                                    or g[G_MERGE_JI_ANGLE] >= g[G_MERGE_IJ_ANGLE]):
+            meets.append((j, i, MERGE, g[G_MERGE_JI_SJ], g[G_MERGE_JI_SI],
+                          g[G_MERGE_JI_ANGLE]))
         else:
-            # the merging vehicle is vehicle 1; both merging: the steeper approach merges
-            ji = g[G_MERGE_JI] > 0 and (g[G_MERGE_IJ] == 0
-                                        or g[G_MERGE_JI_ANGLE] >= g[G_MERGE_IJ_ANGLE])
-            if ji:
-                found = _project(tracks, params, j, i, MERGE, g[G_MERGE_JI_SJ],
-                                 g[G_MERGE_JI_SI], g[G_MERGE_JI_ANGLE])
-            else:
-                found = _project(tracks, params, i, j, MERGE, g[G_MERGE_IJ_SI],
-                                 g[G_MERGE_IJ_SJ], g[G_MERGE_IJ_ANGLE])
-        if found is not None:
-            pairs.append(found)
-    pairs.sort(key=lambda q: (q.recording, float(q.t[0]), q.tracks))
-    pairs = [_with_id(q, k) for k, q in enumerate(pairs)]
-    return PairsResult(pairs, tracks, int(ci.shape[0]), params)
+            meets.append((i, j, MERGE, g[G_MERGE_IJ_SI], g[G_MERGE_IJ_SJ],
+                          g[G_MERGE_IJ_ANGLE]))
+    return int(ci.shape[0]), meets
+
+
+def _pairs_of(tracks: Tracks, params: PairParams, meets: list[tuple]) -> list[Pair]:
+    """The pairs of the candidates ``meets`` (:func:`meetings`), sorted and numbered: the
+    compiled projection of all of them, :func:`_project` where it leaves one to the plain
+    path, and the steps of the pairs gathered at once."""
+    n = len(meets)
+    vi = np.array([m[0] for m in meets], np.int64)
+    vj = np.array([m[1] for m in meets], np.int64)
+    si = np.array([m[3] for m in meets], float)
+    sj = np.array([m[4] for m in meets], float)
+    out = np.zeros((n, N_PROJECTION))
+    plain = np.zeros(n, bool)
+    area = np.zeros((n, 4))
+    for p, (i, j, kind, _, _, angle) in enumerate(meets):
+        try:
+            (e1, l1), (e2, l2) = conflict_area(
+                kind, angle, (float(tracks.length_m[i]), float(tracks.length_m[j])),
+                (float(tracks.width_m[i]), float(tracks.width_m[j])))
+        except RecordingError:
+            plain[p] = True  # _project raises it, if the pair gets that far
+            continue
+        area[p] = e1, l1, e2, l2
+    if n:
+        project_candidates(tracks.t, tracks.x, tracks.y, tracks.s, tracks.v, tracks.starts,
+                           np.asarray(tracks.length_m, float),
+                           np.asarray(tracks.width_m, float), vi, vj,
+                           np.array([m[2] == MERGE for m in meets], np.bool_), si, sj, area,
+                           params.near_m, params.lateral_margin_m, params.long_margin_m,
+                           params.step_m, out)
+    plain |= out[:, P_STATUS] == PLAIN
+    keep = np.flatnonzero(~plain & (out[:, P_STATUS] == A_PAIR))
+    # the steps both are present: t_lo to t_hi, from sample k0 of each track
+    st, T = tracks.starts, tracks.t
+    ti0, tj0 = T[st[vi[keep]]], T[st[vj[keep]]]
+    t_lo = np.maximum(ti0, tj0)
+    t_hi = np.minimum(T[st[vi[keep] + 1] - 1], T[st[vj[keep] + 1] - 1])
+    n_steps = np.rint((t_hi - t_lo) / STEP_S).astype(np.int64) + 1
+    k0 = np.stack([np.rint((t_lo - ti0) / STEP_S).astype(np.int64),
+                   np.rint((t_lo - tj0) / STEP_S).astype(np.int64)])
+    t_first = np.round(T[st[vi[keep]] + k0[0]], 1)
+    # find_pairs' order: recording, first step, track IDs (then the candidates' order)
+    found = []
+    for q, p in enumerate(keep.tolist()):
+        i, j = meets[p][0], meets[p][1]
+        found.append(((str(tracks.recording[i]), float(t_first[q]),
+                       (int(tracks.track[i]), int(tracks.track[j])), p), q))
+    for p in np.flatnonzero(plain).tolist():
+        pair = _project(tracks, params, *meets[p])
+        if pair is not None:
+            found.append(((pair.recording, float(pair.t[0]), pair.tracks, p), pair))
+    found.sort(key=lambda f: f[0])
+    kept = np.array([q for _, q in found if not isinstance(q, Pair)], np.int64)
+    steps = _steps_of(tracks, vi[keep][kept], vj[keep][kept], k0[:, kept], n_steps[kept],
+                      out[keep[kept]][:, [P_CP_1, P_CP_2]])
+    at = dict(zip(kept.tolist(), range(kept.shape[0])))
+    ends = np.concatenate([[0], np.cumsum(n_steps[kept])])
+    pairs = []
+    for pair_id, (key, q) in enumerate(found):
+        if isinstance(q, Pair):
+            pairs.append(_with_id(q, pair_id))
+            continue
+        r = at[q]
+        p = int(keep[q])
+        i, j, kind, _, _, angle = meets[p]
+        g = out[p].tolist()
+        drop = g[P_DROP]
+        a, b = int(ends[r]), int(ends[r + 1])
+        pairs.append(Pair(
+            pair=pair_id, recording=key[0], kind=kind, angle_deg=float(angle), tracks=key[2],
+            classes=(str(tracks.agent_class[i]), str(tracks.agent_class[j])),
+            lengths_m=(float(tracks.length_m[i]), float(tracks.length_m[j])),
+            widths_m=(float(tracks.width_m[i]), float(tracks.width_m[j])),
+            occupancy=((g[P_OCC_1_LO], g[P_OCC_1_HI]), (g[P_OCC_2_LO], g[P_OCC_2_HI])),
+            conflict_xy=(g[P_X], g[P_Y]), first=FIRST_LABELS[int(g[P_FIRST])],
+            pet_s=g[P_PET], pet_area_s=g[P_PET_AREA], t_pass_s=(g[P_PASS_1], g[P_PASS_2]),
+            second_slowed=None if g[P_SECOND] < 0 else bool(drop >= params.slow_drop_mps),
+            second_speed_drop_mps=drop,
+            **{name: (arr[a:b] if arr.ndim == 1 else arr[:, a:b])
+               for name, arr in steps.items()},
+            index=(i, j), track_k0=(int(k0[0, q]), int(k0[1, q])),
+            track_n=(int(st[i + 1] - st[i]), int(st[j + 1] - st[j]))))
+    return pairs
+
+
+def _steps_of(tracks: Tracks, vi: np.ndarray, vj: np.ndarray, k0: np.ndarray,
+              n_steps: np.ndarray, cp: np.ndarray) -> dict[str, np.ndarray]:
+    """The step arrays of several pairs at once, one pair after the other (as
+    :func:`_project` makes each): vehicle 1 of pair ``r`` is track ``vi[r]`` from its sample
+    ``k0[0, r]``, vehicle 2 track ``vj[r]`` from ``k0[1, r]``, ``n_steps[r]`` steps,
+    ``s`` relative to the conflict points ``cp[r]`` ``(2,)`` [m]."""
+    st = tracks.starts
+    within = np.arange(int(n_steps.sum())) - np.repeat(np.cumsum(n_steps) - n_steps, n_steps)
+    rows = [np.repeat(st[v] + k, n_steps) + within for v, k in ((vi, k0[0]), (vj, k0[1]))]
+    cp_steps = np.repeat(cp, n_steps, axis=0)
+
+    def both(values: np.ndarray) -> np.ndarray:
+        return np.stack([values[rows[0]], values[rows[1]]])
+
+    return {"t": np.round(tracks.t[rows[0]], 1),
+            "s": np.stack([tracks.s[rows[0]] - cp_steps[:, 0],
+                           tracks.s[rows[1]] - cp_steps[:, 1]]),
+            "v": both(tracks.v), "a": both(tracks.a), "x": both(tracks.x), "y": both(tracks.y),
+            "heading": both(tracks.heading)}
 
 
 def _with_id(pair: Pair, k: int) -> Pair:
@@ -493,6 +615,375 @@ def _speed_drop(t: np.ndarray, s: np.ndarray, v: np.ndarray, near: float) -> flo
     return float(np.max(np.maximum.accumulate(seg) - seg))
 
 
+# -- the projection of every candidate at once (compiled) ------------------------------------
+#
+# Each function below is the compiled twin of the plain function it names, on the rows
+# lo:hi of the track arrays, with numpy's own arithmetic written out (searchsorted's sides,
+# linspace's k * step + start, interp's slope * (x - x_j) + y_j on the last segment whose
+# start is <= x, hypot from the C library as numpy's), so that the twins give the same bits;
+# tests/test_recordings_pairs_speed.py pins each against the plain path.
+
+#: What :func:`project_candidates` made of a candidate (``out[p, P_STATUS]``): not an
+#: approaching pair, a pair, or left to :func:`_project` (a merge where route_conflict finds
+#: no sample beside the merge point and raises).
+NOT_A_PAIR, A_PAIR, PLAIN = 0.0, 1.0, 2.0
+#: Columns of :func:`project_candidates`' output per candidate: the status, each vehicle's
+#: conflict point on its track's path [m] (arc from its first sample), the occupancy
+#: intervals [m], the conflict point ``(x, y)`` [m], when each reached it [s], ``first`` (an
+#: index into :data:`FIRST_LABELS`), ``pet_s``, ``pet_area_s`` [s], the second passer (0:
+#: vehicle 1, 1: vehicle 2, -1: none) and its speed drop [m/s] (NaN: none).
+(P_STATUS, P_CP_1, P_CP_2, P_OCC_1_LO, P_OCC_1_HI, P_OCC_2_LO, P_OCC_2_HI, P_X, P_Y,
+ P_PASS_1, P_PASS_2, P_FIRST, P_PET, P_PET_AREA, P_SECOND, P_DROP) = range(16)
+N_PROJECTION = 16
+#: Samples of the other path per bounding box in :func:`_route_conflict_nb`.
+_BLOCK = 16
+
+
+@njit(cache=True)
+def _rank_nb(S, lo, hi, shift, value, inclusive):
+    """``np.searchsorted(S[lo:hi] - shift, value, side)`` (``S`` non-decreasing): how many
+    of ``S[k] - shift`` are below ``value`` (side ``"left"``), or at most ``value``
+    (``inclusive``, side ``"right"``)."""
+    a, b = lo, hi
+    while a < b:
+        m = (a + b) >> 1
+        v = S[m] - shift
+        if v < value or (inclusive and v == value):
+            a = m + 1
+        else:
+            b = m
+    return a - lo
+
+
+@njit(cache=True)
+def _near_window_nb(T, S, lo, hi, shift, near):
+    """:func:`_near_window` of times ``T[lo:hi]`` and positions ``S[lo:hi] - shift``."""
+    a = _rank_nb(S, lo, hi, shift, -near, False)
+    b = _rank_nb(S, lo, hi, shift, near, True) - 1
+    if a > b:
+        return math.inf, -math.inf
+    return T[lo + a], T[lo + b]
+
+
+@njit(cache=True)
+def _interp_nb(x, xp, fp, j):
+    """``np.interp(x, xp, fp)`` at one point ``x`` (``xp`` non-decreasing, at least 2 long)
+    and the segment it used: numpy's is the last ``j`` with ``xp[j] <= x``, however ``xp``
+    repeats; the search starts from the guess ``j`` (walks on from it when ``x`` lies
+    further along, as consecutive samples do; searches afresh when before it)."""
+    n = xp.shape[0]
+    if x < xp[0]:
+        return fp[0], j
+    if x > xp[n - 1]:
+        return fp[n - 1], j
+    if xp[j] > x:
+        j = np.searchsorted(xp, x, side="right") - 1
+    while j + 1 < n and xp[j + 1] <= x:
+        j += 1
+    if j == n - 1 or xp[j] == x:
+        return fp[j], j
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if np.isnan(r):  # numpy's retry from the other end of the segment
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+        if np.isnan(r) and fp[j] == fp[j + 1]:
+            r = fp[j]
+    return r, j
+
+
+@njit(cache=True)
+def _samples_nb(X, Y, arc, lo, hi, step):
+    """``Polyline(xy, arc).samples(lo, hi, step)``: the arcs ``np.linspace(lo, hi, n)`` and
+    their points ``(s, x, y)``, each coordinate :func:`_interp_nb`'s (its arithmetic written
+    out here, once per sample for both coordinates)."""
+    lo, hi = max(lo, 0.0), min(hi, arc[arc.shape[0] - 1])
+    n = max(2, int(math.ceil((hi - lo) / step)) + 1)
+    div = n - 1
+    delta = hi - lo
+    dstep = delta / div
+    s = np.empty(n)
+    px = np.empty(n)
+    py = np.empty(n)
+    m = arc.shape[0]
+    j = 0
+    for k in range(n):
+        if k == n - 1:
+            v = hi
+        elif dstep == 0.0:
+            v = (k / div) * delta + lo
+        else:
+            v = k * dstep + lo
+        s[k] = v
+        if v < arc[0] or v > arc[m - 1] or arc[j] > v:  # off the line, or before the guess
+            px[k], j = _interp_nb(v, arc, X, j)
+            py[k], j = _interp_nb(v, arc, Y, j)
+            continue
+        while j + 1 < m and arc[j + 1] <= v:
+            j += 1
+        if j == m - 1 or arc[j] == v:
+            px[k], py[k] = X[j], Y[j]
+            continue
+        ds = arc[j + 1] - arc[j]
+        sx, sy = (X[j + 1] - X[j]) / ds, (Y[j + 1] - Y[j]) / ds
+        rx, ry = sx * (v - arc[j]) + X[j], sy * (v - arc[j]) + Y[j]
+        if rx != rx or ry != ry:  # a NaN: numpy's retry, in _interp_nb
+            rx, j = _interp_nb(v, arc, X, j)
+            ry, j = _interp_nb(v, arc, Y, j)
+        px[k], py[k] = rx, ry
+    return s, px, py
+
+
+@njit(cache=True)
+def _cut_nb(X, Y, S, lo, hi, s_at, reach):
+    """:func:`_cut` of the track of rows ``lo:hi``: its vertices ``x``, ``y`` from ``s_at -
+    reach`` to ``s_at + reach`` without repeated consecutive ones (``Polyline.of``), their
+    arc from the first (the Polyline's ``arc``), and the whole track's arc at the first."""
+    n = hi - lo
+    a = max(_rank_nb(S, lo, hi, 0.0, s_at - reach, True) - 1, 0)
+    b = min(_rank_nb(S, lo, hi, 0.0, s_at + reach, False) + 1, n)
+    cx = np.empty(max(b - a, 0))
+    cy = np.empty(max(b - a, 0))
+    m = 0
+    for k in range(lo + a, lo + b):
+        if m == 0 or X[k] != cx[m - 1] or Y[k] != cy[m - 1]:
+            cx[m], cy[m] = X[k], Y[k]
+            m += 1
+    arc = np.empty(m)
+    if m:
+        arc[0] = 0.0
+    for k in range(1, m):
+        arc[k] = arc[k - 1] + math.hypot(cx[k] - cx[k - 1], cy[k] - cy[k - 1])
+    return cx[:m], cy[:m], arc, S[lo + a]
+
+
+@njit(cache=True)
+def _route_conflict_nb(xe, ye, arc_e, xo, yo, arc_o, l_e, w_e, l_o, w_o, lateral, longit,
+                       step, merge, a0, b0, res):
+    """``persuasive.envs.external.route_conflict`` of the ego's path ``(xe, ye, arc_e)`` and
+    the other's, sizes ``(l, w)`` [m], margins and step [m], a merge at arcs ``(a0, b0)``
+    where ``merge``: 0 for no conflict (None), else 1 with ``res`` = ``(ego_at_m,
+    other_at_m, ego_occupancy, other_occupancy)``, or 2 where route_conflict raises (no
+    sample of the ego beside the merge point). The pairs of samples within reach are taken
+    ego sample by ego sample, the other's in order, as route_conflict takes them (its
+    closest pair is the first of the closest)."""
+    reach = 0.5 * (w_e + w_o) + lateral + step
+    widen_e = 0.5 * l_e + 0.5 * step + longit
+    widen_o = 0.5 * l_o + 0.5 * step + longit
+    if merge:
+        s_e, pxe, pye = _samples_nb(xe, ye, arc_e, 0.0, a0 + 0.5 * l_e + step, step)
+        s_o, pxo, pyo = _samples_nb(xo, yo, arc_o, 0.0, b0 + 0.5 * l_e + reach + step, step)
+    else:
+        s_e, pxe, pye = _samples_nb(xe, ye, arc_e, 0.0, arc_e[arc_e.shape[0] - 1], step)
+        s_o, pxo, pyo = _samples_nb(xo, yo, arc_o, 0.0, arc_o[arc_o.shape[0] - 1], step)
+    r2 = reach * reach
+    side_at = a0 + 0.5 * l_e + 0.5 * step
+    n_o = s_o.shape[0]
+    # the other's samples in blocks with bounding boxes: a box's gap to a point is never more
+    # than the distance of any of its samples, rounded too, so a box out of reach holds none
+    nb = (n_o + _BLOCK - 1) // _BLOCK
+    box = np.empty((nb, 4))
+    for c in range(nb):
+        k0 = c * _BLOCK
+        box[c, 0], box[c, 1], box[c, 2], box[c, 3] = pxo[k0], pyo[k0], pxo[k0], pyo[k0]
+        for k in range(k0 + 1, min(k0 + _BLOCK, n_o)):
+            box[c, 0] = min(box[c, 0], pxo[k])
+            box[c, 1] = min(box[c, 1], pyo[k])
+            box[c, 2] = max(box[c, 2], pxo[k])
+            box[c, 3] = max(box[c, 3], pyo[k])
+    # and all of them in one box: most ego samples of a crossing are out of its reach
+    bx0, by0, bx1, by1 = box[0, 0], box[0, 1], box[0, 2], box[0, 3]
+    for c in range(1, nb):
+        bx0, by0 = min(bx0, box[c, 0]), min(by0, box[c, 1])
+        bx1, by1 = max(bx1, box[c, 2]), max(by1, box[c, 3])
+    found = False
+    a_min, a_max, b_min, b_max = math.inf, -math.inf, math.inf, -math.inf
+    best, best_a, best_b = math.inf, 0.0, 0.0
+    lo_e, any_before = math.inf, False
+    side_lo, side_hi, any_side = math.inf, -math.inf, False
+    for i in range(s_e.shape[0]):
+        px, py, a = pxe[i], pye[i], s_e[i]
+        gx = max(max(bx0 - px, px - bx1), 0.0)
+        gy = max(max(by0 - py, py - by1), 0.0)
+        if gx * gx + gy * gy > r2:
+            continue
+        for c in range(nb):
+            gx = max(max(box[c, 0] - px, px - box[c, 2]), 0.0)
+            gy = max(max(box[c, 1] - py, py - box[c, 3]), 0.0)
+            if gx * gx + gy * gy > r2:
+                continue
+            for j in range(c * _BLOCK, min(c * _BLOCK + _BLOCK, n_o)):
+                dx, dy = pxo[j] - px, pyo[j] - py
+                if not dx * dx + dy * dy <= r2:  # the k-d tree's test, as route_conflict's
+                    continue
+                b = s_o[j]
+                found = True
+                if merge:
+                    if a <= a0:
+                        any_before = True
+                        lo_e = min(lo_e, a)
+                    if a <= side_at:
+                        any_side = True
+                        side_lo, side_hi = min(side_lo, b), max(side_hi, b)
+                else:
+                    a_min, a_max = min(a_min, a), max(a_max, a)
+                    b_min, b_max = min(b_min, b), max(b_max, b)
+                    d = math.hypot(px - pxo[j], py - pyo[j])
+                    if d < best:
+                        best, best_a, best_b = d, a, b
+    if not found:
+        return 0
+    if merge:
+        if not any_side:
+            return 2
+        if not any_before:
+            lo_e = a0
+        res[0], res[1] = a0, b0
+        res[2], res[3] = lo_e - widen_e - a0, 0.0
+        res[4], res[5] = side_lo - widen_o - b0, side_hi + widen_o - b0
+        return 1
+    res[0], res[1] = best_a, best_b
+    res[2], res[3] = a_min - widen_e - best_a, a_max + widen_e - best_a
+    res[4], res[5] = b_min - widen_o - best_b, b_max + widen_o - best_b
+    return 1
+
+
+@njit(cache=True)
+def _time_at_nb(T, S, lo, hi, shift, target):
+    """:func:`_times_at` of one ``target`` [m] on times ``T[lo:hi]`` and positions
+    ``S[lo:hi] - shift``."""
+    n = hi - lo
+    k = _rank_nb(S, lo, hi, shift, target, False)
+    if k == 0 or k == n:
+        return math.nan
+    s1, s0 = S[lo + k] - shift, S[lo + k - 1] - shift
+    ds = s1 - s0
+    f = (target - s0) / ds if ds > 0 else 1.0
+    return T[lo + k - 1] + f * (T[lo + k] - T[lo + k - 1])
+
+
+@njit(cache=True)
+def _pet_of_times_nb(in1, in2, out1, out2, end1, end2):
+    """:func:`_pet_of_times` of ``((in1, in2), (out1, out2), (end1, end2))``."""
+    if math.isnan(in1) or math.isnan(in2):
+        return math.nan
+    if in1 <= in2:
+        first_out, first_end, second_in = out1, end1, in2
+    else:
+        first_out, first_end, second_in = out2, end2, in1
+    if math.isnan(first_out):
+        return 0.0 if first_end >= second_in else math.nan
+    return max(second_in - first_out, 0.0)
+
+
+@njit(cache=True)
+def _speed_drop_nb(S, V, lo, hi, shift, near):
+    """:func:`_speed_drop` of speeds ``V[lo:hi]`` on positions ``S[lo:hi] - shift`` (a NaN
+    speed propagates, as through ``np.maximum.accumulate`` and ``np.max``)."""
+    n = hi - lo
+    a = _rank_nb(S, lo, hi, shift, -near, False)
+    b = min(_rank_nb(S, lo, hi, shift, 0.0, False) + 1, n)
+    if b <= a:
+        return 0.0
+    top = V[lo + a]
+    drop = top - top
+    for k in range(lo + a, lo + b):
+        v = V[k]
+        if not top >= v and not math.isnan(top):  # np.maximum(top, v): v if larger or NaN
+            top = v
+        d = top - v
+        if not drop >= d and not math.isnan(drop):
+            drop = d
+    return drop
+
+
+@njit(cache=True, parallel=True)
+def project_candidates(T, X, Y, S, V, starts, length, width, vi, vj, merge, si, sj, area,
+                       near, lateral, longit, step, out):
+    """:func:`_project` of every candidate ``p``, into ``out`` ``(n, N_PROJECTION)``
+    (:data:`P_STATUS` ...): vehicle 1 is track ``vi[p]``, vehicle 2 track ``vj[p]``, a merge
+    where ``merge[p]``, their paths meeting at arcs ``si[p]``, ``sj[p]`` [m]; ``area[p]``:
+    :func:`conflict_area`'s ``(enter_1, leave_1, enter_2, leave_2)`` [m]. The tracks: times
+    ``T``, centres ``X``, ``Y``, arcs ``S``, speeds ``V`` per sample, ``starts``, ``length``,
+    ``width`` per track (:class:`Tracks`); ``near``, ``lateral``, ``longit``, ``step``:
+    :class:`PairParams`' ``near_m``, ``lateral_margin_m``, ``long_margin_m``, ``step_m``."""
+    for p in prange(vi.shape[0]):
+        for c in range(N_PROJECTION):
+            out[p, c] = math.nan
+        out[p, P_STATUS] = NOT_A_PAIR
+        i, j = vi[p], vj[p]
+        lo_i, hi_i, lo_j, hi_j = starts[i], starts[i + 1], starts[j], starts[j + 1]
+        s_i, s_j = si[p], sj[p]
+        # cheap tests first, on the kernel's meeting point: both within near_m at one time
+        a0, a1 = _near_window_nb(T, S, lo_i, hi_i, s_i, near)
+        b0, b1 = _near_window_nb(T, S, lo_j, hi_j, s_j, near)
+        if max(a0, b0) > min(a1, b1) + 1e-9:
+            continue
+        xi, yi, arc_i, off_i = _cut_nb(X, Y, S, lo_i, hi_i, s_i, CUT_M)
+        xj, yj, arc_j, off_j = _cut_nb(X, Y, S, lo_j, hi_j, s_j, CUT_M)
+        if xi.shape[0] < 2 or xj.shape[0] < 2:
+            continue
+        res = np.empty(6)
+        got = _route_conflict_nb(xi, yi, arc_i, xj, yj, arc_j, length[i], width[i],
+                                 length[j], width[j], lateral, longit, step, merge[p],
+                                 s_i - off_i, s_j - off_j, res)
+        if got == 0:
+            continue
+        if got == 2:
+            out[p, P_STATUS] = PLAIN
+            continue
+        cp_i, cp_j = off_i + res[0], off_j + res[1]
+        o1_lo, o1_hi, o2_lo, o2_hi = res[2], res[3], res[4], res[5]
+        if not merge[p] and abs(s_i - cp_i) <= step and abs(s_j - cp_j) <= step:
+            # the exact crossing of the two centre lines (_project says why)
+            o1_lo, o1_hi = o1_lo + cp_i - s_i, o1_hi + cp_i - s_i
+            o2_lo, o2_hi = o2_lo + cp_j - s_j, o2_hi + cp_j - s_j
+            cp_i, cp_j = s_i, s_j
+        # approaching: each observed before its occupancy interval, both near at one time
+        if not (S[lo_i] - cp_i < o1_lo and S[lo_j] - cp_j < o2_lo):
+            continue
+        a0, a1 = _near_window_nb(T, S, lo_i, hi_i, cp_i, near)
+        b0, b1 = _near_window_nb(T, S, lo_j, hi_j, cp_j, near)
+        if max(a0, b0) > min(a1, b1) + 1e-9:
+            continue
+        # the labels
+        pass_i = _time_at_nb(T, S, lo_i, hi_i, cp_i, 0.0)
+        pass_j = _time_at_nb(T, S, lo_j, hi_j, cp_j, 0.0)
+        end_i, end_j = T[hi_i - 1], T[hi_j - 1]
+        pet = _pet_of_times_nb(_time_at_nb(T, S, lo_i, hi_i, cp_i, o1_lo),
+                               _time_at_nb(T, S, lo_j, hi_j, cp_j, o2_lo),
+                               _time_at_nb(T, S, lo_i, hi_i, cp_i, o1_hi),
+                               _time_at_nb(T, S, lo_j, hi_j, cp_j, o2_hi), end_i, end_j)
+        pet_area = _pet_of_times_nb(_time_at_nb(T, S, lo_i, hi_i, cp_i, area[p, 0]),
+                                    _time_at_nb(T, S, lo_j, hi_j, cp_j, area[p, 2]),
+                                    _time_at_nb(T, S, lo_i, hi_i, cp_i, area[p, 1]),
+                                    _time_at_nb(T, S, lo_j, hi_j, cp_j, area[p, 3]),
+                                    end_i, end_j)
+        if math.isnan(pass_i) and math.isnan(pass_j):  # _first
+            first = 3
+        elif math.isnan(pass_j) or pass_i < pass_j:
+            first = 0
+        elif math.isnan(pass_i) or pass_j < pass_i:
+            first = 1
+        else:
+            first = 2
+        out[p, P_SECOND] = -1.0
+        if first == 0:  # vehicle 1 first: vehicle 2 is the second passer
+            out[p, P_SECOND] = 1.0
+            out[p, P_DROP] = _speed_drop_nb(S, V, lo_j, hi_j, cp_j, near)
+        elif first == 1:
+            out[p, P_SECOND] = 0.0
+            out[p, P_DROP] = _speed_drop_nb(S, V, lo_i, hi_i, cp_i, near)
+        out[p, P_STATUS] = A_PAIR
+        out[p, P_CP_1], out[p, P_CP_2] = cp_i, cp_j
+        out[p, P_OCC_1_LO], out[p, P_OCC_1_HI] = o1_lo, o1_hi
+        out[p, P_OCC_2_LO], out[p, P_OCC_2_HI] = o2_lo, o2_hi
+        out[p, P_X] = _interp_nb(cp_i - off_i, arc_i, xi, 0)[0]
+        out[p, P_Y] = _interp_nb(cp_i - off_i, arc_i, yi, 0)[0]
+        out[p, P_PASS_1], out[p, P_PASS_2] = pass_i, pass_j
+        out[p, P_FIRST] = first
+        out[p, P_PET], out[p, P_PET_AREA] = pet, pet_area
+
+
 # -- the pairs file --------------------------------------------------------------------------
 
 #: The pair-level columns of the pairs file (repeated on each of the pair's rows).
@@ -521,23 +1012,70 @@ def pairs_frame(pairs: Sequence[Pair]):
     :data:`MAP_COLUMNS`, then :data:`STEP_COLUMNS`."""
     import pandas as pd
 
+    def text(name, values, rows):
+        # typed as pandas types a column of Python strings (pandas 3: its string type), once
+        # per pair, then repeated by a take: the same column, without a string per row
+        return pd.Series(np.asarray(values, dtype=object)).array.take(rows)
+
+    def flags(values, rows):
+        return pd.array(np.array(values, dtype=object), dtype="boolean").take(rows)
+
+    return pd.DataFrame(_columns(pairs, text, flags),
+                        columns=[*PAIR_COLUMNS, *TRACK_COLUMNS, *MAP_COLUMNS, *STEP_COLUMNS])
+
+
+def pairs_table(pairs: Sequence[Pair]):
+    """``pa.Table.from_pandas(pairs_frame(pairs), preserve_index=False)`` (the table the
+    pairs file holds: the same schema, pandas' metadata included, and the same arrays) built
+    from the pairs' arrays without the frame: the text and flag columns as Arrow arrays per
+    pair repeated by a take, the numbers as they are."""
+    import pyarrow as pa
+
+    if not pairs:
+        return pa.Table.from_pandas(pairs_frame(pairs), preserve_index=False)
+    # the schema pandas gives these columns (their types depend on pandas' version only)
+    schema = pa.Table.from_pandas(pairs_frame(pairs[:1]), preserve_index=False).schema
+
+    def text(name, values, rows):
+        return pa.array(values, type=schema.field(name).type).take(rows)
+
+    def flags(values, rows):
+        return pa.array(values, type=pa.bool_()).take(rows)
+
+    cols = _columns(pairs, text, flags)
+    # a NaN is a null, as in pandas' table (from_pandas=True); integers are taken as they are
+    return pa.Table.from_arrays([
+        cols[f.name] if not isinstance(cols[f.name], np.ndarray)
+        else pa.array(cols[f.name], from_pandas=cols[f.name].dtype.kind == "f")
+        for f in schema], schema=schema)
+
+
+def _columns(pairs: Sequence[Pair], text, flags) -> dict:
+    """The columns of :func:`pairs_frame` by name: numbers as arrays; the text columns
+    (``recording``, ``first``...) as ``text(name, values, rows)`` and the flags
+    (``second_slowed``) as ``flags(values, rows)`` make them from one value per pair and each
+    row's pair."""
     n = np.array([p.n_steps for p in pairs], np.int64)
+    of_row = np.repeat(np.arange(len(pairs)), n)
 
     def rep(values, dtype=None):
         return np.repeat(np.asarray(values, dtype=dtype), n)
+
+    def per_pair(name, values):
+        return text(name, values, of_row)
 
     def cat(get):
         return np.concatenate([get(p) for p in pairs]) if pairs else np.zeros(0)
 
     cols = {
         "pair": rep([p.pair for p in pairs], np.int64),
-        "recording": rep([p.recording for p in pairs], object),
-        "kind": rep([p.kind for p in pairs], object),
+        "recording": per_pair("recording", [p.recording for p in pairs]),
+        "kind": per_pair("kind", [p.kind for p in pairs]),
         "angle_deg": rep([p.angle_deg for p in pairs], float),
         "track_1": rep([p.tracks[0] for p in pairs], np.int64),
         "track_2": rep([p.tracks[1] for p in pairs], np.int64),
-        "class_1": rep([p.classes[0] for p in pairs], object),
-        "class_2": rep([p.classes[1] for p in pairs], object),
+        "class_1": per_pair("class_1", [p.classes[0] for p in pairs]),
+        "class_2": per_pair("class_2", [p.classes[1] for p in pairs]),
         "length_1_m": rep([p.lengths_m[0] for p in pairs], float),
         "width_1_m": rep([p.widths_m[0] for p in pairs], float),
         "length_2_m": rep([p.lengths_m[1] for p in pairs], float),
@@ -548,22 +1086,21 @@ def pairs_frame(pairs: Sequence[Pair]):
         "occupancy_2_hi_m": rep([p.occupancy[1][1] for p in pairs], float),
         "conflict_x_m": rep([p.conflict_xy[0] for p in pairs], float),
         "conflict_y_m": rep([p.conflict_xy[1] for p in pairs], float),
-        "first": rep([p.first for p in pairs], object),
+        "first": per_pair("first", [p.first for p in pairs]),
         "pet_s": rep([p.pet_s for p in pairs], float),
         "pet_area_s": rep([p.pet_area_s for p in pairs], float),
         "t_pass_1_s": rep([p.t_pass_s[0] for p in pairs], float),
         "t_pass_2_s": rep([p.t_pass_s[1] for p in pairs], float),
-        "second_slowed": pd.array(np.repeat(np.array([p.second_slowed for p in pairs],
-                                                     dtype=object), n), dtype="boolean"),
+        "second_slowed": flags([p.second_slowed for p in pairs], of_row),
         "second_speed_drop_mps": rep([p.second_speed_drop_mps for p in pairs], float),
         **{f"track_{what}_{k + 1}": rep([getattr(p, f"track_{what}")[k] for p in pairs],
                                         np.int64)
            for k in (0, 1) for what in ("k0", "n")},
-        "control": rep([p.control for p in pairs], object),
+        "control": per_pair("control", [p.control for p in pairs]),
         "priority": rep([p.priority for p in pairs], np.int64),
         "stop_1_m": rep([p.stop_s[0] for p in pairs], float),
         "stop_2_m": rep([p.stop_s[1] for p in pairs], float),
-        "step": cat(lambda p: np.arange(p.n_steps)).astype(np.int64),
+        "step": np.arange(of_row.shape[0], dtype=np.int64) - np.repeat(np.cumsum(n) - n, n),
         "t_s": cat(lambda p: p.t),
     }
     for k in (0, 1):
@@ -574,8 +1111,7 @@ def pairs_frame(pairs: Sequence[Pair]):
         cols[f"x_{tag}_m"] = cat(lambda p: p.x[k])
         cols[f"y_{tag}_m"] = cat(lambda p: p.y[k])
         cols[f"heading_{tag}_rad"] = cat(lambda p: p.heading[k])
-    return pd.DataFrame(cols, columns=[*PAIR_COLUMNS, *TRACK_COLUMNS, *MAP_COLUMNS,
-                                       *STEP_COLUMNS])
+    return cols
 
 
 def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
@@ -730,5 +1266,5 @@ def pair_of(result: PairsResult, pair_id: int) -> Pair:
 __all__ = ["CROSSING", "FIRST_LABELS", "LATER_PAIR_COLUMNS", "MAP_COLUMNS", "MERGE",
            "PAIRS_METADATA", "PAIR_COLUMNS", "Pair", "PairLabels", "PairParams", "PairsResult",
            "STEP_COLUMNS", "TRACK_COLUMNS", "candidates", "conflict_area", "find_pairs",
-           "pair_of", "pairs_frame", "post_encroachment", "read_pairs", "summary", "summary_of",
-           "write_pairs"]
+           "meetings", "pair_of", "pairs_frame", "pairs_table", "post_encroachment",
+           "project_candidates", "read_pairs", "summary", "summary_of", "write_pairs"]
