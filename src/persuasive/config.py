@@ -684,6 +684,10 @@ PRIORITIES = ("major", "first-come", "right-before-left")
 ARRIVALS = ("placed", "poisson")
 #: Whom a human plays against (:attr:`JunctionSpec.opponents`).
 OPPONENTS = ("next", "all")
+#: How the junction's AV plans against its humans (``persuasive.many.joint``).
+AV_PLANS = ("pairwise", "joint")
+#: The joint plan's chance constraint (``persuasive.many.joint``).
+JOINT_BOUNDS = ("product", "union")
 #: Named variants: the fields of :class:`JunctionSpec` each sets.
 VARIANTS: dict[str, dict[str, Any]] = {
     "major": {"priority": "major", "mix": (0.25, 0.5, 0.25)},
@@ -733,6 +737,13 @@ class JunctionSpec:
     flow_veh_h: float = 600.0  #: vehicles per hour on each arm (``arrival = "poisson"``)
     #: when the AV enters at the start of its approach, into the flow [s] (``poisson``)
     av_arrival_s: float = 10.0
+    #: how the AV plans against the humans it conflicts with: ``pairwise``, one planner per
+    #: human and the lowest acceleration (part 1, as the adapters); ``joint``, one plan
+    #: against all of them (``persuasive.many.joint``)
+    av_plan: str = "pairwise"
+    #: the joint plan's chance constraint: ``product`` (the humans' branches independent) or
+    #: ``union`` (Boole's inequality)
+    joint_bound: str = "product"
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ConfigError:
@@ -792,6 +803,10 @@ class JunctionSpec:
             raise bad("av_arrival_s", "[0, duration_s) s")
         if self.opponents not in OPPONENTS:
             raise bad("opponents", " | ".join(OPPONENTS))
+        if self.av_plan not in AV_PLANS:
+            raise bad("av_plan", " | ".join(AV_PLANS))
+        if self.joint_bound not in JOINT_BOUNDS:
+            raise bad("joint_bound", " | ".join(JOINT_BOUNDS))
         if not 1.0 <= self.duration_s <= 3600.0:
             raise bad("duration_s", "[1, 3600] s")
 
@@ -858,7 +873,8 @@ def _junction_kinds(value) -> tuple[tuple[str, float], ...]:
 @dataclass(frozen=True)
 class JunctionParams:
     """The four-way unsignalised junction of ``scenario.kind = "junction"`` (docs/method.md
-    §15; :class:`JunctionSpec` holds the meaning and checks of every field). Every field unset takes the named variant's value, else the spec's default
+    §15; :class:`JunctionSpec` holds the meaning and checks of every field). Every field unset
+    takes the named variant's value, else the spec's default
     (``variant`` unset: ``major``); the section is read only with ``scenario.kind =
     "junction"``. Lengths in metres, speeds in m/s, times in s."""
 
@@ -882,6 +898,8 @@ class JunctionParams:
     arrival: str | None = None  #: placed | poisson; unset: placed
     flow_veh_h: float | None = None  #: vehicles per hour on each arm (poisson); unset: 600
     av_arrival_s: float | None = None  #: when the AV enters (poisson); unset: 10
+    av_plan: str | None = None  #: pairwise | joint: how the AV plans; unset: pairwise
+    joint_bound: str | None = None  #: product | union: the joint chance constraint; unset: product
 
     def __post_init__(self) -> None:
         for name in ("mix", "first_m", "gap_m", "v0_mps"):

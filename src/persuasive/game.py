@@ -158,6 +158,22 @@ def build_buffers(s0: float, v0: float, P: np.ndarray, disc: np.ndarray, buf: np
 
 
 @njit(cache=True)
+def shifted_into(S: np.ndarray, V: np.ndarray, A: np.ndarray, shift: float, s0: float,
+                 P: np.ndarray, disc: np.ndarray, buf: np.ndarray, win: np.ndarray) -> None:
+    """Another frame's trajectories ``S + shift``, ``V``, ``A`` (sample-major, from a state
+    at ``s0 - shift`` there, ``s0`` here) with their reward parts, into a library stored as
+    :func:`persuasive.library.lib_buffers` (``buf`` must not hold ``S``, ``V`` or ``A``)."""
+    lib = as_lib(buf, win)
+    n, n_traj = S.shape
+    for k in range(n):
+        for m in range(n_traj):
+            lib.S[k, m] = S[k, m] + shift
+            lib.V[k, m] = V[k, m]
+            lib.A[k, m] = A[k, m]
+    reward_terms(lib.S, lib.V, lib.A, s0, disc, P, lib.base, lib.coll, lib.pos, lib.win)
+
+
+@njit(cache=True)
 def solve_buffers(buf_e: np.ndarray, win_e: np.ndarray, buf_o: np.ndarray, win_o: np.ndarray,
                   P: np.ndarray, out: np.ndarray, q_values: np.ndarray,
                   work: np.ndarray) -> None:
@@ -262,6 +278,7 @@ __all__ = [
     "solve_game",
     "build",
     "build_buffers",
+    "shifted_into",
     "solve_buffers",
     "solve_libs",
 ]

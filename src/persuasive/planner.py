@@ -22,12 +22,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from . import packing as slot
 from .config import Config, ConfigError
-from .game import build_buffers, predict_buffers
+from .game import build_buffers, predict_buffers, shifted_into
 from .kinematics import check_state
 from .library import lib_buffers
 from .mpc import D_EXPECTED, D_MIN_SAFE, D_P_LL, N_DIAG
@@ -42,6 +43,18 @@ from .safety.filter import ShieldFilter
 from .scenarios import build_scenario
 
 State = tuple[float, float]
+
+
+class CandidateView(NamedTuple):
+    """A decision's candidates (:meth:`Planner.candidate_view`): per-candidate diagnostics
+    ``(n_traj, 10)`` (``persuasive.mpc``'s ``D_*`` columns), the sample-major trajectories
+    ``S, V, A`` ``(n, n_traj)`` and each one's collision-free reward ``base`` ``(n_traj,)``."""
+
+    diag: np.ndarray
+    S: np.ndarray
+    V: np.ndarray
+    A: np.ndarray
+    base: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -233,9 +246,45 @@ class Planner:
                               "mode); use Planner.plan")
         return self._step((float(av[0]), float(av[1])), (float(hv[0]), float(hv[1])), -1)
 
-    def _step(self, x_R: State, x_H: State, role: int) -> float:
+    def accel_among(self, av: State, hv: State, candidates: tuple) -> float:
+        """:meth:`accel` with other candidates than the AV's own library at ``av``:
+        ``candidates = (S, V, A, shift)``, sample-major ``(n, n_traj)`` positions [m], speeds
+        [m/s] and accelerations [m/s^2] of another frame, ``shift`` [m] added to ``S`` to put
+        them in this planner's frame (their first sample follows ``av``). The human's full
+        prediction is still made with the AV's own library (what the human expects of the
+        AV); the candidates then replace it for the decision: their reward parts are computed
+        here (``persuasive.rewards.reward_terms``). For a planner of many humans that
+        evaluates one set of candidates against each (``persuasive.many.joint``); read the
+        result with :meth:`candidate_view` and :meth:`allowed_now`."""
+        if self._tie_given:
+            raise ConfigError("Planner.accel_among cannot take the human's role (quirk Q3, "
+                              "paper mode); use Planner.plan")
+        return self._step((float(av[0]), float(av[1])), (float(hv[0]), float(hv[1])), -1,
+                          candidates)
+
+    def candidate_view(self) -> CandidateView:
+        """The last decision's candidates and their diagnostics, as views of the planner's
+        buffers (valid until its next call)."""
+        n = self.config.library.n_samples
+        buf = self._av[0]
+        return CandidateView(self._diag, buf[0:n], buf[n:2 * n], buf[2 * n:3 * n], buf[6 * n])
+
+    def allowed_now(self, av: State, hv: State, out: np.ndarray) -> int:
+        """Which of the last decision's candidates may count as feasible at states ``av``,
+        ``hv`` (``persuasive.policies.planners.shield_allowed``, with the confidence filter's
+        verdict of that decision), into ``out`` ``(n_traj,)`` bool; returns how many."""
+        from .policies.planners import CONFIDENCE, allowed_of
+
+        P = self._P_av
+        robust = self._spec.kind in (kd.PERSUASIVE, kd.PASSIVE) and \
+            P[slot.CONF_THRESHOLD] > 0.0 and self._state[CONFIDENCE] < P[slot.CONF_THRESHOLD]
+        return int(allowed_of(float(av[0]), float(av[1]), float(hv[0]), float(hv[1]),
+                              *self._av, P, self._P_hv, bool(robust), out))
+
+    def _step(self, x_R: State, x_H: State, role: int, candidates: tuple | None = None
+              ) -> float:
         """One decision, before the shield: the proposed acceleration; advances the kept
-        state."""
+        state. ``candidates``: as :meth:`accel_among`."""
         if self._k == 0 and self.yield_line_m is None and \
                 self.config.yield_line_choices is not None:
             self._foresee(x_R, x_H)
@@ -244,6 +293,9 @@ class Planner:
                             *self._hv, *self._av, self._idx, self._q_values, self.work)
         elif self._spec.needs_av_library:
             build_buffers(x_R[0], x_R[1], self._P_av, self._disc, *self._av)
+        if candidates is not None:
+            S, V, A, shift = candidates
+            shifted_into(S, V, A, float(shift), x_R[0], self._P_av, self._disc, *self._av)
         if self._spec.draws:
             self._draws[:self._spec.draws] = self._rng.random(self._spec.draws)
         self._log[:] = np.nan
@@ -296,4 +348,4 @@ def _state(name: str, x, config: Config) -> tuple[float, float]:
     return check_state(name, x, config.vehicle_of(name))
 
 
-__all__ = ["Plan", "Planner"]
+__all__ = ["CandidateView", "Plan", "Planner"]

@@ -156,14 +156,20 @@ def transition_matrix(pl: float, p_a: float) -> np.ndarray:
     return pl * to_leader + pf * to_follower
 
 
-def mpc(x_R, x_H, q, tie_leader: bool, p_a_hat: float, P_av, P_hv, disc, persuade=True):
+def mpc(x_R, x_H, q, tie_leader: bool, p_a_hat: float, P_av, P_hv, disc, persuade=True,
+        candidates=None, branches=None):
     """§6, one decision, with every re-solve done separately.
 
     ``persuade=False``: the passive planner (``Pi_hat`` the identity). Returns ``(chosen,
-    feasible, diag)`` with ``diag`` as in :mod:`persuasive.mpc`.
+    feasible, diag)`` with ``diag`` as in :mod:`persuasive.mpc`. ``candidates``: trajectories
+    ``(S, V, A)`` ``(n_traj, n)`` evaluated in place of the AV's library (which still makes the
+    human's full prediction; ``persuasive.many.joint``). ``branches``: a list that receives,
+    per candidate, its branch probabilities ``(4,)`` and per-sample safety ``(4, n)``.
     """
     (SH, VH, AH), (SR, VR, AR), (hv_l, hv_f, av_l, av_f) = full_prediction(x_H, x_R, P_hv, P_av,
                                                                         disc)
+    if candidates is not None:
+        SR, VR, AR = (np.asarray(x, float) for x in candidates)
     n_traj, n = SR.shape
     q1 = bool(P_av[K.QUIRK_BRANCH_OFFSET])
     q2 = bool(P_av[K.QUIRK_BELIEF_OFFSET])
@@ -218,6 +224,8 @@ def mpc(x_R, x_H, q, tie_leader: bool, p_a_hat: float, P_av, P_hv, disc, persuad
         p_safe = np.zeros(n)
         for p, row in zip(probs, safe_rows):
             p_safe = p_safe + p * row
+        if branches is not None:
+            branches.append((np.array(probs), np.array(safe_rows)))
         diag[k] = [expected, p_safe.min(), p_safe.max(), b_l, b_f, pl, *probs]
     threshold = 1.0 - P_av[K.EPSILON]
     feasible = diag[:, 1] > threshold

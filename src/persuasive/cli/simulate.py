@@ -177,7 +177,9 @@ def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
         return f"{x:.1f} s" if math.isfinite(x) else "-"
 
     kinds = ",".join(f"{k}:{w:g}" if len(spec.hv_kinds) > 1 else k for k, w in spec.hv_kinds)
-    click.echo(f"{config.av.kind} AV among {spec.n_vehicles} vehicles at the junction "
+    plan = "one plan against all, " + spec.joint_bound if spec.av_plan == "joint" else \
+        "one planner per human"
+    click.echo(f"{config.av.kind} AV ({plan}) among {spec.n_vehicles} vehicles at the junction "
                f"({config.junction.variant or 'major'}, {spec.lanes} lane(s), {kinds} humans "
                f"playing {spec.opponents}), seed {seed}, {config.mode} mode, shield "
                f"{config.shield}, {spec.duration_s:g}-s run")

@@ -175,9 +175,28 @@ class ExternalPlanner:
         simulator whose integration lets a braking vehicle roll further than the exact step:
         highway-env's Euler step, :func:`persuasive.envs.highway.euler_shift`).
         """
-        ego, clear, human, horizon = self.ego, self._clear_m, self._human, self.plan_horizon_s
+        ego = self.ego
         v = min(max(float(ego_v_mps), ego.v_min_mps), ego.v_max_mps)
-        accels, live = [], set()
+        planned, leader = self._planned(v, conflicts)
+        a = self._propose(v, planned)
+        if a is None:
+            a = ego.u_max_mps2
+        if leader is not None:
+            a = min(a, idm_follow(self.config, v, leader))
+        a = min(max(a, ego.u_min_mps2), ego.u_max_mps2)
+        proposed = a
+        a, verdict = self.shield(v, proposed, conflicts, dt_s, shield_lead_m)
+        return Decision(float(a), float(proposed), verdict, len(planned), len(conflicts))
+
+    def _planned(self, v: float, conflicts: Sequence[Conflict]
+                 ) -> tuple[list[tuple[Hashable, tuple[float, float], tuple[float, float]]],
+                            tuple[float, float] | None]:
+        """The conflicts :meth:`act` plans against, each ``(key, ego's pair state, the
+        other's)`` (the other's speed within the human's limits, the planner's model), in
+        their order, and the leader in the ego's lane (``(bumper gap, speed)`` or None). The
+        planners of vehicles no longer planned against are dropped."""
+        ego, clear, human, horizon = self.ego, self._clear_m, self._human, self.plan_horizon_s
+        planned, live = [], set()
         leader = None
         for c in conflicts:
             if c.extra.get("stand_in"):  # a vehicle not in the simulator yet: the shield's
@@ -198,19 +217,18 @@ class ExternalPlanner:
             live.add(c.key)
             # the planner's model of the human has the configuration's limits (the states
             # are finite and the speeds clamped: Planner.accel, without the Plan)
-            accels.append(self.planner_for(c.key).accel(
-                (c.ego_s_m, v), (c.other_s_m, min(max(c.other_v_mps, human.v_min_mps),
-                                                  human.v_max_mps))))
+            planned.append((c.key, (c.ego_s_m, v), (c.other_s_m, min(max(
+                c.other_v_mps, human.v_min_mps), human.v_max_mps))))
         if len(live) != len(self._planners):
             for key in [k for k in self._planners if k not in live]:
                 del self._planners[key]
-        a = min(accels) if accels else ego.u_max_mps2
-        if leader is not None:
-            a = min(a, idm_follow(self.config, v, leader))
-        a = min(max(a, ego.u_min_mps2), ego.u_max_mps2)
-        proposed = a
-        a, verdict = self.shield(v, proposed, conflicts, dt_s, shield_lead_m)
-        return Decision(float(a), float(proposed), verdict, len(accels), len(conflicts))
+        return planned, leader
+
+    def _propose(self, v: float, planned: list) -> float | None:
+        """The proposal against the ``planned`` conflicts (:meth:`_planned`; None: none): the
+        lowest of one planner's acceleration per vehicle."""
+        accels = [self.planner_for(key).accel(ego, other) for key, ego, other in planned]
+        return min(accels) if accels else None
 
     def shield(self, ego_v_mps: float, proposed_mps2: float, conflicts: Sequence[Conflict],
                dt_s: float, shield_lead_m: float | Callable[[float], float] = 0.0,

@@ -21,8 +21,9 @@ advance (the saturated step), then every row is checked for overlap:
 
 - the **AV** drives as the outside-simulator adapters do (``persuasive.envs.external``,
   :class:`~persuasive.envs.external.ExternalPlanner`): one planner per conflicting human, the
-  lowest acceleration, IDM behind a leader in its lane, and the one shield over every
-  conflict, its yield line at its stop line;
+  lowest acceleration (``junction.av_plan = "pairwise"``) or one plan against all of them
+  (``"joint"``, ``persuasive.many.joint``), IDM behind a leader in its lane, and the one
+  shield over every conflict, its yield line at its stop line;
 - each **human** (:class:`Human`) computes, in this order: IDM behind the nearest vehicle
   ahead in its lane (or, before a merge, ahead in the exit lane) or behind the start of its
   occupancy interval of any conflict another vehicle is inside of (as behind a standing car:
@@ -59,6 +60,7 @@ from ..policies.kinds import HV as _HV
 from ..policies.kinds import LOG_SIZE
 from ..tables import (ACTIVE, CRASHED, CROSSING, DONE, FOLLOW, MERGE, PENDING, WAIT_V_MPS,
                       Conflict, ConflictTable, Limits, RouteConflict, Row, Trace, Vehicles)
+from .joint import av_planner
 from .junction import (ARMS, Arrivals, JunctionSpec, Route, arrivals, pair_config, possible_routes,
                        right_of_way)
 
@@ -233,7 +235,7 @@ class JunctionWorld:
         if not with_av:
             self.status[0] = DONE
         self.k = 0
-        self.planner = ExternalPlanner(config, self.seed) if with_av else None
+        self.planner = av_planner(config, spec, self.seed) if with_av else None
         self.humans: list[Human | None] = [None]
         for i in range(1, arr.n):
             rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(

@@ -36,7 +36,7 @@ from numba import njit
 
 from .. import packing as slot
 from ..game import EGO_FOLLOWER, EGO_LEADER, OTHER_FOLLOWER, OTHER_LEADER
-from ..library import Lib
+from ..library import Lib, as_lib
 from ..mpc import (D_BELIEF_L, D_EXPECTED, D_MAX_SAFE, D_MIN_SAFE, D_P_LL, D_PLAUSIBLE_L,
                    decide, decide_cv)
 from ..online import online_init, online_step
@@ -151,6 +151,15 @@ def yield_at_line(s_R: float, v_R: float, P_av: np.ndarray, P_hv: np.ndarray) ->
     w = C[C_R_NOISE]  # the stop fits the fastest of the noisy realisations
     return line_brake(s_R, v_R, P_av[slot.SAMPLE_DT], C[C_R_LINE], C[C_R_UMIN] + w,
                       C[C_R_UMAX]) - w
+
+
+@njit(cache=True)
+def allowed_of(s_R: float, v_R: float, s_H: float, v_H: float, buf: np.ndarray,
+               win: np.ndarray, P_av: np.ndarray, P_hv: np.ndarray, robust: bool,
+               allowed: np.ndarray) -> int:
+    """:func:`shield_allowed` of the AV's library stored as
+    :func:`persuasive.library.lib_buffers` (``persuasive.planner.Planner.allowed_now``)."""
+    return shield_allowed(s_R, v_R, s_H, v_H, as_lib(buf, win), P_av, P_hv, robust, allowed)
 
 
 @njit(cache=True)
