@@ -423,7 +423,9 @@ def _within(run, env):
 
 def test_replay_command_prints_the_premise_per_envelope(capsys, three_drivers):
     _, pairs = three_drivers
-    code, out, err = run_cli(capsys, "recordings", "replay", pairs, "--seat", "1", "--quiet")
+    # --pet-max inf: the fixture's drivers pass seconds apart (no interaction by the default)
+    code, out, err = run_cli(capsys, "recordings", "replay", pairs, "--seat", "1", "--quiet",
+                             "--pet-max", "inf")
     assert code == 0 and err == "", err
     lines = out.splitlines()
     i = lines.index("premise held (the driver within the envelope on every tested step, the "
@@ -436,7 +438,8 @@ def test_replay_command_prints_the_premise_per_envelope(capsys, three_drivers):
         "within in 3",
         "  real-driver (u in [-3.7, 3.5] m/s^2, v <= 16.5 m/s): 2 of 3 runs (66.7 %); driver "
         "within in 2"]
-    code, out, _ = run_cli(capsys, "recordings", "replay", pairs, "--seat", "1", "--json")
+    code, out, _ = run_cli(capsys, "recordings", "replay", pairs, "--seat", "1", "--json",
+                           "--pet-max", "inf")
     assert json.loads(out)["premise_by_envelope"]["real-driver"]["runs"] == 2
 
 

@@ -216,6 +216,9 @@ def test_replay_command_prints_and_writes(capsys, simulated, tmp_path):
     (["--model", "idm"], "--model idm is read with --other fitted only"),
     (["--shield", "thick"], "--shield = 'thick' is not allowed"),
     (["--extra-s", "-3"], "--extra-s = -3.0 is out of range"),
+    (["--pet-max", "0"], "--pet-max = 0.0 is out of range; allowed: (0, inf] s"),
+    (["--pet-max", "-1"], "--pet-max = -1.0 is out of range; allowed: (0, inf] s"),
+    (["--pet-max", "nan"], "--pet-max = nan is out of range; allowed: (0, inf] s"),
     (["--out", "runs.txt"], "runs.txt"),
 ])
 def test_bad_replay_input_is_one_line_and_exit_2(capsys, simulated, tmp_path, args, words):
@@ -226,6 +229,39 @@ def test_bad_replay_input_is_one_line_and_exit_2(capsys, simulated, tmp_path, ar
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and words in lines[0], err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_pairs_that_interact_are_replayed_and_the_rest_counted(capsys, simulated):
+    """The command replays the pairs whose PET at the conflict area is at most ``--pet-max``
+    (4 s by default) or unknown, and says how many it left out and why; ``inf`` replays
+    every pair; the library replays a frame whole unless told."""
+    from persuasive.recordings.replay import DEFAULT_PET_AREA_MAX_S, select_pairs
+
+    frame, _ = simulated
+    pet = frame.groupby("pair")["pet_area_s"].first()
+    assert len(pet) == 3 and (pet < DEFAULT_PET_AREA_MAX_S).all()  # three crossings, ~1.4 s
+    # by hand: PETs 1, 4 (kept: "at most"), 4.01 and 7 (left out), unknown (kept)
+    rows = pd.DataFrame({"pair": [0, 0, 1, 2, 3, 4, 4],
+                         "pet_area_s": [1.0, 1.0, 4.0, 4.01, 7.0, np.nan, np.nan]})
+    rows.attrs = {"smoothing": None}
+    kept, info = select_pairs(rows, 4.0)
+    assert sorted(kept["pair"].unique()) == [0, 1, 4] and kept.attrs == rows.attrs
+    assert info == {"pet_area_max_s": 4.0, "pairs": 5, "replayed": 3,
+                    "left_out": {"pet_area_s > 4 s": 2}, "unknown_pet": 1}
+    whole, info = select_pairs(rows, math.inf)
+    assert whole is rows and info["replayed"] == 5 and info["pet_area_max_s"] is None
+    assert select_pairs(rows.drop(columns="pet_area_s"), 4.0)[1]["unknown_pet"] == 5
+    # through the command: a bound below every pair's PET leaves them all out
+    code, text, err = run_cli(capsys, "recordings", "replay", simulated[1], "--seat", "1",
+                              "--pet-max", "1", "--quiet")
+    assert code == 0, err
+    assert "pairs replayed: 0 of 3 (PET at the conflict area at most 1 s, or unknown; 0 " \
+           "without a PET at the area); left out: 3, 3 with pet_area_s > 1 s (no " \
+           "interaction); --pet-max inf replays every pair" in text
+    assert "0 runs of 0 pairs" in text
+    code, text, _ = run_cli(capsys, "recordings", "replay", "--help")
+    assert "--pet-max" in text and "[default: 4.0]" in text
+    assert DEFAULT_PET_AREA_MAX_S == 4.0
 
 
 def test_replay_of_a_file_that_is_not_a_pairs_file(capsys, tmp_path):
@@ -376,8 +412,10 @@ def test_the_real_driver_envelope_is_what_the_shield_and_the_premise_read(tmp_pa
     # the same, through the command line; a name that is not an envelope is one line, exit 2
     pairs = tmp_path / "pairs.parquet"
     write_pairs(pairs, pairs_of(tmp_path), [str(tmp_path)])
+    # --pet-max inf: vehicle 2 reaches the area seconds after vehicle 1 has left it
     code, text, err = run_cli(capsys, "recordings", "replay", pairs, "--seat", "1",
-                              "--envelope", "real-driver", "--json", "--quiet")
+                              "--envelope", "real-driver", "--json", "--quiet",
+                              "--pet-max", "inf")
     assert code == 0, err
     import json
 

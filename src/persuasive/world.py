@@ -78,8 +78,9 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
              meas_noise: np.ndarray, accel_noise: np.ndarray, timed: bool,
              states: np.ndarray, world_log: np.ndarray, av_log: np.ndarray,
              hv_log: np.ndarray, av_time_ns: np.ndarray, work: np.ndarray,
-             av_st: np.ndarray) -> None:
-    """The closed loop, compiled: fills ``states`` ``(n_steps + 1, 4)`` and the logs.
+             av_st: np.ndarray, stop_av_m: float, stop_hv_m: float) -> int:
+    """The closed loop, compiled: fills ``states`` ``(n_steps + 1, 4)`` and the logs;
+    returns the steps taken.
 
     ``needs`` (3,) bool: compute the full prediction of the joint state (some policy reads
     it); build only the AV's library (a policy reads it, none the game); the AV's timing
@@ -87,6 +88,10 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
     ``timed``. ``work``: the kernels' counters (``persuasive.packing.WORK_*``), added to.
     ``av_st``: the AV policy's state (``persuasive.policies.state_size`` slots), initialised
     here and left as the run ends it (e.g. the online posterior over ``p_a``).
+    ``stop_av_m``, ``stop_hv_m``: the loop ends after the first step that leaves both
+    vehicles at or past these positions (``math.inf``: never); the states and logs up to there
+    are those of the whole run (a step reads nothing of the steps after it), the rest is
+    left as it was (foresight's predictions, ``persuasive.safety.foresight``).
     """
     n, n_traj = int(P_av[slot.N_SAMPLES]), int(P_av[slot.N_MESH]) + 1
     lib_h, lib_r = new_lib(n, n_traj), new_lib(n, n_traj)
@@ -152,6 +157,9 @@ def run_loop(P_av: np.ndarray, P_hv: np.ndarray, disc: np.ndarray, x0: np.ndarra
         row[W_AV_A], row[W_HV_A] = advance_states(x, a_av, a_hv, k, noisy, accel_noise, dt,
                                                   P_av, P_hv, x)
         states[k + 1, :] = x
+        if x[0] >= stop_av_m and x[2] >= stop_hv_m:
+            return k + 1
+    return states.shape[0] - 1
 
 
 # -- the Python loop ---------------------------------------------------------------------------
@@ -333,6 +341,17 @@ def run_compiled(s, av_prm: np.ndarray, hv_prm: np.ndarray, timed: bool = False)
     (:class:`persuasive.record.Setup`) with the two policies' parameter vectors: the run's
     :class:`~persuasive.simulation.RunRecord` and the AV's final state vector (which holds an
     online posterior over ``p_a``)."""
+    arrays, _ = _run_arrays(s, av_prm, hv_prm, timed)
+    states, world_log, av_log, hv_log, av_ns, work, av_st = arrays
+    record = make_record(s, states, world_log, av_log, hv_log,
+                         av_ns / 1e6 if timed else None, work=work)
+    return record, av_st
+
+
+def _run_arrays(s, av_prm: np.ndarray, hv_prm: np.ndarray, timed: bool = False,
+                stop_av_m: float = math.inf, stop_hv_m: float = math.inf):
+    """:func:`run_loop` over the setup ``s``: its arrays ``(states, world_log, av_log,
+    hv_log, av_time_ns, work, av_st)`` and the steps taken (``stop_*``: :func:`run_loop`)."""
     from .packing import N_WORK
     from .policies import kind_of, state_size
 
@@ -349,12 +368,11 @@ def run_compiled(s, av_prm: np.ndarray, hv_prm: np.ndarray, timed: bool = False)
                       av.needs_game or av.needs_av_library])
     st = s.streams
     av_st = np.zeros(state_size(av_prm, av.kind))
-    run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind, av_prm, hv.kind,
-             hv_prm, st.draws_av, st.draws_hv, needs, st.noisy, st.meas_noise, st.accel_noise,
-             timed, states, world_log, av_log, hv_log, av_ns, work, av_st)
-    record = make_record(s, states, world_log, av_log, hv_log,
-                         av_ns / 1e6 if timed else None, work=work)
-    return record, av_st
+    steps = run_loop(s.P_av, s.P_hv, s.disc, s.x0, config.simulation.dt_s, av.kind, av_prm,
+                     hv.kind, hv_prm, st.draws_av, st.draws_hv, needs, st.noisy,
+                     st.meas_noise, st.accel_noise, timed, states, world_log, av_log, hv_log,
+                     av_ns, work, av_st, float(stop_av_m), float(stop_hv_m))
+    return (states, world_log, av_log, hv_log, av_ns, work, av_st), steps
 
 
 def predicted_summary(config: Config, seed: int, interaction: int, x0: np.ndarray) -> dict:
@@ -365,6 +383,20 @@ def predicted_summary(config: Config, seed: int, interaction: int, x0: np.ndarra
     s = setup(config, seed, interaction=interaction, x0=x0)
     return run_compiled(s, policy_params(config, kd.AV), policy_params(config, kd.HV))[0] \
         .summary()
+
+
+def predicted_states(config: Config, seed: int, interaction: int, x0: np.ndarray,
+                     stop_av_m: float, stop_hv_m: float):
+    """The run :func:`predicted_summary` predicts, up to the first state at which both
+    vehicles are at or past ``stop_av_m`` and ``stop_hv_m`` (:func:`run_loop`): its setup
+    (:class:`persuasive.record.Setup`) and states ``(steps + 1, 4)``, those of the whole
+    run's first states (foresight's fast path, ``persuasive.safety.foresight``)."""
+    from .policies import policy_params
+
+    s = setup(config, seed, interaction=interaction, x0=x0)
+    arrays, steps = _run_arrays(s, policy_params(config, kd.AV), policy_params(config, kd.HV),
+                                False, stop_av_m, stop_hv_m)
+    return s, arrays[0][:steps + 1]
 
 
 def run_python(config: Config, seed: int, av=None, hv=None, timed: bool = False):

@@ -304,6 +304,16 @@ def _print_replay(info: dict, runs: list) -> None:
         f"the {info['model']} model fitted on the other recordings"
     click.echo(f"{info['runs']} runs of {info['pairs']} pairs: AV {info['av']} with shield "
                f"{info['shield']} in a recorded driver's seat, the other vehicle {other}")
+    sel = info.get("selection") or {}
+    if sel:
+        left = sum(sel["left_out"].values())
+        bound = "every pair" if sel["pet_area_max_s"] is None else \
+            f"PET at the conflict area at most {sel['pet_area_max_s']:g} s, or unknown"
+        click.echo(f"pairs replayed: {sel['replayed']} of {sel['pairs']} ({bound}; "
+                   f"{sel['unknown_pet']} without a PET at the area); left out: {left}"
+                   + "".join(f", {n} with {why} (no interaction)"
+                             for why, n in sel["left_out"].items())
+                   + ("; --pet-max inf replays every pair" if left else ""))
     if info.get("human_envelope", "paper") != "paper":
         from ..config import HUMAN_ENVELOPES
 
@@ -392,6 +402,11 @@ def _print_replay(info: dict, runs: list) -> None:
               help="The human envelope the shield assumes of the other vehicle and the "
                    "premise tests the recorded driver against: paper (the configuration's), "
                    "sumo or real-driver (hv.envelope).")
+@click.option("--pet-max", "pet_max", type=float, default=4.0, show_default=True,
+              metavar="S",
+              help="Replay the pairs that interact: PET at the conflict area (pet_area_s) "
+                   "at most S seconds, or unknown; the others are counted as left out. inf: "
+                   "every pair.")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write one row per run (.parquet or .csv).")
 @click.option("--workers", type=workers_type(), default=None,
@@ -399,7 +414,7 @@ def _print_replay(info: dict, runs: list) -> None:
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
 def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, angle_step,
-                   envelope, out, workers, quiet, as_json) -> None:
+                   envelope, pet_max, out, workers, quiet, as_json) -> None:
     """Put the AV in each recorded driver's seat at the start of each pair: collisions, the
     shield's uncertified steps, the recorded driver against the shield's envelope, who passed
     first and the time to clear against the recorded driver's own."""
@@ -416,7 +431,7 @@ def replay_command(pairs_file, av, shield, other, model, seat, extra_s, mode, an
     seats = (1, 2) if seat == "both" else (int(seat),)
     settings = _guard(ReplaySettings, av=av, shield=shield, other=other,
                       model=model or "lfg", extra_s=extra_s, seats=seats, mode=mode,
-                      angle_step_deg=angle_step, envelope=envelope)
+                      angle_step_deg=angle_step, envelope=envelope, pet_area_max_s=pet_max)
     if out:
         _guard(check_output_file, out, (".parquet", ".csv"), "replay table")
         _guard(lock_output, out, "replay table")

@@ -54,6 +54,19 @@ not reproduce it, the run says nothing about the AV. The rule: a run is *invalid
 
 Times are compared on valid runs only; collisions are reported on all runs, valid or not.
 
+**Which pairs.** A pairs file holds every approaching pair, most of them no interaction at
+all at a busy junction (a minor-road car waiting at its line pairs with every major-road car
+that passes it). ``recordings replay`` therefore replays by default only the pairs that interact:
+those whose post-encroachment time at the conflict area (``pet_area_s``, Allen et al. 1978;
+the time from the first vehicle's rear leaving the area to the other's front reaching it) is
+at most :data:`DEFAULT_PET_AREA_MAX_S` (4 s, the held-out evaluation's bound too, ``fit
+--pet-max``; ``--pet-max``, ``inf``: every pair). A pair whose
+PET is unknown (the second never reached the area while recorded, or a pairs file written
+before the column) is replayed. In the library the bound is
+``ReplaySettings.pet_area_max_s``, ``inf`` unless given: a frame handed in is replayed
+whole, as before. The pairs left out are counted, with the reason, in
+:attr:`ReplayResult.selection` and the summary (:func:`select_pairs`).
+
 **Times.** The AV's time to clear (``RunOutcome.av_time_to_clear_s``) beside the replaced
 vehicle's own, the first recorded step at which its ``s`` is past the scenario's clearing
 position (NaN when it did not clear while recorded); the summary gives restricted means, a
@@ -82,6 +95,11 @@ OTHERS = ("replay", "fitted")
 FITTED_MODELS = ("lfg", "stubborn", "noisy", "idm")
 #: Reasons of an invalid run (module docstring).
 INVALID_YIELDED, INVALID_REAR_END = "yielded", "rear-end"
+#: The pairs replayed by default: post-encroachment time at the conflict area at most this [s]
+#: (module docstring, "Which pairs"; the held-out evaluation's bound, ``fit --pet-max``): an
+#: accepted gap at an unsignalised junction is some 4-7 s between arrivals, which leaves a PET
+#: at the area of a few seconds; two vehicles further apart there did not interact.
+DEFAULT_PET_AREA_MAX_S = 4.0
 
 
 @dataclass(frozen=True)
@@ -100,9 +118,19 @@ class ReplaySettings:
     #: recorded driver against: ``paper`` (the configuration's ``hv`` limits) or a name of
     #: ``persuasive.config.HUMAN_ENVELOPES`` (``hv.envelope``)
     envelope: str = "paper"
+    #: replay the pairs whose PET at the conflict area is at most this [s] (``inf``: every
+    #: pair; a pair without one is replayed; module docstring, "Which pairs"); the command's
+    #: default is :data:`DEFAULT_PET_AREA_MAX_S`
+    pet_area_max_s: float = math.inf
 
     def __post_init__(self) -> None:
         from ..config import HUMAN_ENVELOPES
+
+        pet = self.pet_area_max_s
+        if isinstance(pet, bool) or not isinstance(pet, (int, float)) or math.isnan(pet) \
+                or not pet > 0.0:
+            raise RecordingError(f"--pet-max = {pet!r} is out of range; allowed: (0, inf] s "
+                                 "(inf: every pair)")
 
         if self.envelope != "paper" and self.envelope not in HUMAN_ENVELOPES:
             raise RecordingError(f"--envelope = {self.envelope!r} is not allowed; allowed: "
@@ -179,6 +207,8 @@ class ReplayResult:
     runs: list[SeatRun]
     settings: ReplaySettings
     fits: dict[str, dict] = field(default_factory=dict)
+    #: which pairs of the file were replayed and which left out, and why (:func:`select_pairs`)
+    selection: dict = field(default_factory=dict)
 
     def frame(self):
         """One row per run (the fields of :class:`SeatRun`; ``fitted`` as JSON text)."""
@@ -194,8 +224,9 @@ class ReplayResult:
         return pd.DataFrame(rows, columns=list(SeatRun.__dataclass_fields__))
 
     def summary(self) -> dict:
-        """What ``recordings replay`` prints (see :func:`summarise`)."""
-        return summarise(self.runs, self.settings)
+        """What ``recordings replay`` prints (see :func:`summarise`), with the pairs left
+        out (``selection``: :func:`select_pairs`)."""
+        return {**summarise(self.runs, self.settings), "selection": self.selection}
 
 
 def _share(k: int, n: int) -> float | None:
@@ -519,11 +550,40 @@ def fit_left_out(frame, settings: ReplaySettings, base: Config) -> dict[str, dic
     return out
 
 
+def select_pairs(frame, pet_area_max_s: float = DEFAULT_PET_AREA_MAX_S):
+    """The rows of the pairs that interact (module docstring, "Which pairs"): a pair is left
+    out when its ``pet_area_s`` is known and above ``pet_area_max_s``. Returns the kept
+    rows (``frame.attrs`` kept) and what was done: ``pet_area_max_s`` (None for ``inf``),
+    ``pairs`` (in the file), ``replayed``, ``left_out`` (``{reason: pairs}``, the reason
+    ``"pet_area_s > <bound> s"``; empty when none), ``unknown_pet`` (pairs replayed
+    without a PET at the area)."""
+    pet = frame.groupby("pair", sort=True)["pet_area_s"].first() if "pet_area_s" in frame \
+        else None
+    n = int(frame["pair"].nunique()) if len(frame) else 0
+    bound = None if math.isinf(pet_area_max_s) else float(pet_area_max_s)
+    if pet is None:
+        return frame, {"pet_area_max_s": bound, "pairs": n, "replayed": n, "left_out": {},
+                       "unknown_pet": n}
+    values = pet.to_numpy(float)
+    out = ~np.isnan(values) & (values > pet_area_max_s)
+    left = int(out.sum())
+    info = {"pet_area_max_s": bound, "pairs": n, "replayed": n - left,
+            "left_out": {f"pet_area_s > {pet_area_max_s:g} s": left} if left else {},
+            "unknown_pet": int(np.isnan(values).sum())}
+    if not left:
+        return frame, info
+    kept = frame[frame["pair"].isin(pet.index[~out])]
+    kept.attrs = dict(frame.attrs)
+    return kept, info
+
+
 def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | None = None,
                  source: str = "", workers: int = 1,
                  progress: Callable[[int, int], None] | None = None) -> ReplayResult:
-    """Every pair of a pairs frame (:func:`persuasive.recordings.pairs.read_pairs`) replayed
-    with the AV in each seat of ``settings.seats`` (module docstring), in pair order; with
+    """Every pair of a pairs frame (:func:`persuasive.recordings.pairs.read_pairs`) that
+    interacts (:func:`select_pairs` with ``settings.pet_area_max_s``; the rest are counted in
+    the result's ``selection``) replayed with the AV in each seat of ``settings.seats``
+    (module docstring), in pair order; with
     ``workers > 1`` the pairs run on the worker processes of a local Dask cluster
     (``persuasive.sweep.runner.local_client``), the same runs bit for bit (each pair's runs
     depend on that pair, the settings and, with a fitted other, the fits made here first);
@@ -532,8 +592,10 @@ def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | N
     base = base if base is not None else Config(mode=settings.mode)
     if settings.envelope != "paper":
         base = base.with_overrides({"hv.envelope": settings.envelope})
+    # the fits read every pair of the file (the models are the recordings' drivers)
     fits = fit_left_out(frame, settings, base) if settings.other == "fitted" else {}
     smoothing = frame.attrs.get("smoothing")
+    frame, selection = select_pairs(frame, settings.pet_area_max_s)
     edge = edge_samples(SmoothingParams(**smoothing) if smoothing else None)
     tasks = []
     for _, rows in frame.groupby("pair", sort=True):
@@ -559,7 +621,7 @@ def replay_pairs(frame, settings: ReplaySettings | None = None, base: Config | N
                 if progress is not None:
                     progress(len(by_pair), len(tasks))
     runs = [run for i in range(len(tasks)) for run in by_pair[i]]
-    return ReplayResult(runs, settings, {k: v["params"] for k, v in fits.items()})
+    return ReplayResult(runs, settings, {k: v["params"] for k, v in fits.items()}, selection)
 
 
 def _replay_pair(rows, settings: ReplaySettings, base: Config, source: str, fits: dict,
@@ -575,8 +637,8 @@ def _replay_task(args) -> list[SeatRun]:
     return _replay_pair(rows, settings, Config.from_dict(data), source, fits, edge)
 
 
-__all__ = ["ENVELOPE_TOL", "FITTED_MODELS", "INVALID_REAR_END", "INVALID_YIELDED", "OTHERS",
-           "ReplayResult", "ReplaySettings", "SeatRun", "envelope_excess", "fit_left_out",
-           "fitted_overrides", "pair_run_logs", "replay_accelerations", "replay_pairs",
-           "edge_steps", "premise_by_envelope", "run_from", "run_seat", "seat_right_of_way",
-           "summarise", "within"]
+__all__ = ["DEFAULT_PET_AREA_MAX_S", "ENVELOPE_TOL", "FITTED_MODELS", "INVALID_REAR_END",
+           "INVALID_YIELDED", "OTHERS", "ReplayResult", "ReplaySettings", "SeatRun",
+           "edge_steps", "envelope_excess", "fit_left_out", "fitted_overrides",
+           "pair_run_logs", "premise_by_envelope", "replay_accelerations", "replay_pairs",
+           "run_from", "run_seat", "seat_right_of_way", "select_pairs", "summarise", "within"]

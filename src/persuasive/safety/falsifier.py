@@ -13,6 +13,8 @@ human is at fault for, after a fair cut-in in a shared lane, are left out: docs/
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .. import packing as slot
@@ -42,7 +44,7 @@ def run_against(config: Config, accels: np.ndarray, seed: int = 1):
              policy_params(config, kd.AV), kd.REPLAY, hv_prm, st.draws_av, np.zeros((n, 0)),
              needs, False, st.meas_noise, st.accel_noise, False, states, world_log, av_log,
              hv_log, np.zeros(n, np.int64), np.zeros(slot.N_WORK, np.int64),
-             np.zeros(kd.STATE_SIZE))
+             np.zeros(kd.STATE_SIZE), math.inf, math.inf)  # never stops: the whole run
     return s.scenario, states, world_log
 
 

@@ -43,9 +43,26 @@ none, even where the stubborn one cannot be persuaded on any line). The run then
 The choice only sets where the shield's line stands: every step is still filtered by the
 shield, so every guarantee of §12 holds whichever line is picked. What foresight does not
 know is a human unlike its models: a human that waits for the AV to commit (a follower that
-never takes the lead) may still keep it waiting, as the issue allows. It costs ``5 n`` model
-runs once per run (about 6 ms each at the paper's intersection), before the first step, not in
-the per-step budget.
+never takes the lead) may still keep it waiting, as the issue allows. It costs at most ``5 n``
+model runs once per run (about 6 ms each at the paper's intersection), before the first step,
+not in the per-step budget.
+
+**Cost, with the same pick** (issue 42; :func:`choose_line_reference` is the plain
+computation, and ``tests/test_replay_speed.py`` holds the two equal on random states):
+
+- *a line that cannot win is not finished*: after ``j`` of a line's ``m`` model runs, its
+  value can at most reach (live so far ``+ (m - j)``, AV first so far ``+ (m - j)``, the
+  slowest clear so far), each model run adding at most one to the counts and the slowest
+  clear only falling; where that bound is not above the best value so far (a tie goes to the
+  earlier line), the line's other runs are skipped;
+- *a predicted run ends once it is decided*: with the compiled loop's predictions
+  (``persuasive.world.predicted_summary``, what both loops hand in) the run stops at the first
+  state at which both vehicles are past their clearing position and the conflict point
+  (``persuasive.world.predicted_states``). Positions never fall (speeds are at least
+  ``v_min >= 0``), so from there on both stay cleared, who reached the conflict point first is
+  settled, the AV's time to clear is known, and no standoff can start (a standoff needs both
+  vehicles short of clearing): the score (:func:`score_states`) is the whole run's. Only the
+  four fields the score reads are computed, not the run's record.
 """
 
 from __future__ import annotations
@@ -100,7 +117,87 @@ def choose_line(config: Config, seed: int, x0_measured: np.ndarray, predict,
                 interaction: int = 0) -> float:
     """The yield line the AV picks for the run (module docstring). ``predict(config, seed,
     interaction, x0) -> summary``: a predicted run's summary (the loops hand in
-    ``persuasive.world.predicted_summary``, the compiled loop's)."""
+    ``persuasive.world.predicted_summary``, the compiled loop's, whose runs are then scored
+    by :func:`predicted_score`, stopped once decided). The same line as
+    :func:`choose_line_reference`, with fewer and shorter model runs (module docstring,
+    "Cost")."""
+    from ..world import predicted_summary
+
+    run_s = config.simulation.n_steps * config.simulation.dt_s
+    p_seed = prediction_seed(seed)
+    if predict is predicted_summary:
+        def score_of(model: Config):
+            return predicted_score(model, p_seed, interaction, x0_measured, run_s)
+    else:
+        def score_of(model: Config):
+            return score(predict(model, p_seed, interaction, x0_measured), run_s)
+    best, pick = None, None
+    for line in config.yield_line_choices:
+        value = bounded_line_value((score_of(model_config(config, line, kind, role))
+                                    for kind, role in MODELS), len(MODELS), best)
+        if value is not None and (best is None or value > best):
+            best, pick = value, line
+    return pick
+
+
+def bounded_line_value(scores, m: int, best) -> tuple[int, int, float] | None:
+    """:func:`line_value` of the ``m`` :func:`score` that ``scores`` yields, drawn one at a
+    time, or None as soon as the line cannot beat ``best`` (None: nothing to beat): its
+    value after ``j`` of them can at most reach (live ``+ (m - j)``, first ``+ (m - j)``, the
+    slowest clear so far), and a line wins only with a value above the best so far."""
+    live = first = 0
+    slowest = math.inf
+    left = m
+    for s in scores:
+        left -= 1
+        live += s[0]
+        first += s[1]
+        slowest = min(slowest, s[2])
+        if best is not None and (live + left, first + left, slowest) <= best:
+            return None
+    return live, first, slowest
+
+
+def score_states(scenario, states: np.ndarray, dt: float, run_s: float
+                 ) -> tuple[bool, bool, float]:
+    """The :func:`score` of a run of ``scenario`` from its states ``(k + 1, 4)``: the whole
+    run's, or a first part of it that ends with both vehicles past their clearing position
+    and the conflict point (module docstring, "Cost"), computed as
+    ``persuasive.record.outcome`` computes those fields."""
+    from ..record import _first_time
+    from ..scenarios import first_arrival
+    from . import measures
+
+    cleared_av = scenario.cleared("av", states[:, 0])
+    cleared_hv = scenario.cleared("hv", states[:, 2])
+    both = bool(cleared_av[-1] and cleared_hv[-1])
+    after = states[1:]
+    conflict, _ = first_arrival(scenario.at_conflict_point(after[:, 0]),
+                                scenario.at_conflict_point(after[:, 2]))
+    stood = measures.standoff(states[:, 0], states[:, 2], cleared_av, cleared_hv, dt)
+    return score({"both_cleared": both, "deadlock": not math.isnan(stood),
+                  "av_first_through": both and conflict == 1,
+                  "av_time_to_clear_s": _first_time(cleared_av[1:], dt)}, run_s)
+
+
+def predicted_score(config: Config, seed: int, interaction: int, x0: np.ndarray,
+                    run_s: float) -> tuple[bool, bool, float]:
+    """``score(predicted_summary(config, seed, interaction, x0), run_s)``, from the
+    compiled run stopped once both vehicles are past their clearing position and the
+    conflict point (module docstring, "Cost")."""
+    from ..record import static_setup
+    from ..world import predicted_states
+
+    scenario = static_setup(config)[0]  # the run's own (cached): where it may stop
+    s, states = predicted_states(config, seed, interaction, x0,
+                                 max(scenario.av.clear_s, 0.0), max(scenario.hv.clear_s, 0.0))
+    return score_states(s.scenario, states, config.simulation.dt_s, run_s)
+
+
+def choose_line_reference(config: Config, seed: int, x0_measured: np.ndarray, predict,
+                          interaction: int = 0) -> float:
+    """:func:`choose_line` computed plainly: every model run of every line, whole, through
+    ``predict``'s summaries (what the tests hold the fast path to)."""
     run_s = config.simulation.n_steps * config.simulation.dt_s
     best, pick = None, None
     for line in config.yield_line_choices:
@@ -113,5 +210,6 @@ def choose_line(config: Config, seed: int, x0_measured: np.ndarray, predict,
     return pick
 
 
-__all__ = ["MODELS", "PREDICTION_SEED_XOR", "choose_line", "line_value", "model_config",
-           "prediction_seed", "score"]
+__all__ = ["MODELS", "PREDICTION_SEED_XOR", "bounded_line_value", "choose_line",
+           "choose_line_reference", "line_value", "model_config", "predicted_score",
+           "prediction_seed", "score", "score_states"]
