@@ -301,3 +301,173 @@ def test_bad_input_ends_in_one_line_and_exit_2_writing_nothing(capsys, pairs_fil
         assert code == 2 and out == "" and err.count("\n") == 1, (args, err)
         assert words in err, (args, err)
     assert not target.exists() and not (tmp_path / "r.parquet").exists()
+
+
+# -- reading, selecting and splitting the work (issue 42: a site's pairs in minutes) ----------
+
+def _pairs_of_by_groups(frame, site, prefix):
+    """The reading of a pairs frame before it was vectorised (a groupby, one pair at a time):
+    the reference the fast :func:`pairs_of` must equal field for field."""
+    out = []
+    for pair_id, rows in frame.groupby("pair", sort=True):
+        rows = rows.sort_values("step", kind="stable")
+        r0 = rows.iloc[0]
+
+        def both(q, unit):
+            return np.stack([rows[f"{q}_1_{unit}"].to_numpy(float),
+                             rows[f"{q}_2_{unit}"].to_numpy(float)])
+
+        rec = str(r0["recording"]).split("/case", 1)[0]
+        out.append(PairData(
+            site=site, file=f"{site}/{rec}" if prefix else rec, pair=int(pair_id),
+            kind=str(r0["kind"]), angle_deg=float(r0["angle_deg"]),
+            classes=(str(r0["class_1"]), str(r0["class_2"])),
+            lengths_m=(float(r0["length_1_m"]), float(r0["length_2_m"])),
+            widths_m=(float(r0["width_1_m"]), float(r0["width_2_m"])),
+            occupancy=np.array([[r0["occupancy_1_lo_m"], r0["occupancy_1_hi_m"]],
+                                [r0["occupancy_2_lo_m"], r0["occupancy_2_hi_m"]]], float),
+            first=str(r0["first"]), pet_s=float(r0["pet_s"]),
+            pet_area_s=float(r0["pet_area_s"]) if "pet_area_s" in rows else math.nan,
+            t_pass_s=(float(r0["t_pass_1_s"]), float(r0["t_pass_2_s"])),
+            t=rows["t_s"].to_numpy(float), s=both("s", "m"), v=both("v", "mps"),
+            a=both("a", "mps2"), x=both("x", "m"), y=both("y", "m"),
+            **({"control": str(r0["control"]), "priority": int(r0["priority"]),
+                "stop_s": (float(r0["stop_1_m"]), float(r0["stop_2_m"]))}
+               if "control" in rows else {})))
+    return out
+
+
+def _same_pairs(a, b):
+    from dataclasses import fields
+
+    assert len(a) == len(b)
+    for p, q in zip(a, b):
+        for f in fields(p):
+            u, v = getattr(p, f.name), getattr(q, f.name)
+            assert type(u) is type(v), f.name
+            if isinstance(u, np.ndarray):
+                assert u.shape == v.shape and np.array_equal(u, v, equal_nan=True), f.name
+            else:  # NaN equals NaN here (a pair with no stop line, no PET)
+                assert np.array_equal(np.asarray(u, object), np.asarray(v, object)) or \
+                    np.array_equal(u, v, equal_nan=True), (f.name, u, v)
+
+
+def test_pairs_are_read_as_the_groupby_read_them(pairs_file):
+    """The vectorised reading equals the pair-by-pair one on every field, whatever the order of
+    the rows in the file, and the columns read are read_pairs' own values."""
+    from persuasive.recordings.evaluate import pairs_of, read_pair_data
+    from persuasive.recordings.pairs import read_pairs
+
+    whole, _ = read_pairs(pairs_file)
+    want = _pairs_of_by_groups(whole, "s", False)
+    _same_pairs(pairs_of(whole, "s", False), want)
+    ((name, frame),) = read_sites([pairs_file])
+    _same_pairs(pairs_of(frame, "s", False), want)
+    shuffled = whole.sample(frac=1.0, random_state=np.random.default_rng(1).integers(1 << 30))
+    _same_pairs(pairs_of(shuffled, "s", False), want)
+    _same_pairs(pairs_of(frame, "site", True), _pairs_of_by_groups(whole, "site", True))
+    _same_pairs(read_pair_data([pairs_file]), _pairs_of_by_groups(whole, name, False))
+    assert pairs_of(whole.iloc[:0], "s", False) == []
+
+
+def test_each_runs_evidence_is_its_own(evaluation):
+    """The folds solve the training and the test views apart: a run's evidence does not
+    depend on the runs solved with it (every array, bit for bit)."""
+    from persuasive.fitting import evidence_of
+
+    builder = ViewBuilder("corrected", vehicle_limits(evaluation.pairs, 0.01), 12.0)
+    views = [builder.view(p, h) for p in evaluation.pairs for h in (1, 2)]
+    whole = evidence_of(views)
+    for part in (range(0, 5), range(5, len(views))):
+        alone, sub = evidence_of([views[i] for i in part]), whole.subset(part)
+        for name in ("starts", "accel", "a_role", "pl", "belief", "q", "a_first", "states",
+                     "P_hv", "P_av", "dt"):
+            assert np.array_equal(getattr(alone, name), getattr(sub, name)), name
+
+
+def test_pairs_are_selected_by_their_pet_at_the_conflict_area(evaluation):
+    from persuasive.recordings.evaluate import NO_PET, PET_ABOVE, select_pairs
+
+    pairs = [replace(p, pet_area_s=x) for p, x in
+             zip(evaluation.pairs, [0.5, 5.0, 5.0001, math.nan, 30.0, 0.0])]
+    kept, left = select_pairs(pairs, 5.0)
+    assert [p.pet_area_s for p in kept] == [0.5, 5.0, 0.0]
+    assert left == {PET_ABOVE: 2, NO_PET: 1}
+    kept, left = select_pairs(pairs, math.inf)  # every pair, those without a PET too
+    assert len(kept) == len(pairs) and left == {PET_ABOVE: 0, NO_PET: 0}
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(RecordingError, match="pet_max_s"):
+            EvalParams(pet_max_s=bad)
+
+
+def test_the_evaluation_is_that_of_the_pairs_read_one_by_one(pairs_file, evaluation):
+    """The whole evaluation (every fold, score, interval and fitted parameter) from the
+    reference reading of the pairs equals the one from the fast reading, and every pair of
+    the fixture is evaluated under the default --pet-max."""
+    from persuasive.recordings.evaluate import PET_MAX_S, evaluate_pairs
+    from persuasive.recordings.pairs import read_pairs
+
+    whole, _ = read_pairs(pairs_file)
+    ref = evaluate_pairs(_pairs_of_by_groups(whole, "pairs", False), Split("folds", k=3),
+                         params=EvalParams(n_boot=200))
+    assert ref.to_dict() == evaluation.to_dict()
+    sel = evaluation.to_dict()["selection"]
+    assert sel["pet_max_s"] == PET_MAX_S and sel["read"] == sel["selected"] == N_FILES
+    every = evaluate_pairs(evaluation.pairs, Split("folds", k=3),
+                           params=EvalParams(n_boot=200, pet_max_s=math.inf)).to_dict()
+    assert every["selection"]["pet_max_s"] == "inf"
+    assert {**every, "selection": None} == {**evaluation.to_dict(), "selection": None}
+
+
+def test_fit_names_the_pairs_it_leaves_out(capsys, pairs_file, tmp_path):
+    from persuasive.recordings.evaluate import PET_MAX_S
+
+    pets = sorted(p.pet_area_s for p in read_pair_data_of(pairs_file))
+    cut = 0.5 * (pets[1] + pets[2])  # two of the six pairs at most
+    code, out, err = run(capsys, "fit", pairs_file, "--folds", "2", "--model", "stubborn",
+                         "--quiet", "--pet-max", f"{cut!r}", "--json")
+    if code == 0:
+        d = json.loads(out)
+        assert d["selection"]["selected"] == 2 and d["pairs"]["total"] == 2
+        assert d["selection"]["left_out"] == {"PET at the conflict area above pet_max_s": 4,
+                                              "no PET at the conflict area": 0}
+    else:  # the two pairs in one file: a split needs two
+        assert code == 2 and "recording file" in err
+    code, out, err = run(capsys, "fit", pairs_file, "--holdout", "0.34", "--model", "lfg",
+                         "--quiet")
+    assert code == 0 and f"pairs evaluated: 6 of 6, those with a PET at the conflict area " \
+        f"(pet_area_s) of at most {PET_MAX_S:g} s (--pet-max)" in out
+    code, out, err = run(capsys, "fit", "--help")
+    assert f"[{PET_MAX_S:g}]" in " ".join(out.split())
+    for bad in ("0", "-2", "nan"):
+        code, out, err = run(capsys, "fit", pairs_file, "--pet-max", bad)
+        assert code == 2 and out == "" and err.count("\n") == 1, (bad, err)
+        assert f"--pet-max = {float(bad):g} is out of range; allowed: (0, inf] s" in err
+    code, out, err = run(capsys, "fit", pairs_file, "--pet-max", "1e-6", "--quiet")
+    assert code == 2 and err.count("\n") == 1 and "--pet-max" in err, err
+
+
+def read_pair_data_of(path):
+    from persuasive.recordings.evaluate import read_pair_data
+
+    return read_pair_data([path])
+
+
+def test_the_rollout_reads_the_views_packed_parameters_as_built(evaluation):
+    """The IDM rollout on the parameter vectors an evidence packed equals the one that builds
+    them from the views' configurations."""
+    from persuasive.config import Config
+    from persuasive.fitting import evidence_of
+    from persuasive.fitting.models import IDM_NAMES
+    from persuasive.recordings.evaluate import idm_rollout
+
+    idm = Config().hv.idm
+    prm = np.array([getattr(idm, name) for name in IDM_NAMES], float)
+    builder = ViewBuilder("corrected", vehicle_limits(evaluation.pairs, 0.01), 12.0)
+    for p, st in zip(evaluation.pairs, evaluation.status):
+        if st[0] != KEPT:
+            continue
+        views = [builder.view(p, 1), builder.view(p, 2)]
+        ev = evidence_of(views)
+        packed = (ev.P_av[0], ev.P_hv[0], ev.P_av[1], ev.P_hv[1])
+        assert idm_rollout(p, st[2], *views, prm, packed) == idm_rollout(p, st[2], *views, prm)

@@ -153,7 +153,13 @@ def _fmt_interval(d: dict, digits: int = 3) -> str:
 
 
 def _print_evaluation(d: dict, elapsed: float, out: str | None) -> None:
-    sp, pairs, lim = d["split"], d["pairs"], d["limits"]
+    sp, pairs, lim, sel = d["split"], d["pairs"], d["limits"], d["selection"]
+    dropped = ", ".join(f"{v} with {k}" for k, v in sel["left_out"].items() if v)
+    pet = sel["pet_max_s"]
+    click.echo(f"pairs evaluated: {sel['selected']} of {sel['read']}, "
+               + ("every pair (--pet-max inf)" if pet == "inf" else
+                  f"those with a PET at the conflict area (pet_area_s) of at most {pet:g} s "
+                  f"(--pet-max)" + (f"; left out: {dropped}" if dropped else "")))
     left = ", ".join(f"{k} {v}" for k, v in pairs["left_out"].items() if v)
     click.echo(f"held-out evaluation: {sp['describe']} (seed {sp['seed']}); {sp['files']} "
                f"recording files, {pairs['total']} pairs, {pairs['kept']} predicted"
@@ -186,14 +192,15 @@ def _print_evaluation(d: dict, elapsed: float, out: str | None) -> None:
 
 
 def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_site,
-                    seed, workers=None, quiet=False) -> None:
+                    seed, workers=None, quiet=False, pet_max=None) -> None:
     """``fit PAIRS.parquet...``: the held-out evaluation (module docstring)."""
     from click.core import ParameterSource
 
     from .._files import check_output_file
     from ..fitting import write_json
     from ..fitting.estimate import MODELS
-    from ..recordings.evaluate import EvalParams, Split, evaluate, read_sites
+    from ..recordings.evaluate import (PET_MAX_S, EvalParams, Split, evaluate_pairs,
+                                       read_pair_data)
     from ..recordings.formats import RecordingError
 
     ctx = click.get_current_context()
@@ -207,6 +214,10 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
     if holdout is not None and not (math.isfinite(holdout) and 0.0 < holdout < 1.0):
         raise _BadInput(f"--holdout = {holdout:g} is out of range; allowed: (0, 1), the share "
                         "of recording files tested")
+    if pet_max is not None and not (pet_max > 0.0):  # NaN too
+        raise _BadInput(f"--pet-max = {pet_max:g} is out of range; allowed: (0, inf] s, the "
+                        "largest PET at the conflict area (pet_area_s) of a pair evaluated "
+                        "(inf: every pair)")
     if folds is not None and folds < 2:
         raise _BadInput(f"--folds = {folds} is out of range; allowed: 2 to the number of "
                         "recording files")
@@ -223,16 +234,18 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
     else:
         split = Split("folds", k=folds)
     models = MODELS if model == "all" else (model,)
-    params = EvalParams(seed=seed if seed is not None else 0, sigma_min=sigma_min)
+    params = EvalParams(seed=seed if seed is not None else 0, sigma_min=sigma_min,
+                        pet_max_s=PET_MAX_S if pet_max is None else pet_max)
     clock = StudyClock()
     n_folds = 1 if split.kind != "folds" else (folds or 5)
     workers = check_workers(workers, n_folds)
     bar = None
     try:
-        sites = read_sites(paths)
+        pairs = read_pair_data(paths)
         _notice_compile()
         bar = progress_bar(quiet, unit="fold")
-        result = evaluate(sites, split, models, params, workers=workers, progress=bar)
+        result = evaluate_pairs(pairs, split, models, params, workers=workers, progress=bar)
+        del pairs
     except RecordingError as exc:
         raise _BadInput(str(exc)) from None
     finally:
@@ -279,6 +292,10 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
 @click.option("--test-site", default=None, metavar="NAME",
               help="Pairs files: train on the other pairs files (sites), test on this one "
                    "(its file name without .parquet).")
+@click.option("--pet-max", "pet_max", type=float, default=None, metavar="SECONDS",
+              help="Pairs files: evaluate the pairs whose PET at the conflict area "
+                   "(pet_area_s) is at most this, in (0, inf] s; inf: every pair (a site's "
+                   "waiting cars pair with every car that passes) [4].")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=None,
               help="Pairs files: seed of the split and of the bootstrap [0].")
 @click.option("--workers", type=workers_type(), default=None,
@@ -286,7 +303,7 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
                    "most the folds]; the evaluation does not depend on it.")
 @click.option("--quiet", is_flag=True, help="Pairs files: no progress bar over the folds.")
 def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_json, holdout,
-        folds, test_site, seed, workers, quiet) -> None:
+        folds, test_site, pet_max, seed, workers, quiet) -> None:
     """Fit human models to recorded driving (simulate --out logs, drive trials), or evaluate
     them held out on recorded pairs (pairs files of 'persuasive recordings pairs').
 
@@ -312,10 +329,10 @@ def fit(logs, model, per_participant, scenario, sigma_min, intervals, out, as_js
                             "both")
         check_distinct(logs)
         _evaluate_pairs(logs, model, sigma_min, out, as_json, holdout, folds, test_site, seed,
-                        workers, quiet)
+                        workers, quiet, pet_max)
         return
     for value, flag in ((holdout, "--holdout"), (folds, "--folds"), (test_site, "--test-site"),
-                        (seed, "--seed"), (workers, "--workers")):
+                        (pet_max, "--pet-max"), (seed, "--seed"), (workers, "--workers")):
         if value is not None:
             raise _BadInput(f"{flag} applies to pairs files ('persuasive recordings pairs --out "
                             "FILE.parquet'), not to logs")

@@ -85,6 +85,7 @@ from ..config import AV_KINDS, SHIELD_KINDS, Config
 from ..safety.measures import restricted_mean
 # the envelope test lives with the envelopes (one concept, one module); kept importable here
 from .envelope import ENVELOPE_TOL, ENVELOPES, envelope_excess
+from .evaluate import PET_MAX_S
 from .formats import STEP_S, RecordingError
 from .logs import ANGLE_STEP_DEG, view_log
 from .tracks import SmoothingParams, edge_samples
@@ -99,7 +100,7 @@ INVALID_YIELDED, INVALID_REAR_END = "yielded", "rear-end"
 #: (module docstring, "Which pairs"; the held-out evaluation's bound, ``fit --pet-max``): an
 #: accepted gap at an unsignalised junction is some 4-7 s between arrivals, which leaves a PET
 #: at the area of a few seconds; two vehicles further apart there did not interact.
-DEFAULT_PET_AREA_MAX_S = 4.0
+DEFAULT_PET_AREA_MAX_S = PET_MAX_S
 
 
 @dataclass(frozen=True)
