@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 
 from persuasive import Config
 from persuasive.safety import foresight
-from persuasive.world import predicted_states, predicted_summary, run_compiled
+from persuasive.world import (predicted_score, predicted_states, predicted_summary,
+                              run_compiled)
 
 #: clear times that tie often, a run that never cleared (None), one past the run's end
 CLEARS = (None, 3.0, 5.0, 5.0, 6.5, 40.0)
@@ -134,7 +135,7 @@ def test_the_fast_pick_is_the_references_on_random_states(scenario, envelope, n_
             through = (whole.states[:, 0] >= stop[0]) & (whole.states[:, 2] >= stop[1])
             k = np.flatnonzero(through[1:])
             assert len(part) - 1 == (k[0] + 1 if k.size else n_steps)
-            assert foresight.predicted_score(model, p_seed, 0, x0, run_s) == \
+            assert predicted_score(model, p_seed, 0, x0, run_s) == \
                 foresight.score(whole.summary(), run_s)
     assert foresight.choose_line(config, seed, x0, predicted_summary) == \
         foresight.choose_line_reference(config, seed, x0, predicted_summary)

@@ -399,6 +399,47 @@ def predicted_states(config: Config, seed: int, interaction: int, x0: np.ndarray
     return s, arrays[0][:steps + 1]
 
 
+def score_states(scenario, states: np.ndarray, dt: float, run_s: float
+                 ) -> tuple[bool, bool, float]:
+    """Foresight's score (``persuasive.safety.foresight.score``) of a run of ``scenario``
+    from its states ``(k + 1, 4)``: the whole run's, or a first part of it that ends with both
+    vehicles past their clearing position and the conflict point (foresight's module
+    docstring, "Cost"), computed as ``persuasive.record.outcome`` computes those fields."""
+    from .record import _first_time
+    from .safety import measures
+    from .safety.foresight import score
+    from .scenarios import first_arrival
+
+    cleared_av = scenario.cleared("av", states[:, 0])
+    cleared_hv = scenario.cleared("hv", states[:, 2])
+    both = bool(cleared_av[-1] and cleared_hv[-1])
+    after = states[1:]
+    conflict, _ = first_arrival(scenario.at_conflict_point(after[:, 0]),
+                                scenario.at_conflict_point(after[:, 2]))
+    stood = measures.standoff(states[:, 0], states[:, 2], cleared_av, cleared_hv, dt)
+    return score({"both_cleared": both, "deadlock": not math.isnan(stood),
+                  "av_first_through": both and conflict == 1,
+                  "av_time_to_clear_s": _first_time(cleared_av[1:], dt)}, run_s)
+
+
+def predicted_score(config: Config, seed: int, interaction: int, x0: np.ndarray,
+                    run_s: float) -> tuple[bool, bool, float]:
+    """``score(predicted_summary(config, seed, interaction, x0), run_s)`` from the compiled
+    run stopped once both vehicles are past their clearing position and the conflict point
+    (:func:`predicted_states`); foresight reads it as ``predicted_summary.score``."""
+    from .record import static_setup
+
+    scenario = static_setup(config)[0]  # the run's own (cached): where it may stop
+    s, states = predicted_states(config, seed, interaction, x0,
+                                 max(scenario.av.clear_s, 0.0), max(scenario.hv.clear_s, 0.0))
+    return score_states(s.scenario, states, config.simulation.dt_s, run_s)
+
+
+#: foresight scores the compiled loop's predictions with the run stopped once decided
+#: (``persuasive.safety.foresight.choose_line``)
+predicted_summary.score = predicted_score
+
+
 def run_python(config: Config, seed: int, av=None, hv=None, timed: bool = False):
     """One whole run of the Python loop (:class:`PythonWorld`); returns its
     :class:`~persuasive.simulation.RunRecord`. With the configuration's own kinds it equals

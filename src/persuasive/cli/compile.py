@@ -16,7 +16,8 @@ call takes into compiled code, on tiny inputs, phase by phase:
   world's steps from Python;
 - ``planner``: ``Planner`` (every AV kind, every scenario, the online ``p_a``) and the
   adapter of outside simulators (``envs/external.py``: highway-env, SUMO), whose shield calls
-  ``shield_filter`` and ``shield_filter_one``; ``bench``'s kernels;
+  ``shield_filter`` and ``shield_filter_one``; the junction's joint AV (``many/joint.py``:
+  ``shifted_into``, ``allowed_of``); ``bench``'s kernels;
 - ``fit``: the fit's kernels, the parallel ones too (``fitting.estimate.warm_up``), and a
   fit of every model to two runs;
 - ``recordings``: runs exported as tracks, the pair search (``recordings.geometry``), logs of
@@ -103,6 +104,7 @@ def _planner(tmp: Path) -> None:
     from .. import bench
     from ..config import AV_KINDS, SCENARIO_KINDS, SHIELD_KINDS, Config
     from ..envs.external import CROSSING, FOLLOW, MERGE, Conflict, ExternalPlanner
+    from ..many.joint import JointPlanner
     from ..planner import Planner
     from ..simulation import simulate
 
@@ -129,6 +131,7 @@ def _planner(tmp: Path) -> None:
                 p.act(8.0, conflicts, 0.1)
                 p.act(8.0, conflicts[:1], 0.1, shield_lead_m=lambda a: 0.01 * a)
                 p.shield(8.0, 0.5, conflicts, 0.1, driven=True)
+            JointPlanner(config, 0).act(8.0, conflicts, 0.1)  # one plan against two
     config = Config()
     bench._game_times_ns(config, [simulate(config.with_overrides({"simulation.n_steps": 3}),
                                            1)], 1)

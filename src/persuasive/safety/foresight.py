@@ -56,12 +56,14 @@ computation, and ``tests/test_replay_speed.py`` holds the two equal on random st
   clear only falling; where that bound is not above the best value so far (a tie goes to the
   earlier line), the line's other runs are skipped;
 - *a predicted run ends once it is decided*: with the compiled loop's predictions
-  (``persuasive.world.predicted_summary``, what both loops hand in) the run stops at the first
-  state at which both vehicles are past their clearing position and the conflict point
+  (``persuasive.world.predicted_summary``, what both loops hand in, scored by its ``score``,
+  ``persuasive.world.predicted_score``) the run stops at the first state at which both
+  vehicles are past their clearing position and the conflict point
   (``persuasive.world.predicted_states``). Positions never fall (speeds are at least
   ``v_min >= 0``), so from there on both stay cleared, who reached the conflict point first is
   settled, the AV's time to clear is known, and no standoff can start (a standoff needs both
-  vehicles short of clearing): the score (:func:`score_states`) is the whole run's. Only the
+  vehicles short of clearing): the score (``persuasive.world.score_states``) is the whole
+  run's. Only the
   four fields the score reads are computed, not the run's record.
 """
 
@@ -117,17 +119,17 @@ def choose_line(config: Config, seed: int, x0_measured: np.ndarray, predict,
                 interaction: int = 0) -> float:
     """The yield line the AV picks for the run (module docstring). ``predict(config, seed,
     interaction, x0) -> summary``: a predicted run's summary (the loops hand in
-    ``persuasive.world.predicted_summary``, the compiled loop's, whose runs are then scored
-    by :func:`predicted_score`, stopped once decided). The same line as
-    :func:`choose_line_reference`, with fewer and shorter model runs (module docstring,
-    "Cost")."""
-    from ..world import predicted_summary
-
+    ``persuasive.world.predicted_summary``, the compiled loop's). A ``predict`` with a
+    ``score(config, seed, interaction, x0, run_s)`` attribute (``predicted_summary``'s:
+    ``persuasive.world.predicted_score``, the run stopped once decided) is scored by it. The
+    same line as :func:`choose_line_reference`, with fewer and shorter model runs (module
+    docstring, "Cost")."""
     run_s = config.simulation.n_steps * config.simulation.dt_s
     p_seed = prediction_seed(seed)
-    if predict is predicted_summary:
+    fast = getattr(predict, "score", None)  # the compiled loop's: a run stopped once decided
+    if fast is not None:
         def score_of(model: Config):
-            return predicted_score(model, p_seed, interaction, x0_measured, run_s)
+            return fast(model, p_seed, interaction, x0_measured, run_s)
     else:
         def score_of(model: Config):
             return score(predict(model, p_seed, interaction, x0_measured), run_s)
@@ -158,42 +160,6 @@ def bounded_line_value(scores, m: int, best) -> tuple[int, int, float] | None:
     return live, first, slowest
 
 
-def score_states(scenario, states: np.ndarray, dt: float, run_s: float
-                 ) -> tuple[bool, bool, float]:
-    """The :func:`score` of a run of ``scenario`` from its states ``(k + 1, 4)``: the whole
-    run's, or a first part of it that ends with both vehicles past their clearing position
-    and the conflict point (module docstring, "Cost"), computed as
-    ``persuasive.record.outcome`` computes those fields."""
-    from ..record import _first_time
-    from ..scenarios import first_arrival
-    from . import measures
-
-    cleared_av = scenario.cleared("av", states[:, 0])
-    cleared_hv = scenario.cleared("hv", states[:, 2])
-    both = bool(cleared_av[-1] and cleared_hv[-1])
-    after = states[1:]
-    conflict, _ = first_arrival(scenario.at_conflict_point(after[:, 0]),
-                                scenario.at_conflict_point(after[:, 2]))
-    stood = measures.standoff(states[:, 0], states[:, 2], cleared_av, cleared_hv, dt)
-    return score({"both_cleared": both, "deadlock": not math.isnan(stood),
-                  "av_first_through": both and conflict == 1,
-                  "av_time_to_clear_s": _first_time(cleared_av[1:], dt)}, run_s)
-
-
-def predicted_score(config: Config, seed: int, interaction: int, x0: np.ndarray,
-                    run_s: float) -> tuple[bool, bool, float]:
-    """``score(predicted_summary(config, seed, interaction, x0), run_s)``, from the
-    compiled run stopped once both vehicles are past their clearing position and the
-    conflict point (module docstring, "Cost")."""
-    from ..record import static_setup
-    from ..world import predicted_states
-
-    scenario = static_setup(config)[0]  # the run's own (cached): where it may stop
-    s, states = predicted_states(config, seed, interaction, x0,
-                                 max(scenario.av.clear_s, 0.0), max(scenario.hv.clear_s, 0.0))
-    return score_states(s.scenario, states, config.simulation.dt_s, run_s)
-
-
 def choose_line_reference(config: Config, seed: int, x0_measured: np.ndarray, predict,
                           interaction: int = 0) -> float:
     """:func:`choose_line` computed plainly: every model run of every line, whole, through
@@ -211,5 +177,4 @@ def choose_line_reference(config: Config, seed: int, x0_measured: np.ndarray, pr
 
 
 __all__ = ["MODELS", "PREDICTION_SEED_XOR", "bounded_line_value", "choose_line",
-           "choose_line_reference", "line_value", "model_config", "predicted_score",
-           "prediction_seed", "score", "score_states"]
+           "choose_line_reference", "line_value", "model_config", "prediction_seed", "score"]
