@@ -104,8 +104,9 @@ def test_simulate_prints_writes_and_matches_the_world(capsys, tmp_path):
     log = tmp_path / "run.parquet"
     code, text, err = run_cli(capsys, "simulate", *SHORT, "--seed", 2, "--out", log)
     assert code == 0, err
-    assert ("persuasive AV (one planner per human) among 3 vehicles at the junction (major"
-            in text)
+    assert ("persuasive AV (one planner per human, yielding outside the junction) among 3 "
+            "vehicles at the junction (major" in text)
+    assert "AV stood inside the junction 0.0 s (a human waiting for it 0.0 s)" in text
     assert "corrected mode, shield worst-case" in text  # corrected unless a mode is given
     world = JunctionWorld.of(JUNCTION, 2).run()
     frame = pd.read_parquet(log)

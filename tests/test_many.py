@@ -148,7 +148,7 @@ def test_the_table_has_a_row_for_every_pair_that_can_touch_and_none_for_the_othe
         from persuasive.many.junction import Arrivals
         arr = Arrivals((a, b), np.array([0.0, 0.0]), np.array([4.0, 4.0]), ("av", "lfg"),
                        np.zeros(2))
-        rows = conflict_table(spec, arr, lim).rows
+        rows = conflict_table(spec, arr, lim, 7.5).rows
         return rows[0].kind if rows else None
 
     south, north = route(geo, 3, "straight", 0), route(geo, 1, "straight", 0)
@@ -277,7 +277,7 @@ def test_a_standoff_is_a_deadlock_and_a_queue_is_not():
                                                   east.entry_m - 12.0]),
                    np.zeros(3), ("av", "lfg", "lfg"), np.zeros(3))
     w.arrivals, w.routes = arr, arr.routes
-    w.table = conflict_table(spec, arr, w.limits)
+    w.table = conflict_table(spec, arr, w.limits, w.keep_out_m)
     steps = int(round(6.0 / w.dt))
     w.k = steps
     w.S[: steps + 1] = arr.s0_m
@@ -416,7 +416,7 @@ def test_an_entry_waits_while_its_lane_is_blocked():
                    ("av", "idm", "idm"), np.array([19.0, 0.1, 0.2]))
     w.arrivals, w.routes, w.t0 = arr, arr.routes, arr.t0_s
     w.s, w.v = arr.s0_m.copy(), arr.v0_mps.copy()
-    w.table = conflict_table(spec, arr, w.limits)
+    w.table = conflict_table(spec, arr, w.limits, w.keep_out_m)
     w._prepare_views()
     w._lines()
     w.status[:] = PENDING

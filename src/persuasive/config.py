@@ -688,6 +688,8 @@ OPPONENTS = ("next", "all")
 AV_PLANS = ("pairwise", "joint")
 #: The joint plan's chance constraint (``persuasive.many.joint``).
 JOINT_BOUNDS = ("product", "union")
+#: Where the junction's AV yields (:attr:`JunctionSpec.av_line`).
+AV_LINES = ("stop", "outside")
 #: Named variants: the fields of :class:`JunctionSpec` each sets.
 VARIANTS: dict[str, dict[str, Any]] = {
     "major": {"priority": "major", "mix": (0.25, 0.5, 0.25)},
@@ -744,6 +746,12 @@ class JunctionSpec:
     #: the joint plan's chance constraint: ``product`` (the humans' branches independent) or
     #: ``union`` (Boole's inequality)
     joint_bound: str = "product"
+    #: where the AV yields at each crossing and merge: ``stop``, at the box's stop line (or
+    #: the occupancy interval's start, where that comes first; part 1); ``outside``, outside
+    #: the junction (before the occupancy interval of every route that crosses or merges
+    #: with its own) and outside the human's keep-out circle (the pair game's safety
+    #: distance, 7.5 m, before the conflict point) (docs/method.md §15.9)
+    av_line: str = "outside"
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ConfigError:
@@ -807,6 +815,8 @@ class JunctionSpec:
             raise bad("av_plan", " | ".join(AV_PLANS))
         if self.joint_bound not in JOINT_BOUNDS:
             raise bad("joint_bound", " | ".join(JOINT_BOUNDS))
+        if self.av_line not in AV_LINES:
+            raise bad("av_line", " | ".join(AV_LINES))
         if not 1.0 <= self.duration_s <= 3600.0:
             raise bad("duration_s", "[1, 3600] s")
 
@@ -900,6 +910,7 @@ class JunctionParams:
     av_arrival_s: float | None = None  #: when the AV enters (poisson); unset: 10
     av_plan: str | None = None  #: pairwise | joint: how the AV plans; unset: pairwise
     joint_bound: str | None = None  #: product | union: the joint chance constraint; unset: product
+    av_line: str | None = None  #: stop | outside: where the AV yields; unset: outside
 
     def __post_init__(self) -> None:
         for name in ("mix", "first_m", "gap_m", "v0_mps"):

@@ -213,6 +213,7 @@ class RunRecord:
         ``persuasive.many.measures`` reads it as it reads a junction's run."""
         from .packing import RIGHT_OF_WAY_IDS
         from .safety.shield import verdict_name
+        from .scenarios.base import pair_min_dist
         from .tables import (CROSSING, MERGE, ConflictTable, Limits, RouteConflict, Row, Trace,
                              Vehicles)
 
@@ -242,8 +243,8 @@ class RunRecord:
         def place(i: int, s: np.ndarray):
             return scene.positions(("av", "hv")[i], s)
 
-        return Trace(vehicles, ConflictTable.of_rows([row], 2), self.seed, dt, n_steps * dt,
-                     True, states[:, [0, 2]], states[:, [1, 3]],
+        return Trace(vehicles, ConflictTable.of_rows([row], 2, pair_min_dist(c)), self.seed, dt,
+                     n_steps * dt, True, states[:, [0, 2]], states[:, [1, 3]],
                      np.column_stack([log["av_accel_mps2"], log["hv_accel_mps2"]]),
                      np.zeros((n_steps + 1, 2), np.int8), n_steps, verdicts, collisions,
                      float(self.outcome.min_gap_m), opponents, place)

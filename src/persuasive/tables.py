@@ -134,6 +134,9 @@ class RouteConflict:
 ACTIVE, DONE, CRASHED, PENDING = 0, 1, 2, 3
 #: A vehicle slower than this waits [m/s] (the wait-for graph, ``persuasive.many.measures``).
 WAIT_V_MPS = 0.5
+#: A vehicle slower than this stands [m/s] (SUMO's ``waitingTime`` threshold; the two-vehicle
+#: waits, ``persuasive.safety.measures``, and standing inside, ``persuasive.many.measures``).
+STAND_V_MPS = 0.1
 
 
 @dataclass(frozen=True)
@@ -158,15 +161,18 @@ class ConflictTable:
 
     rows: list[Row]
     of: list[list[int]]  #: per vehicle: indices of its rows
+    #: the radius of the keep-out circle a human's pair game keeps around a conflict point
+    #: (the pair's safety distance) [m]; 0: none (``persuasive.many.measures`` reads it)
+    keep_out_m: float = 0.0
 
     @classmethod
-    def of_rows(cls, rows: list[Row], n: int) -> ConflictTable:
+    def of_rows(cls, rows: list[Row], n: int, keep_out_m: float = 0.0) -> ConflictTable:
         """The table of ``rows`` among ``n`` vehicles."""
         of: list[list[int]] = [[] for _ in range(n)]
         for r, row in enumerate(rows):
             of[row.i].append(r)
             of[row.j].append(r)
-        return cls(list(rows), of)
+        return cls(list(rows), of, keep_out_m)
 
 
 @dataclass(frozen=True)

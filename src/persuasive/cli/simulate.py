@@ -179,6 +179,8 @@ def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
     kinds = ",".join(f"{k}:{w:g}" if len(spec.hv_kinds) > 1 else k for k, w in spec.hv_kinds)
     plan = "one plan against all, " + spec.joint_bound if spec.av_plan == "joint" else \
         "one planner per human"
+    plan += ", yielding " + ("outside the junction" if spec.av_line == "outside" else
+                             "at the stop line")
     click.echo(f"{config.av.kind} AV ({plan}) among {spec.n_vehicles} vehicles at the junction "
                f"({config.junction.variant or 'major'}, {spec.lanes} lane(s), {kinds} humans "
                f"playing {spec.opponents}), seed {seed}, {config.mode} mode, shield "
@@ -190,12 +192,15 @@ def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
     click.echo(f"collisions: AV-caused {row['av_caused_collisions']}, AV in any "
                f"{row['av_collisions']}, between humans {row['human_collisions']}; uncertified "
                f"steps {row['uncertified_steps']}; shield overrides {row['shield_overrides']}")
-    lock = (f"at t = {row['deadlock_t_s']:.1f} s, vehicles {row['deadlock_vehicles']}"
-            f"{' (the AV in it)' if row['av_in_deadlock'] else ''}" if row["deadlock"]
-            else "none")
+    who = (" (the AV in it, of its own making)" if row["av_caused_deadlock"] else
+           " (the AV in it)" if row["av_in_deadlock"] else "")
+    lock = (f"at t = {row['deadlock_t_s']:.1f} s, vehicles {row['deadlock_vehicles']}{who}"
+            if row["deadlock"] else "none")
     click.echo(f"deadlock: {lock}; waiting: AV {row['av_wait_s']:.1f} s, humans mean "
                f"{row['mean_wait_s']:.1f} s, max {row['max_wait_s']:.1f} s; delay caused to "
                f"the humans {row['caused_delay_s']:.2f} s")
+    click.echo(f"AV stood inside the junction {row['av_inside_stood_s']:.1f} s (a human waiting "
+               f"for it {row['av_inside_blocking_s']:.1f} s)")
     click.echo(f"vehicles through {row['vehicles_through']} of {spec.n_vehicles}, throughput "
                f"{row['throughput_veh_h']:.0f} veh/h; min PET of the AV "
                f"{secs(row['min_pet_av_s'])}, of all {secs(row['min_pet_s'])}; AV's closest "

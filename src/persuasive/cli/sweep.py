@@ -146,7 +146,8 @@ def _parse_where(values: tuple[str, ...]) -> dict[str, Any]:
                    "min_distance_to_line_m, hv_role_changes, wait_s (means, normal 95 % "
                    "interval); a junction's (scenario.kind = junction): av_through_pct, "
                    "av_caused_collision_pct, human_collision_pct, deadlock_pct, "
-                   "caused_delay_s, mean_wait_s, throughput_veh_h.")
+                   "av_caused_deadlock_pct, av_inside_stood_pct, caused_delay_s, mean_wait_s, "
+                   "throughput_veh_h.")
 @click.option("--where", "where", multiple=True, metavar="AXIS=VALUE",
               help="Keep only runs with this value of another axis (repeatable); other "
                    "axes are pooled.")

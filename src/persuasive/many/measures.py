@@ -12,6 +12,18 @@ takes a trace or a world that has one.
 - **Deadlock** (:func:`deadlock`): a cycle of that graph (a strongly connected component of
   two or more vehicles, ``scipy.sparse.csgraph``) whose members stay the same for
   ``DEADLOCK_S`` seconds; the first one is reported with its members and time.
+- **Standing clear** (:func:`stands_clear`): the AV waiting (slower than ``WAIT_V_MPS``), its
+  centre before the occupancy interval of every crossing and merge of its own (outside the
+  junction) and, for a given row, at least the table's ``keep_out_m`` before that row's
+  conflict point (outside the circle the human's pair game keeps around it). A human that
+  waits for an AV standing clear of it waits by its own choice: the way is free.
+- **AV-caused deadlock** (:func:`av_caused`): a deadlock with the AV in it in which, at the
+  step it is declared, the AV is still on a cycle of the wait-for graph once the edges of the
+  humans waiting for an AV that stands clear of them are removed.
+- **Standing inside** (:func:`stood_inside`): the AV at rest (slower than 0.1 m/s,
+  ``persuasive.tables.STAND_V_MPS``, as the two-vehicle waits) with its centre
+  inside the occupancy interval of one of its crossings or merges; *blocking* when,
+  at the same step, a human waits for it in the wait-for graph.
 - **Waiting time**: the time a vehicle spends slower than ``WAIT_V_MPS`` before leaving the
   box.
 - **Throughput**: vehicles through the box per hour, over the time until the last one left
@@ -32,7 +44,8 @@ import math
 
 import numpy as np
 
-from ..tables import ACTIVE, CRASHED, CROSSING, DONE, FOLLOW, MERGE, WAIT_V_MPS, Trace
+from ..tables import (ACTIVE, CRASHED, CROSSING, DONE, FOLLOW, MERGE, STAND_V_MPS, WAIT_V_MPS,
+                      Trace)
 
 #: A follower within this bumper gap of its leader waits for it [m].
 FOLLOW_GAP_M = 15.0
@@ -129,10 +142,17 @@ def _may_cycle(edges: list[tuple[int, int]]) -> bool:
     return False
 
 
-def deadlock(world: Trace, hold_s: float = DEADLOCK_S
+def all_wait_edges(world: Trace) -> list[list[tuple[int, int]]]:
+    """The wait-for graph at every step of the run (:func:`wait_edges`)."""
+    world = _trace(world)
+    return [wait_edges(world, k) for k in range(world.k + 1)]
+
+
+def deadlock(world: Trace, hold_s: float = DEADLOCK_S,
+             edges_of: list[list[tuple[int, int]]] | None = None
              ) -> tuple[float, tuple[int, ...]] | None:
     """The first deadlock of the run (module docstring): ``(time it began [s], members)``,
-    or None."""
+    or None; ``edges_of``: the run's :func:`all_wait_edges`, if at hand."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -141,7 +161,7 @@ def deadlock(world: Trace, hold_s: float = DEADLOCK_S
     current: frozenset = frozenset()
     since = 0
     for k in range(world.k + 1):
-        edges = wait_edges(world, k)
+        edges = wait_edges(world, k) if edges_of is None else edges_of[k]
         cycle: frozenset = frozenset()
         if len(edges) >= 2 and _may_cycle(edges):
             e = np.array(edges)
@@ -155,6 +175,66 @@ def deadlock(world: Trace, hold_s: float = DEADLOCK_S
         if current and k - since >= hold:
             return since * world.dt, tuple(sorted(current))
     return None
+
+
+def stands_clear(world: Trace, k: int) -> dict[int, bool]:
+    """Per human the AV has a row with: whether the AV stands clear of it at step ``k``
+    (module docstring)."""
+    world = _trace(world)
+    s, v = world.S[k, 0], world.V[k, 0]
+    rows = [world.table.rows[r] for r in world.table.of[0]]
+    waiting = bool(world.STATUS[k, 0] == ACTIVE and v < WAIT_V_MPS)
+    starts = [row.ij.ego_at_m + row.ij.ego_occupancy[0] for row in rows
+              if row.kind in (CROSSING, MERGE)]
+    outside = waiting and all(s < lo for lo in starts)
+    keep = world.table.keep_out_m
+    out = {}
+    for row in rows:
+        far = row.kind == FOLLOW or s - row.ij.ego_at_m <= -keep
+        out[row.j] = outside and far
+    return out
+
+
+def av_caused(world: Trace, lock: tuple[float, tuple[int, ...]] | None,
+              hold_s: float = DEADLOCK_S, edges_of: list[list[tuple[int, int]]] | None = None
+              ) -> bool:
+    """Whether the deadlock ``lock`` (:func:`deadlock`'s) is the AV's (module docstring)."""
+    if not lock or 0 not in lock[1]:
+        return False
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    world = _trace(world)
+    k = min(world.k, int(round(lock[0] / world.dt)) + max(1, int(round(hold_s / world.dt))))
+    edges = wait_edges(world, k) if edges_of is None else edges_of[k]
+    clear = stands_clear(world, k)
+    kept = [(a, b) for a, b in edges if not (b == 0 and clear.get(a, False))]
+    if not kept:
+        return False
+    e = np.array(kept)
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(world.n, world.n))
+    _, label = connected_components(g, directed=True, connection="strong")
+    return bool(np.count_nonzero(label == label[0]) >= 2)
+
+
+def stood_inside(world: Trace, i: int = 0) -> np.ndarray:
+    """Per step: vehicle ``i`` stands (slower than ``STAND_V_MPS``) inside the junction,
+    its centre inside the occupancy interval of one of its crossings or merges (a merge's
+    ends at the merge point)."""
+    world = _trace(world)
+    S, V = world.S[: world.k + 1, i], world.V[: world.k + 1, i]
+    inside = np.zeros(S.shape, bool)
+    for r in world.table.of[i]:
+        row = world.table.rows[r]
+        if row.kind not in (CROSSING, MERGE):
+            continue
+        rc = row.ij if row.i == i else row.ji
+        lo, hi = rc.ego_occupancy
+        rel = S - rc.ego_at_m
+        with np.errstate(invalid="ignore"):
+            inside |= (rel >= lo) & ((rel < 0.0) if row.kind == MERGE else (rel <= hi))
+    with np.errstate(invalid="ignore"):
+        return inside & (V < STAND_V_MPS) & (world.STATUS[: world.k + 1, i] == ACTIVE)
 
 
 def waiting_s(world: Trace) -> np.ndarray:
@@ -214,8 +294,15 @@ def summary(world: Trace, reference: Trace | None = None,
     last = float(np.nanmax(clear)) if n_through else math.nan
     throughput = 3600.0 * n_through / (last if n_through == (n if world.with_av else n - 1)
                                        and last > 0 else world.duration_s)
-    lock = deadlock(world)
+    edges_of = all_wait_edges(world)
+    lock = deadlock(world, edges_of=edges_of)
     wait = waiting_s(world)
+    if world.with_av:
+        inside = stood_inside(world, 0)
+        waited_for = np.array([any(b == 0 for _, b in e) for e in edges_of], bool)
+    else:
+        inside = waited_for = np.zeros(world.k + 1, bool)
+    caused = av_caused(world, lock, edges_of=edges_of)
     passed = passings(world)
     pet = [(i, j, abs(ti - tj)) for i, j, ti, tj in passed]
     av_passed = [(ti, tj) for i, _, ti, tj in passed if i == 0]
@@ -239,6 +326,9 @@ def summary(world: Trace, reference: Trace | None = None,
         "deadlock_t_s": lock[0] if lock else math.nan,
         "deadlock_vehicles": " ".join(map(str, lock[1])) if lock else "",
         "av_in_deadlock": bool(lock and 0 in lock[1]),
+        "av_caused_deadlock": caused,
+        "av_inside_stood_s": float(inside.sum() * dt),
+        "av_inside_blocking_s": float((inside & waited_for).sum() * dt),
         "av_wait_s": float(wait[0]),
         "mean_wait_s": float(wait[humans].mean()) if n > 1 else 0.0,
         "max_wait_s": float(wait.max()),
@@ -265,5 +355,6 @@ def summary(world: Trace, reference: Trace | None = None,
     return {k: v.item() if isinstance(v, np.generic) else v for k, v in row.items()}
 
 
-__all__ = ["APPROACH_M", "DEADLOCK_S", "FOLLOW_GAP_M", "clear_times", "deadlock", "free_flow_s",
-           "passings", "pets", "summary", "wait_edges", "waiting_s"]
+__all__ = ["APPROACH_M", "DEADLOCK_S", "FOLLOW_GAP_M", "all_wait_edges", "av_caused",
+           "clear_times", "deadlock", "free_flow_s", "passings", "pets", "stands_clear",
+           "stood_inside", "summary", "wait_edges", "waiting_s"]

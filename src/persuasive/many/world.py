@@ -95,9 +95,41 @@ def _route_pair(a: Route, b: Route, size_a: tuple[float, float], size_b: tuple[f
     return kind, ab, ba, math.nan
 
 
-def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits]) -> ConflictTable:
-    """The one builder of the conflict table of a run (module docstring)."""
+def av_line(rc: RouteConflict, spec: JunctionSpec, keep_out_m: float, start_m: float
+            ) -> RouteConflict:
+    """The AV's side of a crossing or merge with its yield line placed by ``spec.av_line``
+    (docs/method.md §15.9): ``stop``, the row's (the stop line, or the occupancy's start where
+    that comes first); ``outside``, also at or before ``start_m``, the arc where the AV's
+    route first meets another's occupancy (:func:`junction_start`), and ``keep_out_m`` or
+    more before the conflict point, outside the keep-out circle of the human's pair game."""
+    if spec.av_line != "outside" or rc.ego_line_m is None:
+        return rc
+    return replace(rc, ego_line_m=min(rc.ego_line_m, -keep_out_m, start_m - rc.ego_at_m))
+
+
+def junction_start(spec: JunctionSpec, mine: Route, size: tuple[float, float],
+                   other: tuple[float, float]) -> float:
+    """Where the junction begins on route ``mine`` [m]: the lowest start of its occupancy
+    interval over the crossings and merges with every route a human of ``spec`` may take
+    (vehicles of sizes ``size`` and ``other``, ``(length, width)``); its stop line if none
+    comes first."""
+    start = mine.entry_m
+    for route_ in possible_routes(spec):
+        pair = _route_pair(mine, route_, size, other)
+        if pair is not None and pair[0] != FOLLOW:
+            rc = pair[1]
+            start = min(start, rc.ego_at_m + rc.ego_occupancy[0])
+    return start
+
+
+def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits],
+                   keep_out_m: float) -> ConflictTable:
+    """The one builder of the conflict table of a run (module docstring); ``keep_out_m``: the
+    pair games' safety distance, which with ``spec.av_line = "outside"`` places the AV's
+    lines (:func:`av_line`)."""
     rows: list[Row] = []
+    start = junction_start(spec, arr.routes[0], (limits[0].length_m, limits[0].width_m),
+                           (limits[-1].length_m, limits[-1].width_m))
     of: list[list[int]] = [[] for _ in range(arr.n)]
     t0 = arr.t0_s
     for i in range(arr.n):
@@ -108,13 +140,15 @@ def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits]) -> C
             if pair is None:
                 continue
             kind, ij, ji, until = pair
+            if i == 0 and ij is not None:  # the AV's side
+                ij = av_line(ij, spec, keep_out_m, start)
             prio = 0 if kind == FOLLOW else right_of_way(
                 spec, a, b, (arr.s0_m[i], arr.v0_mps[i]), (arr.s0_m[j], arr.v0_mps[j]),
                 float(t0[i]), float(t0[j]))
             of[i].append(len(rows))
             of[j].append(len(rows))
             rows.append(Row(i, j, kind, ij, ji, until, prio))
-    return ConflictTable(rows, of)
+    return ConflictTable(rows, of, keep_out_m)
 
 
 class Human:
@@ -210,6 +244,7 @@ class JunctionWorld:
     def __init__(self, config: Config, spec: JunctionSpec, seed: int, with_av: bool = True):
         from ..packing import discounts, pack
         from ..scenarios import build_scenario
+        from ..scenarios.base import pair_min_dist
         from ..world import GameCache
 
         config = pair_config(config)
@@ -220,7 +255,9 @@ class JunctionWorld:
         self.arrivals = arr = arrivals(spec, seed, hv_lim.length_m)
         self.n = arr.n
         self.limits = [av_lim] + [hv_lim] * (arr.n - 1)
-        self.table = conflict_table(spec, arr, self.limits)
+        #: the pair games' safety distance: their keep-out circle's radius [m]
+        self.keep_out_m = pair_min_dist(config)
+        self.table = conflict_table(spec, arr, self.limits, self.keep_out_m)
         self._prepare_views()
         self.routes = arr.routes
         self._lines()
@@ -277,7 +314,9 @@ class JunctionWorld:
             for n, other in enumerate(possible_routes(self.spec)):
                 pair = _route_pair(mine, other, size, hv)
                 if pair is not None and pair[0] != FOLLOW:
-                    got.append((n, pair[1]))
+                    got.append((n, pair[1] if i != 0 else av_line(
+                        pair[1], self.spec, self.keep_out_m, junction_start(
+                            self.spec, mine, size, hv))))
             self._stand_ins[i] = got
         return got
 
@@ -632,5 +671,5 @@ def run_summary(config: Config, seed: int) -> dict:
 
 
 __all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "KIND_IDS",
-           "PENDING", "Row", "StepInfo", "WAIT_V_MPS", "conflict_table", "run_summary",
-           "warm_up"]
+           "PENDING", "Row", "StepInfo", "WAIT_V_MPS", "av_line", "conflict_table",
+           "junction_start", "run_summary", "warm_up"]

@@ -40,13 +40,15 @@ import math
 import numpy as np
 from numba import njit
 
+from ..tables import STAND_V_MPS
+
 
 #: A standoff: neither vehicle advances more than this [m] ...
 STANDOFF_PROGRESS_M = 0.5
 #: ... within this window [s], neither having cleared.
 STANDOFF_WINDOW_S = 3.0
 #: Below this speed a vehicle is waiting [m/s] (SUMO's ``waitingTime`` threshold).
-WAIT_SPEED_MPS = 0.1
+WAIT_SPEED_MPS = STAND_V_MPS
 
 
 def standoff(s_av: np.ndarray, s_hv: np.ndarray, cleared_av: np.ndarray,

@@ -1,0 +1,258 @@
+"""Live with many (docs/method.md §15.9): where the junction's AV yields, the bound on its
+wait, and the measures that say whether it blocked anyone.
+
+Layers: the lines by construction (outside the junction, outside the human's keep-out
+circle; ``stop`` as part 1 placed them); the bounded wait by hypothesis over humans, their
+states and what they do before they proceed; the measures by hand; closed loops that pin what
+the liveness sweep measured (docs/results.md §16.4).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from persuasive import Config
+from persuasive.config import ConfigError, JunctionSpec
+from persuasive.kinematics import saturated_step
+from persuasive.many import measures as M
+from persuasive.many.junction import Arrivals, geometry_of, possible_routes, route
+from persuasive.many.world import (ACTIVE, CROSSING, FOLLOW, MERGE, JunctionWorld,
+                                   conflict_table, junction_start)
+from persuasive.safety import shield as sh
+
+CONFIG = Config(mode="corrected")
+
+
+def _lines(world: JunctionWorld) -> list[tuple[str, float, float, float]]:
+    """The AV's rows: ``(kind, line, occupancy start, conflict point)`` along its route."""
+    out = []
+    for r in world.table.of[0]:
+        row = world.table.rows[r]
+        if row.kind in (CROSSING, MERGE):
+            rc = row.ij
+            out.append((row.kind, rc.ego_at_m + rc.ego_line_m,
+                        rc.ego_at_m + rc.ego_occupancy[0], rc.ego_at_m))
+    return out
+
+
+@pytest.mark.parametrize("lanes", [1, 2])
+def test_the_av_yields_outside_the_junction_and_outside_every_keep_out_circle(lanes):
+    seen = 0
+    for seed in range(1, 9):
+        spec = JunctionSpec(n_vehicles=8, lanes=lanes)
+        w = JunctionWorld(CONFIG, spec, seed)
+        start = junction_start(spec, w.routes[0], (w.limits[0].length_m, w.limits[0].width_m),
+                               (w.limits[1].length_m, w.limits[1].width_m))
+        # the junction starts where the first possible occupancy does, before the stop line
+        firsts = []
+        for other in possible_routes(spec):
+            rows = conflict_table(spec, Arrivals((w.routes[0], other), np.zeros(2), np.zeros(2),
+                                                 ("av", "lfg"), np.zeros(2)), w.limits[:2],
+                                  w.keep_out_m).rows
+            if rows and rows[0].kind != FOLLOW:
+                firsts.append(rows[0].ij.ego_at_m + rows[0].ij.ego_occupancy[0])
+        assert start == min(firsts + [w.routes[0].entry_m]) < w.routes[0].entry_m
+        stop = JunctionWorld(CONFIG.with_overrides({}), spec.with_(av_line="stop"), seed)
+        for (kind, line, lo, at), (_, line_stop, _, _) in zip(_lines(w), _lines(stop)):
+            seen += 1
+            assert line <= start + 1e-9  # outside the junction
+            assert at - line >= w.keep_out_m - 1e-9  # outside the human's circle
+            assert line <= line_stop <= lo + 1e-9  # never after part 1's line
+            # part 1's: the stop line, or the occupancy's start where that comes first
+            assert line_stop == pytest.approx(min(w.routes[0].entry_m, lo))
+    assert seen > 20
+
+
+def test_av_line_is_checked():
+    with pytest.raises(ConfigError, match=r"junction\.av_line = 'inside' is out of range; "
+                                          "allowed: stop | outside"):
+        JunctionSpec(av_line="inside")
+    cfg = Config.from_dict({"scenario": {"kind": "junction"}, "junction": {"av_line": "stop"}})
+    assert cfg.junction_spec.av_line == "stop"
+    assert JunctionSpec().av_line == "outside"
+
+
+# -- a bounded wait with many ------------------------------------------------------------------
+
+
+def _crossing_routes(spec: JunctionSpec, mine) -> list:
+    """Routes that cross the AV's (no merge, no shared lane), one per inbound lane."""
+    out, lanes = [], set()
+    w = JunctionWorld(CONFIG, spec.with_(n_vehicles=2), 0)
+    for other in possible_routes(spec):
+        rows = conflict_table(spec, Arrivals((mine, other), np.zeros(2), np.zeros(2),
+                                             ("av", "idm"), np.zeros(2)),
+                              w.limits, w.keep_out_m).rows
+        if rows and rows[0].kind == CROSSING and other.inbound not in lanes:
+            lanes.add(other.inbound)
+            out.append(other)
+    return out
+
+
+SPEC = JunctionSpec(n_vehicles=4, lanes=2, duration_s=200.0, approach_m=200.0)
+MINE = route(geometry_of(SPEC), SPEC.av_arm, SPEC.av_movement, 0)
+CROSSERS = _crossing_routes(SPEC, MINE)
+
+
+@settings(max_examples=60, deadline=None)
+@given(picks=st.lists(st.integers(0, len(CROSSERS) - 1), min_size=1, max_size=4, unique=True),
+       before=st.lists(st.floats(-3.0, 25.0), min_size=4, max_size=4),
+       v0=st.lists(st.floats(0.0, 10.0), min_size=4, max_size=4),
+       tau=st.floats(0.0, 3.0), v_p=st.floats(1.0, 5.0),
+       accels=st.lists(st.floats(-2.0, 1.0), min_size=20, max_size=20))
+def test_humans_that_proceed_release_the_av_within_the_stated_bound(picks, before, v0, tau, v_p,
+                                                                     accels):
+    """The AV stands at its lines (at rest, at the most binding one) among 1-4 humans on
+    crossing routes. Each does anything within its limits for ``tau`` seconds, then proceeds
+    (full throttle while slower than ``v_p``, never below it after). From ``W = tau + v_p /
+    u_max + max_h (H_hi_h - s_H_h)^+ / v_p + dt`` on, the one shield over every conflict admits
+    full throttle at every step (docs/method.md §15.9), and never before it is safe."""
+    routes = [CROSSERS[p] for p in picks]
+    n = 1 + len(routes)
+    w = JunctionWorld(CONFIG, SPEC.with_(n_vehicles=n), 0)
+    # the humans, `before` metres before their occupancy interval of the AV's conflict (or
+    # inside it), and the AV 1 cm before its most binding line
+    arr = Arrivals((MINE, *routes), np.zeros(n), np.zeros(n), ("av",) + ("idm",) * (n - 1),
+                   np.zeros(n))
+    w.arrivals, w.routes = arr, arr.routes
+    w.table = conflict_table(SPEC, arr, w.limits, w.keep_out_m)
+    w._prepare_views()
+    w._stand_ins.clear()
+    rows = [w.table.rows[r] for r in w.table.of[0]]
+    assert all(r.kind == CROSSING for r in rows) and len(rows) == n - 1
+    s_av = min(r.ij.ego_at_m + r.ij.ego_line_m for r in rows) - sh.LINE_MARGIN_M
+    s = np.empty(n)
+    s[0] = s_av
+    hi = {}
+    for r in rows:
+        s[r.j] = r.ji.ego_at_m + r.ji.ego_occupancy[0] - before[r.j - 1]
+        hi[r.j] = r.ji.ego_at_m + r.ji.ego_occupancy[1]
+    w.s, w.v = s, np.r_[0.0, np.asarray(v0[: n - 1], float)]
+    w.status[:] = ACTIVE
+    lim = w.limits[1]
+    dt = w.dt
+    bound = tau + v_p / lim.u_max_mps2 + max(max(0.0, hi[j] - w.s[j]) for j in hi) / v_p + dt
+    planner = w.planner
+    u_max = w.limits[0].u_max_mps2
+    for k in range(int(math.ceil((bound + 1.0) / dt))):
+        t = k * dt
+        conflicts = w.conflicts_of(0)
+        a_av, verdict = planner.shield(0.0, u_max, conflicts, dt)
+        if t >= bound:
+            # the proof's step: by W every human is past its interval ...
+            assert all(w.s[j] > hi[j] for j in hi), (t, w.s, w.v)
+            # ... and the shield admits full throttle from the line
+            assert verdict == "admitted" and a_av == u_max, (t, w.s, w.v)
+        for j in hi:
+            if t < tau:
+                a = min(max(accels[(k + j) % len(accels)], lim.u_min_mps2), lim.u_max_mps2)
+            else:
+                a = lim.u_max_mps2 if w.v[j] < v_p else max(accels[k % len(accels)], 0.0)
+            w.s[j], w.v[j] = saturated_step(float(w.s[j]), float(w.v[j]), a, dt, lim.v_min_mps,
+                                            lim.v_max_mps)
+
+
+# -- the measures by hand ----------------------------------------------------------------------
+
+
+def _standing(av_at: float, human_at: float, human_v: float, seconds: float = 7.0):
+    """A run rebuilt by hand: the AV from the south standing at ``av_at`` (relative to its
+    crossing with the east's straight route), a human from the east at ``human_at`` (relative
+    to the same) at ``human_v``, for ``seconds``."""
+    spec = JunctionSpec(n_vehicles=2)
+    geo = geometry_of(spec)
+    south, east = route(geo, 3, "straight", 0), route(geo, 0, "straight", 0)
+    w = JunctionWorld(CONFIG, spec, 1)
+    arr = Arrivals((south, east), np.zeros(2), np.zeros(2), ("av", "lfg"), np.zeros(2))
+    w.arrivals, w.routes = arr, arr.routes
+    w.table = conflict_table(spec, arr, w.limits, w.keep_out_m)
+    row = w.table.rows[0]
+    steps = int(round(seconds / w.dt))
+    w.k = steps
+    w.S[: steps + 1] = [row.ij.ego_at_m + av_at, row.ji.ego_at_m + human_at]
+    w.V[: steps + 1] = [0.0, human_v]
+    w.STATUS[: steps + 1] = ACTIVE
+    return w, row
+
+
+def test_standing_inside_and_blocking_are_told_apart_from_waiting_at_a_line():
+    w, row = _standing(-1.0, -8.0, 0.0)  # the AV stands inside its interval; the human waits
+    inside = M.stood_inside(w, 0)
+    assert inside.all()
+    summary = M.summary(w)
+    assert summary["av_inside_stood_s"] == pytest.approx(w.k * w.dt + w.dt)
+    assert summary["av_inside_blocking_s"] == pytest.approx(summary["av_inside_stood_s"])
+    # at its line, before the interval: waiting, not inside
+    w, row = _standing(row.ij.ego_line_m - 0.01, -8.0, 0.0)
+    assert not M.stood_inside(w, 0).any()
+    assert M.summary(w)["av_inside_stood_s"] == 0.0
+    # inside but moving (0.2 m/s): not standing; inside while the human drives on: not
+    # blocking
+    w, _ = _standing(-1.0, -8.0, 0.0)
+    w.V[:, 0] = 0.2
+    assert not M.stood_inside(w, 0).any()
+    w, _ = _standing(-1.0, -8.0, 3.0)
+    summary = M.summary(w)
+    assert summary["av_inside_stood_s"] > 0.0 and summary["av_inside_blocking_s"] == 0.0
+
+
+def test_a_deadlock_is_the_avs_only_when_it_does_not_stand_clear():
+    # the AV 6 m from the conflict point, as part 1's stop line left it: inside the human's
+    # 7.5 m circle, so the human's waiting is the AV's doing
+    w, row = _standing(-6.0, -12.0, 0.0)
+    lock = M.deadlock(w)
+    assert lock is not None and 0 in lock[1]
+    assert not M.stands_clear(w, w.k)[1] and M.av_caused(w, lock)
+    assert M.summary(w)["av_caused_deadlock"]
+    # outside the junction and outside the circle, waiting: clear, the way is free
+    line = min(row.ij.ego_occupancy[0], -w.table.keep_out_m) - 0.01
+    w, _ = _standing(line, -12.0, 0.0)
+    lock = M.deadlock(w)
+    assert lock is not None and 0 in lock[1]  # the graph still has the cycle ...
+    assert M.stands_clear(w, w.k)[1] and not M.av_caused(w, lock)  # ... but not the AV's
+    assert not M.summary(w)["av_caused_deadlock"]
+    # outside the circle but inside the junction (its occupancy interval): not clear
+    w, _ = _standing(-5.0, -12.0, 0.0)
+    w.table = type(w.table)(w.table.rows, w.table.of, 4.0)
+    assert not M.stands_clear(w, w.k)[1] and M.av_caused(w, M.deadlock(w))
+    # driving through (faster than the wait threshold): not waiting, not clear, no deadlock
+    w, _ = _standing(line, -12.0, 0.0)
+    w.V[:, 0] = 2.0
+    assert not M.stands_clear(w, w.k)[1] and M.deadlock(w) is None
+
+
+# -- closed loops: what the liveness sweep measured ------------------------------------------
+
+
+@pytest.mark.parametrize("kind,n", [("idm", 6), ("lfg", 6)])
+def test_outside_lines_end_the_avs_standoffs_that_stop_lines_make(kind, n):
+    """Seeds 0-11: with the lines at the stop line the AV stands inside the junction, or is
+    in a deadlock of its own, in some runs; with the lines outside it never stands inside,
+    is in no deadlock of its own against humans that go when the way is free (``idm``) and in
+    fewer against the paper's human, and gets through at least as often (docs/results.md
+    §16.4 over 500 seeds)."""
+    got = {}
+    for line in ("stop", "outside"):
+        spec = JunctionSpec(n_vehicles=n, hv_kinds=((kind, 1.0),), av_line=line)
+        rows = []
+        for seed in range(12):
+            world = JunctionWorld(CONFIG, spec, seed).run()
+            reference = JunctionWorld(CONFIG, spec, seed, with_av=False).run()
+            rows.append(M.summary(world, reference))
+        assert sum(r["av_caused_collisions"] + r["uncertified_steps"] for r in rows) == 0
+        got[line] = rows
+
+    def count(line: str, key: str) -> int:
+        return sum(bool(r[key]) for r in got[line])
+
+    assert count("stop", "av_inside_stood_s") > 0 and count("outside", "av_inside_stood_s") == 0
+    if kind == "idm":
+        assert count("outside", "av_caused_deadlock") == 0
+    else:
+        assert count("outside", "av_caused_deadlock") < count("stop", "av_caused_deadlock")
+    assert count("outside", "av_through") >= count("stop", "av_through")
