@@ -15,6 +15,7 @@ from persuasive.cli import main
 from persuasive.cli.simulate import json_summary
 from persuasive.simulation import simulate
 from persuasive.config import Config
+from persuasive.studies.compare import AV_KINDS, DEFAULT_HV_KINDS
 
 REQUIRED = ("mode", "scenario", "av", "hv", "hv_role", "pa", "pa_hat", "seed", "streams",
             "hv_initial_state", "first_at_line", "first_at_conflict_point", "collision",
@@ -245,9 +246,11 @@ def test_a_results_summary_that_is_not_utf8_is_one_line(capsys, tmp_path):
     (["reproduce", "all", "--seeds", "4294967295"],
      "--seeds = 4294967295 is out of range; allowed: 1..62500 for 16 rows (at most 1000000 "
      "runs, summarised in memory; 'persuasive sweep' streams more to disk)"),
-    (["compare", "--seeds", "4000000000"],
-     "--seeds = 4000000000 is out of range; allowed: 1..25000 for 40 pairs (at most 1000000 "
-     "runs, summarised in memory; 'persuasive sweep' streams more to disk)"),
+    (["compare", "--seeds", "4000000000"],  # every planner x every human but replay
+     "--seeds = 4000000000 is out of range; allowed: "
+     f"1..{1_000_000 // (len(AV_KINDS) * len(DEFAULT_HV_KINDS))} for "
+     f"{len(AV_KINDS) * len(DEFAULT_HV_KINDS)} pairs (at most 1000000 runs, summarised in "
+     "memory; 'persuasive sweep' streams more to disk)"),
     (["compare", "--seeds", "4294967296", "--av", "cv", "--hv", "idm"],
      "--seeds = 4294967296 is out of range; allowed: integer in [1, 4294967295]"),
 ], ids=["reproduce-beyond-2^32", "reproduce-too-many-runs", "compare-too-many-runs",

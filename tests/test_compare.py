@@ -138,12 +138,17 @@ def test_compare_bad_input(capsys, tmp_path, args, message):
 
 # -- the size of a comparison counts every interaction; the bar counts runs --------------------
 
+#: The pairs of a default comparison: every planner x every human but replay (the registries).
+N_PAIRS = len(cmp.AV_KINDS) * len(cmp.DEFAULT_HV_KINDS)
+#: The most seeds 1,000,000 runs allow for them with 3 shield settings and 4 interactions.
+MOST_SHIELDS = 1_000_000 // (3 * N_PAIRS * 4)
+
 
 @pytest.mark.parametrize("args, message", [
     (["--interactions", "1000", "--seeds", "2000"],
-     "--seeds = 2000 is out of range; allowed: 1..25 for 40 pairs x 1000 interactions (at "
-     "most 1000000 runs, every interaction counted, summarised in memory; 'persuasive sweep' "
-     "streams more to disk)"),
+     f"--seeds = 2000 is out of range; allowed: 1..{1_000_000 // (N_PAIRS * 1000)} for "
+     f"{N_PAIRS} pairs x 1000 interactions (at most 1000000 runs, every interaction counted, "
+     "summarised in memory; 'persuasive sweep' streams more to disk)"),
     # the interactions from --set count as well as --interactions
     (["--set", "simulation.interactions=10", "--av", "cv", "--hv", "idm,lfg", "--seeds",
       "50001"],
@@ -151,10 +156,11 @@ def test_compare_bad_input(capsys, tmp_path, args, message):
      "most 1000000 runs, every interaction counted, summarised in memory; 'persuasive sweep' "
      "streams more to disk)"),
     # shield settings are pairs too
-    (["--shield", "off,worst-case,responsive", "--interactions", "4", "--seeds", "2084"],
-     "--seeds = 2084 is out of range; allowed: 1..2083 for 120 pairs x 4 interactions (at "
-     "most 1000000 runs, every interaction counted, summarised in memory; 'persuasive sweep' "
-     "streams more to disk)"),
+    (["--shield", "off,worst-case,responsive", "--interactions", "4", "--seeds",
+      str(MOST_SHIELDS + 1)],
+     f"--seeds = {MOST_SHIELDS + 1} is out of range; allowed: 1..{MOST_SHIELDS} for "
+     f"{3 * N_PAIRS} pairs x 4 interactions (at most 1000000 runs, every interaction counted, "
+     "summarised in memory; 'persuasive sweep' streams more to disk)"),
 ], ids=["interactions", "set-interactions", "shields"])
 def test_the_run_cap_counts_interactions(capsys, tmp_path, monkeypatch, args, message):
     monkeypatch.chdir(tmp_path)  # the default folder would go here
@@ -176,9 +182,11 @@ def test_check_size_bounds():
     with pytest.raises(ConfigError, match=r"^seeds = 25001 is out of range; allowed: 1\.\.25000 "
                                           r"for 40 pairs \(at most"):
         cmp.check_size(25001, 40)
-    with pytest.raises(ConfigError, match=r"allowed: 1\.\.25 for 40 pairs x 1000 interactions"):
+    most = 1_000_000 // (N_PAIRS * 1000)
+    with pytest.raises(ConfigError, match=rf"allowed: 1\.\.{most} for {N_PAIRS} pairs x 1000 "
+                                          "interactions"):
         cmp.comparison_grid(Config().with_overrides({"simulation.interactions": 1000}),
-                            cmp.AV_KINDS, cmp.DEFAULT_HV_KINDS, 26)
+                            cmp.AV_KINDS, cmp.DEFAULT_HV_KINDS, most + 1)
 
 
 @pytest.mark.slow  # a local cluster starts

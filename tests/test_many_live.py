@@ -256,3 +256,38 @@ def test_outside_lines_end_the_avs_standoffs_that_stop_lines_make(kind, n):
     else:
         assert count("outside", "av_caused_deadlock") < count("stop", "av_caused_deadlock")
     assert count("outside", "av_through") >= count("stop", "av_through")
+
+
+# -- foresight: the line picked per run ------------------------------------------------------
+
+
+def test_foresight_drives_the_run_of_the_line_it_picks():
+    picked = set()
+    for seed in (3, 11, 13):
+        spec = JunctionSpec(n_vehicles=3, av_line="foresight", duration_s=20.0)
+        world = JunctionWorld(CONFIG, spec, seed).run()
+        line = world.spec.av_line
+        assert line in ("outside", "stop")
+        picked.add(line)
+        # every line against every crowd was predicted
+        assert {k[0] for k in world.foreseen} == {"outside", "stop"}
+        assert {k[1] for k in world.foreseen} == {"lfg", "stubborn", "idm"}
+        same = JunctionWorld(CONFIG, spec.with_(av_line=line), seed).run()
+        np.testing.assert_array_equal(world.S, same.S)
+        np.testing.assert_array_equal(world.A, same.A)
+        # its value: liveness first, then persuasion, then time
+        value = {}
+        for (l_, _), (ok, first, t) in world.foreseen.items():
+            live, n_first, slowest = value.get(l_, (0, 0, 0.0))
+            value[l_] = (live + ok, n_first + first, max(slowest, t))
+        key = {l_: (v[0], v[1], -v[2]) for l_, v in value.items()}
+        assert key[line] == max(key.values())
+    assert picked == {"outside", "stop"}  # these seeds pick both
+
+
+def test_foresight_needs_the_vehicles_on_the_road():
+    spec = JunctionSpec(n_vehicles=3, av_line="foresight", arrival="poisson")
+    with pytest.raises(ConfigError, match=r"junction\.av_line = 'foresight' predicts the run "
+                                          r"from the vehicles on the road at the start; "
+                                          r"allowed with junction\.arrival = placed"):
+        JunctionWorld(CONFIG, spec, 1)

@@ -15,6 +15,7 @@ import pytest
 
 from persuasive import Config, ConfigError, Planner, simulate
 from persuasive import packing as slot
+from persuasive.config import AV_KINDS
 from persuasive.policies import CompiledPolicy, Context, Observation, kinds as kd
 from persuasive.policies.idm import idm_step
 from persuasive.policies.lfg import boltzmann_choice
@@ -33,8 +34,7 @@ def run(config: Config, seed: int, **overrides):
 
 def test_human_draws_and_start_are_the_same_whatever_the_av():
     for seed in (1, 2, 3):
-        records = [run(CORRECTED, seed, **{"av.kind": av}) for av in
-                   ("persuasive", "passive", "cv", "lfg", "yield")]
+        records = [run(CORRECTED, seed, **{"av.kind": av}) for av in AV_KINDS]
         first = records[0]
         for r in records[1:]:
             assert r.hv_initial_state == first.hv_initial_state
@@ -335,7 +335,7 @@ def test_policies_reject_bad_observations_and_sides():
         Planner(Config()).plan((-20.0, 4.0), (-20.0, 4.0), human_role="Leader")
 
 
-@pytest.mark.parametrize("kind", ["persuasive", "passive", "cv", "lfg", "yield"])
+@pytest.mark.parametrize("kind", AV_KINDS)
 def test_planner_runs_every_av_kind(kind):
     planner = Planner(Config(mode="corrected").with_overrides({"av.kind": kind}), seed=3)
     assert planner.kind == kind
@@ -349,7 +349,7 @@ def test_planner_runs_every_av_kind(kind):
 
 
 def test_kinds_registry_is_consistent():
-    from persuasive.config import AV_KINDS, HV_KINDS, SIMULATED_HV_KINDS
+    from persuasive.config import HV_KINDS, SIMULATED_HV_KINDS
 
     assert set(AV_KINDS) | set(SIMULATED_HV_KINDS) == set(kd.KINDS)
     assert set(HV_KINDS) - set(SIMULATED_HV_KINDS) == {"person"}  # a Python policy only

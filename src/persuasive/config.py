@@ -23,7 +23,7 @@ from typing import Any, Literal, get_args
 
 Role = Literal["leader", "follower"]
 Mode = Literal["paper", "corrected"]
-AVKind = Literal["persuasive", "passive", "cv", "lfg", "yield"]
+AVKind = Literal["persuasive", "passive", "cv", "lfg", "yield", "level1", "level2"]
 HVKind = Literal["lfg", "stubborn", "noisy", "idm", "aggressive", "replay", "adversary",
                  "deceptive", "random", "person"]
 ShieldKind = Literal["off", "worst-case", "responsive", "responsibility"]
@@ -411,10 +411,12 @@ class AVParams:
     ``persuasive``: the paper's branch MPC (alias ``mpc``); ``passive``: the same MPC with no
     role transition at T1; ``cv``: the MPC's candidates and chance constraint against a
     constant-velocity human; ``lfg``: an adaptive-role LFG player (the 2-LFG case); ``yield``:
-    yields until the human has cleared the conflict, then goes.
+    yields until the human has cleared the conflict, then goes; ``level1``, ``level2``: a
+    level-k player (``persuasive.policies.levelk``), the best response to the human's
+    level-(k-1) trajectory.
     """
 
-    kind: AVKind = "persuasive"  #: persuasive | passive | cv | lfg | yield
+    kind: AVKind = "persuasive"  #: persuasive | passive | cv | lfg | yield | level1 | level2
     role: Role | None = None  #: initial role of an LFG AV; unset: the other of hv.role
     #: the safety shield around the planner (docs/method.md §12): off | worst-case |
     #: responsive | responsibility (§12.13, the ``[responsibility]`` rule); unset: off in
@@ -689,7 +691,7 @@ AV_PLANS = ("pairwise", "joint")
 #: The joint plan's chance constraint (``persuasive.many.joint``).
 JOINT_BOUNDS = ("product", "union")
 #: Where the junction's AV yields (:attr:`JunctionSpec.av_line`).
-AV_LINES = ("stop", "outside")
+AV_LINES = ("stop", "outside", "foresight")
 #: Named variants: the fields of :class:`JunctionSpec` each sets.
 VARIANTS: dict[str, dict[str, Any]] = {
     "major": {"priority": "major", "mix": (0.25, 0.5, 0.25)},
@@ -750,7 +752,8 @@ class JunctionSpec:
     #: the occupancy interval's start, where that comes first; part 1); ``outside``, outside
     #: the junction (before the occupancy interval of every route that crosses or merges
     #: with its own) and outside the human's keep-out circle (the pair game's safety
-    #: distance, 7.5 m, before the conflict point) (docs/method.md §15.9)
+    #: distance, 7.5 m, before the conflict point); ``foresight``, the one of the two the
+    #: AV's predictions of the run favour (placed arrivals only) (docs/method.md §15.9)
     av_line: str = "outside"
 
     def __post_init__(self) -> None:
@@ -910,7 +913,7 @@ class JunctionParams:
     av_arrival_s: float | None = None  #: when the AV enters (poisson); unset: 10
     av_plan: str | None = None  #: pairwise | joint: how the AV plans; unset: pairwise
     joint_bound: str | None = None  #: product | union: the joint chance constraint; unset: product
-    av_line: str | None = None  #: stop | outside: where the AV yields; unset: outside
+    av_line: str | None = None  #: stop | outside | foresight (where it yields); unset: outside
 
     def __post_init__(self) -> None:
         for name in ("mix", "first_m", "gap_m", "v0_mps"):

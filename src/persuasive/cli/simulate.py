@@ -159,7 +159,7 @@ def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
     world = JunctionWorld.of(config, seed).run()
     reference = JunctionWorld.of(config, seed, with_av=False).run()
     elapsed = clock.seconds
-    row = summary(world, reference)
+    row = {**summary(world, reference), "av_line": world.spec.av_line}
     if out or vehicles_out:
         frame = world.frame()
         for path in (out, vehicles_out):
@@ -179,8 +179,9 @@ def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
     kinds = ",".join(f"{k}:{w:g}" if len(spec.hv_kinds) > 1 else k for k, w in spec.hv_kinds)
     plan = "one plan against all, " + spec.joint_bound if spec.av_plan == "joint" else \
         "one planner per human"
-    plan += ", yielding " + ("outside the junction" if spec.av_line == "outside" else
-                             "at the stop line")
+    plan += ", yielding " + ("outside the junction" if row["av_line"] == "outside" else
+                             "at the stop line") + (" (picked by foresight)" if
+                                                    spec.av_line == "foresight" else "")
     click.echo(f"{config.av.kind} AV ({plan}) among {spec.n_vehicles} vehicles at the junction "
                f"({config.junction.variant or 'major'}, {spec.lanes} lane(s), {kinds} humans "
                f"playing {spec.opponents}), seed {seed}, {config.mode} mode, shield "

@@ -36,6 +36,7 @@ def run_seed(config: Config, spec: JunctionSpec, seed: int) -> tuple[dict, np.nd
     reference = JunctionWorld(config, spec, seed, with_av=False).run()
     step_ms = np.array(times)
     row = summary(world, reference, step_ms)
+    row["av_line"] = world.spec.av_line
     return row, step_ms
 
 

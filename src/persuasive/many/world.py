@@ -241,7 +241,8 @@ class JunctionWorld:
     the AV (vehicle 0 never enters the road).
     """
 
-    def __init__(self, config: Config, spec: JunctionSpec, seed: int, with_av: bool = True):
+    def __init__(self, config: Config, spec: JunctionSpec, seed: int, with_av: bool = True,
+                 arrived: Arrivals | None = None):
         from ..packing import discounts, pack
         from ..scenarios import build_scenario
         from ..scenarios.base import pair_min_dist
@@ -252,11 +253,19 @@ class JunctionWorld:
         self.dt = float(config.simulation.dt_s)
         self.n_steps = int(round(spec.duration_s / self.dt))
         av_lim, hv_lim = Limits.of(config, "av"), Limits.of(config, "hv")
-        self.arrivals = arr = arrivals(spec, seed, hv_lim.length_m)
+        #: ``arrived``: the arrivals to use instead of the seed's (foresight's predictions)
+        self.arrivals = arr = arrivals(spec, seed, hv_lim.length_m) if arrived is None \
+            else arrived
         self.n = arr.n
         self.limits = [av_lim] + [hv_lim] * (arr.n - 1)
         #: the pair games' safety distance: their keep-out circle's radius [m]
         self.keep_out_m = pair_min_dist(config)
+        #: the foresight's predictions, ``{(line, model crowd): value}`` (empty without it)
+        self.foreseen: dict[tuple[str, str], tuple] = {}
+        if spec.av_line == "foresight" and with_av:
+            self.spec = spec = spec.with_(av_line=foresee_line(self, config, spec, arr))
+        elif spec.av_line == "foresight":
+            self.spec = spec = spec.with_(av_line=AV_LINE_CHOICES[0])
         self.table = conflict_table(spec, arr, self.limits, self.keep_out_m)
         self._prepare_views()
         self.routes = arr.routes
@@ -653,6 +662,55 @@ class JunctionWorld:
         return self
 
 
+#: The lines foresight chooses among, ties to the earlier (``JunctionSpec.av_line``).
+AV_LINE_CHOICES = ("outside", "stop")
+#: The crowds foresight predicts with: every human of one kind (docs/method.md §15.9).
+FORESIGHT_CROWDS = ("lfg", "stubborn", "idm")
+
+
+def foresee_line(world: JunctionWorld, config: Config, spec: JunctionSpec, arr: Arrivals
+                 ) -> str:
+    """The line foresight picks for ``world``'s run (docs/method.md §15.9): for each line of
+    :data:`AV_LINE_CHOICES` and each crowd of :data:`FORESIGHT_CROWDS` (the paper's human
+    with the planner's ``p_a_hat``, one that keeps the leader's role, one that goes when the
+    way is free), the whole run from the arrivals as they are at the start, with the
+    predictions' random numbers (``persuasive.safety.foresight.prediction_seed``); a line's
+    value is, in this order, the crowds in which the AV gets through with no deadlock of its
+    own and never stands inside the junction, the conflicts it passes first over the crowds,
+    and its slowest time through, shorter better. Ties go to the earlier line. The values are
+    kept in ``world.foreseen``."""
+    from ..safety.foresight import prediction_seed
+    from .measures import summary
+
+    if spec.arrival != "placed":
+        raise ConfigError("junction.av_line = 'foresight' predicts the run from the vehicles "
+                          "on the road at the start; allowed with junction.arrival = placed")
+    p_hat = config.mpc.p_a_hat
+    model = config if not isinstance(p_hat, (int, float)) or isinstance(p_hat, bool) \
+        else config.with_overrides({"roles.p_a": float(p_hat)})
+    seed = prediction_seed(world.seed)
+    best, best_value = AV_LINE_CHOICES[0], None
+    for line in AV_LINE_CHOICES:
+        live = first = 0
+        slowest = 0.0
+        for crowd in FORESIGHT_CROWDS:
+            kinds = ("av",) + (crowd,) * (arr.n - 1)
+            run = JunctionWorld(model, spec.with_(av_line=line, hv_kinds=((crowd, 1.0),)), seed,
+                                arrived=replace(arr, kinds=kinds)).run()
+            row = summary(run)
+            ok = row["av_through"] and not row["av_caused_deadlock"] and \
+                row["av_inside_stood_s"] == 0.0
+            live += int(ok)
+            first += row["av_first_conflicts"]
+            t = row["av_clear_s"] if math.isfinite(row["av_clear_s"]) else spec.duration_s
+            slowest = max(slowest, t)
+            world.foreseen[(line, crowd)] = (bool(ok), int(row["av_first_conflicts"]), t)
+        value = (live, first, -slowest)
+        if best_value is None or value > best_value:
+            best, best_value = line, value
+    return best
+
+
 def warm_up(config: Config) -> None:
     """Load (and compile once, here) the kernels a run needs before workers start."""
     JunctionWorld(config, JunctionSpec(n_vehicles=3, duration_s=1.0), 0).run()
@@ -667,7 +725,7 @@ def run_summary(config: Config, seed: int) -> dict:
 
     world = JunctionWorld.of(config, seed).run()
     reference = JunctionWorld.of(config, seed, with_av=False).run()
-    return summary(world, reference)
+    return {**summary(world, reference), "av_line": world.spec.av_line}
 
 
 __all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "KIND_IDS",

@@ -13,9 +13,10 @@ both loops:
   wraps any compiled kind in that protocol; the two loops give the same runs bit for bit.
 
 AV kinds: ``persuasive`` (the paper's branch MPC; alias ``mpc``), ``passive``, ``cv``,
-``lfg``, ``yield``. Human kinds: ``lfg``, ``stubborn``, ``noisy``, ``idm``, ``aggressive``,
-``replay``, and the humans that test the safety shield, ``adversary``, ``deceptive``,
-``random`` (:mod:`.adversarial`). Each module's docstring states the kind's definition and parameters.
+``lfg``, ``yield``, and the level-k players ``level1``, ``level2`` (:mod:`.levelk`). Human
+kinds: ``lfg``, ``stubborn``, ``noisy``, ``idm``, ``aggressive``, ``replay``, and the humans
+that test the safety shield, ``adversary``, ``deceptive``, ``random`` (:mod:`.adversarial`).
+Each module's docstring states the kind's definition and parameters.
 """
 
 from __future__ import annotations
@@ -103,6 +104,12 @@ def policy_params(config: Config, side: int, p_a_prior: np.ndarray | None = None
         return np.concatenate([[float(accel.size)], accel])
     if spec.kind == kd.RANDOM:
         return np.array([config.hv.random.hold_min_s, config.hv.random.hold_max_s])
+    if spec.kind in (kd.LEVEL1, kd.LEVEL2):
+        from .levelk import PRM_LEVEL
+
+        prm = np.zeros(1)
+        prm[PRM_LEVEL] = 1.0 if spec.kind == kd.LEVEL1 else 2.0
+        return prm
     return np.zeros(1)
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 # Kind ids (compile-time constants in the dispatcher).
 (LFG, STUBBORN, NOISY, IDM, AGGRESSIVE, REPLAY, PERSUASIVE, PASSIVE, CV, YIELD, ADVERSARY,
- DECEPTIVE, RANDOM) = range(13)
+ DECEPTIVE, RANDOM, LEVEL1, LEVEL2) = range(15)
 
 #: The vehicle a policy drives.
 AV, HV = 0, 1
@@ -32,6 +32,7 @@ MPC_LOG = ("trajectory", "feasible", "n_feasible", "p_safe_min", "p_safe_max",
            "model_confidence", "n_allowed", "p_a_hat")
 CV_LOG = ("trajectory", "feasible", "n_feasible", "p_safe_min", "expected_reward", "n_allowed")
 YIELD_LOG = ("trajectory", "released", "n_admissible")
+LEVELK_LOG = ("trajectory", "predicted_hv_trajectory", "expected_reward", "n_allowed")
 IDM_LOG = ("go", "committed", "waiting_s", "gap_s", "time_to_conflict_s",
            "other_time_to_conflict_s")
 ADVERSARY_LOG = ("target_time_s", "lurking")
@@ -68,6 +69,9 @@ KINDS: dict[str, KindSpec] = {s.name: s for s in (
     KindSpec("passive", PASSIVE, (AV,), 0, True, True, MPC_LOG),
     KindSpec("cv", CV, (AV,), 0, False, True, CV_LOG),
     KindSpec("yield", YIELD, (AV,), 0, False, True, YIELD_LOG),
+    # the level-k AV reads the game cache's two libraries (not its solve)
+    KindSpec("level1", LEVEL1, (AV,), 0, True, True, LEVELK_LOG),
+    KindSpec("level2", LEVEL2, (AV,), 0, True, True, LEVELK_LOG),
 )}
 
 #: Specs by kind id.
@@ -75,7 +79,8 @@ BY_ID: dict[int, KindSpec] = {s.kind: s for s in KINDS.values()}
 #: Log columns whose values are roles (written as "leader"/"follower").
 ROLE_COLUMNS = ("role", "next_role", "tie_role")
 #: Log columns whose values are integers or flags.
-INT_COLUMNS = ("trajectory", "n_feasible", "n_admissible", "n_allowed")
+INT_COLUMNS = ("trajectory", "n_feasible", "n_admissible", "n_allowed",
+               "predicted_hv_trajectory")
 BOOL_COLUMNS = ("feasible", "released", "go", "committed", "lurking")
 
 

@@ -19,6 +19,7 @@ from ..library import Lib, as_lib
 from . import kinds as kd
 from .adversarial import adversary_step, deceptive_step, random_step
 from .idm import idm_step
+from .levelk import levelk_step
 from .lfg import PRM_ROLE, ROLE, lfg_init, lfg_step
 from .planners import cv_step, mpc_init, mpc_step
 from .scripted import aggressive_step, replay_step
@@ -95,6 +96,9 @@ def policy_step(kind: int, me: int, prm: np.ndarray, st: np.ndarray, k: int, s_a
         return deceptive_step(st, s_hv, v_hv, s_av, v_av, dt, P_hv, P_av, log)
     if kind == kd.RANDOM:
         return random_step(st, prm, draws, dt, P_hv, log)
+    # last, so that no other kind's dispatch gets a test longer
+    if kind == kd.LEVEL1 or kind == kd.LEVEL2:
+        return levelk_step(prm, s_av, v_av, s_hv, v_hv, lib_h, lib_r, P_av, P_hv, log, work)
     raise ValueError("unknown policy kind")
 
 
