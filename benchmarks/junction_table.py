@@ -24,21 +24,28 @@ from persuasive.sweep import load
 from persuasive.sweep.store import read_manifest
 
 
-def table(folder: str) -> str:
+def _cells(folder: str, columns: str):
+    """The table's two header lines (the sweep's axes, then ``columns``, ``|``-separated) and
+    each cell of the axes: ``(its values, its rows, AV first, conflicts both passed)``."""
     axes = list(read_manifest(folder)["axes"])
-    rows = load(folder)
-    lines = [f"| {' | '.join(axes)} | runs | AV through | AV first (conflicts) | AV-caused "
-             "collisions | uncertified steps | deadlocks (AV in) | human collisions | delay "
-             "caused [s] | humans' mean wait [s] |",
-             "|" + "---|" * (len(axes) + 9)]
-    for key, g in rows.groupby(axes, sort=True):
+    head = [f"| {' | '.join(axes)} | {columns} |",
+            "|" + "---|" * (len(axes) + columns.count("|") + 1)]
+    cells = []
+    for key, g in load(folder).groupby(axes, sort=True):
         key = key if isinstance(key, tuple) else (key,)
-        both = int(g["av_conflicts_passed"].sum())
-        first = int(g["av_first_conflicts"].sum())
+        cells.append((" | ".join(str(k) for k in key), g, int(g["av_first_conflicts"].sum()),
+                      int(g["av_conflicts_passed"].sum())))
+    return head, cells
+
+
+def table(folder: str) -> str:
+    lines, cells = _cells(folder, "runs | AV through | AV first (conflicts) | AV-caused "
+                          "collisions | uncertified steps | deadlocks (AV in) | human "
+                          "collisions | delay caused [s] | humans' mean wait [s]")
+    for key, g, first, both in cells:
         share = f"{100 * first / both:.1f} % ({both})" if both else "- (0)"
         lines.append(
-            f"| {' | '.join(str(k) for k in key)} | {len(g)} | "
-            f"{100 * g['av_through'].mean():.1f} % | {share} | "
+            f"| {key} | {len(g)} | {100 * g['av_through'].mean():.1f} % | {share} | "
             f"{int(g['av_caused_collisions'].sum())} | {int(g['uncertified_steps'].sum())} | "
             f"{int(g['deadlock'].sum())} ({int(g['av_in_deadlock'].sum())}) | "
             f"{int(g['human_collisions'].sum())} | {g['caused_delay_s'].mean():.2f} | "
@@ -47,21 +54,15 @@ def table(folder: str) -> str:
 
 
 def liveness_table(folder: str) -> str:
-    axes = list(read_manifest(folder)["axes"])
-    rows = load(folder)
-    lines = [f"| {' | '.join(axes)} | runs | AV through | AV first (of conflicts) | AV-caused "
-             "collisions | uncertified steps | deadlocks (AV in, AV-caused) | AV stood inside "
-             "(a human waiting) | AV wait max / p95 [s] | delay caused [s] |",
-             "|" + "---|" * (len(axes) + 9)]
-    for key, g in rows.groupby(axes, sort=True):
-        key = key if isinstance(key, tuple) else (key,)
-        both = int(g["av_conflicts_passed"].sum())
-        first = int(g["av_first_conflicts"].sum())
+    lines, cells = _cells(folder, "runs | AV through | AV first (of conflicts) | AV-caused "
+                          "collisions | uncertified steps | deadlocks (AV in, AV-caused) | AV "
+                          "stood inside (a human waiting) | AV wait max / p95 [s] | delay "
+                          "caused [s]")
+    for key, g, first, both in cells:
         share = f"{first} ({100 * first / both:.1f} % of {both})" if both else "0 (of 0)"
         wait = g["av_wait_s"].to_numpy(float)
         lines.append(
-            f"| {' | '.join(str(k) for k in key)} | {len(g)} | "
-            f"{100 * g['av_through'].mean():.1f} % | {share} | "
+            f"| {key} | {len(g)} | {100 * g['av_through'].mean():.1f} % | {share} | "
             f"{int(g['av_caused_collisions'].sum())} | {int(g['uncertified_steps'].sum())} | "
             f"{int(g['deadlock'].sum())} ({int(g['av_in_deadlock'].sum())}, "
             f"{int(g['av_caused_deadlock'].sum())}) | "
