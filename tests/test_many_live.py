@@ -277,11 +277,13 @@ def test_foresight_drives_the_run_of_the_line_it_picks():
         np.testing.assert_array_equal(world.A, same.A)
         # its value: liveness first, then persuasion, then time
         value = {}
-        for (l_, _), (ok, first, t) in world.foreseen.items():
+        for (l_, _), (ok, first, minus_t) in world.foreseen.items():
             live, n_first, slowest = value.get(l_, (0, 0, 0.0))
-            value[l_] = (live + ok, n_first + first, max(slowest, t))
+            value[l_] = (live + ok, n_first + first, max(slowest, -minus_t))
         key = {l_: (v[0], v[1], -v[2]) for l_, v in value.items()}
         assert key[line] == max(key.values())
+        # ties go to the line outside, the first of the choices
+        assert line == "outside" or key["stop"] > key["outside"]
     assert picked == {"outside", "stop"}  # these seeds pick both
 
 

@@ -149,7 +149,6 @@ def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
     import math
 
     from .._files import json_safe
-    from ..many.measures import summary
     from ..many.world import JunctionWorld
 
     outputs = _check_outputs(out, vehicles_out)
@@ -159,7 +158,7 @@ def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
     world = JunctionWorld.of(config, seed).run()
     reference = JunctionWorld.of(config, seed, with_av=False).run()
     elapsed = clock.seconds
-    row = {**summary(world, reference), "av_line": world.spec.av_line}
+    row = world.summary(reference)
     if out or vehicles_out:
         frame = world.frame()
         for path in (out, vehicles_out):

@@ -148,28 +148,32 @@ def all_wait_edges(world: Trace) -> list[list[tuple[int, int]]]:
     return [wait_edges(world, k) for k in range(world.k + 1)]
 
 
+def _on_cycles(edges: list[tuple[int, int]], n: int) -> frozenset:
+    """The vertices of a graph of ``n`` vertices that lie on a cycle: the members of its
+    strongly connected components of two or more (``scipy.sparse.csgraph``)."""
+    if len(edges) < 2 or not _may_cycle(edges):
+        return frozenset()
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    e = np.array(edges)
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, label = connected_components(g, directed=True, connection="strong")
+    return frozenset(int(m) for m in np.flatnonzero(np.bincount(label)[label] >= 2))
+
+
 def deadlock(world: Trace, hold_s: float = DEADLOCK_S,
              edges_of: list[list[tuple[int, int]]] | None = None
              ) -> tuple[float, tuple[int, ...]] | None:
     """The first deadlock of the run (module docstring): ``(time it began [s], members)``,
     or None; ``edges_of``: the run's :func:`all_wait_edges`, if at hand."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     world = _trace(world)
     hold = max(1, int(round(hold_s / world.dt)))
     current: frozenset = frozenset()
     since = 0
     for k in range(world.k + 1):
         edges = wait_edges(world, k) if edges_of is None else edges_of[k]
-        cycle: frozenset = frozenset()
-        if len(edges) >= 2 and _may_cycle(edges):
-            e = np.array(edges)
-            g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(world.n, world.n))
-            _, label = connected_components(g, directed=True, connection="strong")
-            counts = np.bincount(label)
-            members = np.flatnonzero(counts[label] >= 2)
-            cycle = frozenset(int(m) for m in members)
+        cycle = _on_cycles(edges, world.n)
         if cycle != current:
             current, since = cycle, k
         if current and k - since >= hold:
@@ -201,20 +205,12 @@ def av_caused(world: Trace, lock: tuple[float, tuple[int, ...]] | None,
     """Whether the deadlock ``lock`` (:func:`deadlock`'s) is the AV's (module docstring)."""
     if not lock or 0 not in lock[1]:
         return False
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     world = _trace(world)
     k = min(world.k, int(round(lock[0] / world.dt)) + max(1, int(round(hold_s / world.dt))))
     edges = wait_edges(world, k) if edges_of is None else edges_of[k]
     clear = stands_clear(world, k)
     kept = [(a, b) for a, b in edges if not (b == 0 and clear.get(a, False))]
-    if not kept:
-        return False
-    e = np.array(kept)
-    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(world.n, world.n))
-    _, label = connected_components(g, directed=True, connection="strong")
-    return bool(np.count_nonzero(label == label[0]) >= 2)
+    return 0 in _on_cycles(kept, world.n)
 
 
 def stood_inside(world: Trace, i: int = 0) -> np.ndarray:

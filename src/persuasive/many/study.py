@@ -2,7 +2,7 @@
 (docs/method.md §15.6).
 
 :func:`run_seed` runs one seed twice (the AV's run and the reference without it, for the
-delay it causes) and returns its row (``persuasive.many.measures.summary``) and the AV's
+delay it causes) and returns its row (``JunctionWorld.summary``) and the AV's
 run's step times; :func:`run_study` runs seeds on the worker processes of a local Dask cluster
 (``persuasive.sweep.runner``), rows in seed order, bit-identical whatever the number of
 workers; :func:`aggregate` is the study's one-line summary.
@@ -18,7 +18,6 @@ import numpy as np
 
 from ..config import Config
 from .junction import JunctionSpec
-from .measures import summary
 from .world import JunctionWorld, run_summary, warm_up
 
 
@@ -35,9 +34,7 @@ def run_seed(config: Config, spec: JunctionSpec, seed: int) -> tuple[dict, np.nd
             break
     reference = JunctionWorld(config, spec, seed, with_av=False).run()
     step_ms = np.array(times)
-    row = summary(world, reference, step_ms)
-    row["av_line"] = world.spec.av_line
-    return row, step_ms
+    return world.summary(reference, step_ms), step_ms
 
 
 def _task(args) -> tuple[dict, np.ndarray]:

@@ -260,7 +260,8 @@ class JunctionWorld:
         self.limits = [av_lim] + [hv_lim] * (arr.n - 1)
         #: the pair games' safety distance: their keep-out circle's radius [m]
         self.keep_out_m = pair_min_dist(config)
-        #: the foresight's predictions, ``{(line, model crowd): value}`` (empty without it)
+        #: the foresight's predictions, ``{(line, model crowd): (live, conflicts first, -AV
+    #: clear time)}`` (empty without it)
         self.foreseen: dict[tuple[str, str], tuple] = {}
         if spec.av_line == "foresight" and with_av:
             self.spec = spec = spec.with_(av_line=foresee_line(self, config, spec, arr))
@@ -320,12 +321,12 @@ class JunctionWorld:
             size = (self.limits[i].length_m, self.limits[i].width_m)
             hv = (self.limits[-1].length_m, self.limits[-1].width_m)
             got = []
+            start = junction_start(self.spec, mine, size, hv) if i == 0 else math.nan
             for n, other in enumerate(possible_routes(self.spec)):
                 pair = _route_pair(mine, other, size, hv)
                 if pair is not None and pair[0] != FOLLOW:
                     got.append((n, pair[1] if i != 0 else av_line(
-                        pair[1], self.spec, self.keep_out_m, junction_start(
-                            self.spec, mine, size, hv))))
+                        pair[1], self.spec, self.keep_out_m, start)))
             self._stand_ins[i] = got
         return got
 
@@ -655,6 +656,14 @@ class JunctionWorld:
                               "scenario; the junction world needs scenario.kind = junction")
         return cls(config, spec, seed, with_av)
 
+    def summary(self, reference: JunctionWorld | None = None,
+                step_ms: np.ndarray | None = None) -> dict:
+        """The run's row (``persuasive.many.measures.summary``; ``reference``: the same seed
+        without the AV) and where its AV yielded, ``av_line`` (foresight's pick, if it picked)."""
+        from .measures import summary
+
+        return {**summary(self, reference, step_ms), "av_line": self.spec.av_line}
+
     def run(self) -> JunctionWorld:
         """Step until the run is over; returns itself."""
         while not self.step().done:
@@ -679,7 +688,7 @@ def foresee_line(world: JunctionWorld, config: Config, spec: JunctionSpec, arr: 
     own and never stands inside the junction, the conflicts it passes first over the crowds,
     and its slowest time through, shorter better. Ties go to the earlier line. The values are
     kept in ``world.foreseen``."""
-    from ..safety.foresight import prediction_seed
+    from ..safety.foresight import line_value, prediction_seed
     from .measures import summary
 
     if spec.arrival != "placed":
@@ -691,21 +700,17 @@ def foresee_line(world: JunctionWorld, config: Config, spec: JunctionSpec, arr: 
     seed = prediction_seed(world.seed)
     best, best_value = AV_LINE_CHOICES[0], None
     for line in AV_LINE_CHOICES:
-        live = first = 0
-        slowest = 0.0
         for crowd in FORESIGHT_CROWDS:
             kinds = ("av",) + (crowd,) * (arr.n - 1)
             run = JunctionWorld(model, spec.with_(av_line=line, hv_kinds=((crowd, 1.0),)), seed,
                                 arrived=replace(arr, kinds=kinds)).run()
             row = summary(run)
-            ok = row["av_through"] and not row["av_caused_deadlock"] and \
+            live = row["av_through"] and not row["av_caused_deadlock"] and \
                 row["av_inside_stood_s"] == 0.0
-            live += int(ok)
-            first += row["av_first_conflicts"]
             t = row["av_clear_s"] if math.isfinite(row["av_clear_s"]) else spec.duration_s
-            slowest = max(slowest, t)
-            world.foreseen[(line, crowd)] = (bool(ok), int(row["av_first_conflicts"]), t)
-        value = (live, first, -slowest)
+            world.foreseen[(line, crowd)] = (bool(live), int(row["av_first_conflicts"]), -t)
+        # the two-vehicle foresight's value (its score with a count of conflicts first)
+        value = line_value([world.foreseen[(line, c)] for c in FORESIGHT_CROWDS])
         if best_value is None or value > best_value:
             best, best_value = line, value
     return best
@@ -721,11 +726,8 @@ def run_summary(config: Config, seed: int) -> dict:
     ``persuasive.many.study.run_seed`` returns for :attr:`Config.junction_spec`, without the
     step times, so that it is the same in every process: what
     ``persuasive.simulation.run_summary`` returns for it)."""
-    from .measures import summary
-
     world = JunctionWorld.of(config, seed).run()
-    reference = JunctionWorld.of(config, seed, with_av=False).run()
-    return {**summary(world, reference), "av_line": world.spec.av_line}
+    return world.summary(JunctionWorld.of(config, seed, with_av=False).run())
 
 
 __all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "KIND_IDS",

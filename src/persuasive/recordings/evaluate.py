@@ -874,49 +874,20 @@ READ_COLUMNS = ("pair", "recording", "kind", "angle_deg", "class_1", "class_2", 
 
 def read_pairs_columns(path: str | Path):
     """The columns of the pairs file ``path`` the evaluation reads (:data:`READ_COLUMNS`, the
-    map's :data:`persuasive.recordings.pairs.MAP_COLUMNS` when it has them) as a frame, text
-    columns as categories: what :func:`persuasive.recordings.pairs.read_pairs` reads of them
-    (``pet_area_s`` NaN for a file written before it), at a fraction of its memory (a site's
-    file, 5.6 million step rows, read whole, took 5.5 GB). :class:`RecordingError` (one line
-    naming the file) when it is not a pairs file."""
-    import pyarrow as pa
+    map's :data:`persuasive.recordings.pairs.MAP_COLUMNS` when it has them all) as a frame,
+    text columns as categories (``persuasive.recordings.pairs.read_pairs`` with ``columns``:
+    ``pet_area_s`` NaN for a file written before it), at a fraction of the whole file's
+    memory. :class:`RecordingError` (one line naming the file) when it is not a pairs file."""
     import pyarrow.parquet as pq
 
-    from .formats import file_head
-    from .pairs import LATER_PAIR_COLUMNS, MAP_COLUMNS, PAIR_COLUMNS, STEP_COLUMNS
+    from .pairs import MAP_COLUMNS, read_pairs
 
-    name = str(path)
-    not_pairs = RecordingError(f"pairs file {name!r} is not a pairs file (write it with "
-                               "'persuasive recordings pairs PATHS... --out FILE.parquet')")
-    if file_head(path, 4, "pairs file") != b"PAR1":
-        raise RecordingError(f"pairs file {name!r} is not a Parquet file (write it with "
-                             "'persuasive recordings pairs PATHS... --out FILE.parquet')")
     try:
-        pf = pq.ParquetFile(Path(path))
-        names = set(pf.schema_arrow.names)
-        meta = {**(pf.schema_arrow.metadata or {}), **(pf.metadata.metadata or {})}
-        if PAIRS_METADATA not in meta or any(
-                c not in names and c not in LATER_PAIR_COLUMNS
-                for c in (*PAIR_COLUMNS, *STEP_COLUMNS)):
-            raise not_pairs
-        cols = [c for c in READ_COLUMNS if c in names]
-        cols += [c for c in MAP_COLUMNS if c in names and all(m in names for m in MAP_COLUMNS)]
-        text = [c for c in cols if pa.types.is_string(pf.schema_arrow.field(c).type)
-                or pa.types.is_large_string(pf.schema_arrow.field(c).type)]
-        table = pq.read_table(Path(path), columns=cols, read_dictionary=text)
-        # each column freed as it is converted: not the table and the frame at once
-        frame = table.to_pandas(split_blocks=True, self_destruct=True)
-        del table
-    except RecordingError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - pyarrow raises several kinds for a bad file
-        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise RecordingError(f"pairs file {name!r} cannot be read: {text}") from None
-    if frame.empty:
-        raise RecordingError(f"pairs file {name!r} holds no pair")
-    for col in LATER_PAIR_COLUMNS:
-        if col not in frame:  # a file written before the column: NaN
-            frame[col] = math.nan
+        names = set(pq.read_schema(Path(path)).names)
+    except Exception:  # noqa: BLE001 - read_pairs says why in one line
+        names = set()
+    maps = list(MAP_COLUMNS) if all(m in names for m in MAP_COLUMNS) else []
+    frame, _ = read_pairs(path, [*READ_COLUMNS, *maps])
     return frame
 
 

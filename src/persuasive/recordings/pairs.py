@@ -1137,15 +1137,20 @@ def write_pairs(path, result: PairsResult, sources: Sequence[str]) -> None:
     atomic_write(path, lambda p: pq.write_table(table, p))
 
 
-def read_pairs(path):
+def read_pairs(path, columns=None):
     """The pairs file ``path`` as ``(frame, metadata)``; :class:`RecordingError` (one line
     naming it) when it is not one. Columns of :data:`LATER_PAIR_COLUMNS` a file lacks are
     NaN. ``frame.attrs["smoothing"]``: the tracks' filter
     (:class:`~persuasive.recordings.tracks.SmoothingParams` as a dict; None for a file written
-    before it was recorded), which the fit's measurement model needs."""
+    before it was recorded), which the fit's measurement model needs.
+
+    ``columns``: read only these (those the file has, and of :data:`LATER_PAIR_COLUMNS` the
+    ones asked for, NaN where missing), text columns as categories and each column freed as it
+    is converted: a site's file, 5.6 million step rows, read whole, takes 5.5 GB."""
     import json
     from pathlib import Path
 
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     from .formats import file_head
@@ -1155,26 +1160,40 @@ def read_pairs(path):
         raise RecordingError(f"pairs file {name!r} is not a Parquet file (write it with "
                              "'persuasive recordings pairs PATHS... --out FILE.parquet')")
     try:
-        table = pq.read_table(Path(path))
+        pf = pq.ParquetFile(Path(path))
+        schema = pf.schema_arrow
+        # a file written part by part (persuasive.recordings.streaming) holds its final
+        # metadata among the file's key-value metadata, the schema's being the one it
+        # started with
+        raw = (pf.metadata.metadata or {}).get(PAIRS_METADATA) or \
+            (schema.metadata or {}).get(PAIRS_METADATA)
+        missing = [c for c in (*PAIR_COLUMNS, *STEP_COLUMNS)
+                   if c not in schema.names and c not in LATER_PAIR_COLUMNS]
+        if raw is None or missing:
+            raise RecordingError(f"pairs file {name!r} is not a pairs file (write it with "
+                                 "'persuasive recordings pairs PATHS... --out FILE.parquet')")
+        if columns is None:
+            frame = pq.read_table(Path(path)).to_pandas()
+        else:
+            cols = [c for c in columns if c in schema.names]
+            text = [c for c in cols if pa.types.is_string(schema.field(c).type)
+                    or pa.types.is_large_string(schema.field(c).type)]
+            table = pq.read_table(Path(path), columns=cols, read_dictionary=text)
+            frame = table.to_pandas(split_blocks=True, self_destruct=True)
+            del table
+    except RecordingError:
+        raise
     except Exception as exc:  # noqa: BLE001 - pyarrow raises several kinds for a bad file
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise RecordingError(f"pairs file {name!r} cannot be read: {text}") from None
-    # a file written part by part (persuasive.recordings.streaming) holds its final metadata
-    # among the file's key-value metadata, the schema's being the one it started with
-    raw = (pq.read_metadata(Path(path)).metadata or {}).get(PAIRS_METADATA) or \
-        (table.schema.metadata or {}).get(PAIRS_METADATA)
-    missing = [c for c in (*PAIR_COLUMNS, *STEP_COLUMNS)
-               if c not in table.column_names and c not in LATER_PAIR_COLUMNS]
-    if raw is None or missing:
-        raise RecordingError(f"pairs file {name!r} is not a pairs file (write it with "
-                             "'persuasive recordings pairs PATHS... --out FILE.parquet')")
-    frame = table.to_pandas()
     if frame.empty:
         raise RecordingError(f"pairs file {name!r} holds no pair")
     for col in LATER_PAIR_COLUMNS:
-        if col not in frame:  # a file written before the column: NaN, in its place
+        if col not in frame and (columns is None or col in columns):
+            # a file written before the column: NaN, in its place
             before = PAIR_COLUMNS[PAIR_COLUMNS.index(col) - 1]
-            frame.insert(frame.columns.get_loc(before) + 1, col, math.nan)
+            at = frame.columns.get_loc(before) + 1 if before in frame else len(frame.columns)
+            frame.insert(at, col, math.nan)
     meta = json.loads(raw)
     # the filter its accelerations went through (files of before it was kept: unknown)
     frame.attrs["smoothing"] = meta.get("smoothing")
