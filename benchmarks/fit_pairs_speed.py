@@ -9,8 +9,10 @@ recordings of ``--tracks`` tracks each, a busy four-arm junction, 5 cm of positi
 reads, smooths and pairs it, keeps the first ``--pairs`` pairs (in order of recording and
 time), and times what ``persuasive fit`` does with them before it scores anything: both views
 of every pair as runs (``persuasive.recordings.evaluate.ViewBuilder``, the vehicle limits from
-the pairs' 1 %/99 % acceleration quantiles), their evidence (``persuasive.fitting
-.evidence_of``: every view's games solved in its own scenario) and the fit of every model
+the pairs' 1 %/99 % acceleration quantiles) and their scenarios' geometry (which an evaluation
+builds once for all its folds, ``persuasive.record.scenario_of``; cleared before each run),
+their evidence (``persuasive.fitting.evidence_of``: every view's games solved in its own
+scenario, in every fold) and the fit of every model
 (``persuasive.fitting.fit_models``: ``lfg``, ``stubborn``, ``noisy``, ``idm``; point estimates,
 or with ``--intervals`` the profile intervals too). Prints the median of ``--repeat`` runs in
 one process, after one untimed run that compiles and caches the kernels, and the steps fitted.
@@ -71,17 +73,28 @@ def views_of(pairs):
     return [builder.view(p, h) for p in pairs for h in (1, 2)]
 
 
-def fit_once(pairs, intervals: bool) -> tuple[float, float, int, dict]:
-    """Views + evidence, then the fits: ``(seconds to evidence, seconds to fit, steps, BIC)``."""
+def fit_once(pairs, intervals: bool) -> tuple[float, float, float, int, dict]:
+    """The views and their scenarios' geometry (none kept from before: what an evaluation
+    builds once, ``persuasive.record.GEOMETRIES``), their evidence (every fold's games, the
+    geometry kept), then the fits: ``(seconds to geometry, to evidence, to fit, steps,
+    BIC)``."""
     from persuasive.fitting import evidence_of, fit_models
     from persuasive.fitting.comparison import MODELS
+    from persuasive.record import GEOMETRIES, scenario_of, static_setup
 
+    GEOMETRIES.clear()
+    static_setup.cache_clear()
     t0 = time.perf_counter()
-    ev = evidence_of(views_of(pairs))
+    views = views_of(pairs)
+    for view in views:
+        scenario_of(view.config)
     t1 = time.perf_counter()
-    report = fit_models(ev, list(MODELS), intervals=intervals)
+    ev = evidence_of(views)
     t2 = time.perf_counter()
-    return t1 - t0, t2 - t1, int(ev.accel.shape[0]), {m: f.bic for m, f in report.fits.items()}
+    report = fit_models(ev, list(MODELS), intervals=intervals)
+    t3 = time.perf_counter()
+    return (t1 - t0, t2 - t1, t3 - t2, int(ev.accel.shape[0]),
+            {m: f.bic for m, f in report.fits.items()})
 
 
 def per_model(pairs, intervals: bool) -> dict[str, float]:
@@ -132,15 +145,17 @@ def main() -> None:
                          "raise --tracks or --files")
     fit_once(pairs[:20], args.intervals)  # compile and cache, untimed
     runs = [fit_once(pairs, args.intervals) for _ in range(args.repeat)]
-    total = [a + b for a, b, _, _ in runs]
+    total = [g + e + f for g, e, f, _, _ in runs]
     what = "recorded logs, measurement model on" if args.logs else "the evaluation's views"
-    print(f"{len(pairs)} pairs ({2 * len(pairs)} views: {what}; {runs[0][2]} steps), every model "
+    print(f"{len(pairs)} pairs ({2 * len(pairs)} views: {what}; {runs[0][3]} steps), every model "
           f"{'with' if args.intervals else 'without'} intervals: median "
           f"{statistics.median(total):.1f} s of {args.repeat} "
-          f"({', '.join(f'{t:.1f}' for t in total)}); evidence "
-          f"{statistics.median(a for a, *_ in runs):.1f} s, fits "
-          f"{statistics.median(b for _, b, *_ in runs):.1f} s; {os.cpu_count()} cores")
-    print("BIC: " + ", ".join(f"{m} {b:.0f}" for m, b in runs[0][3].items()))
+          f"({', '.join(f'{t:.1f}' for t in total)}); the views and their geometry "
+          f"{statistics.median(g for g, *_ in runs):.1f} s (once per evaluation), evidence "
+          f"{statistics.median(e for _, e, *_ in runs):.1f} s and fits "
+          f"{statistics.median(f for _, _, f, *_ in runs):.1f} s (per fold); "
+          f"{os.cpu_count()} cores")
+    print("BIC: " + ", ".join(f"{m} {b:.0f}" for m, b in runs[0][4].items()))
     if args.per_model:
         print("each model alone: " + ", ".join(f"{m} {t:.1f} s" for m, t in
                                                per_model(pairs, args.intervals).items()))

@@ -471,3 +471,32 @@ def test_the_rollout_reads_the_views_packed_parameters_as_built(evaluation):
         ev = evidence_of(views)
         packed = (ev.P_av[0], ev.P_hv[0], ev.P_av[1], ev.P_hv[1])
         assert idm_rollout(p, st[2], *views, prm, packed) == idm_rollout(p, st[2], *views, prm)
+
+
+def test_the_geometries_built_once_are_those_each_fold_builds(evaluation, monkeypatch):
+    """Every view's scenario geometry is built once before the folds (``view_geometries``):
+    under another fold's limits it gives the scenario a build gives, and the evaluation
+    with every scenario built anew (no cache) is the same, key for key."""
+    import persuasive.record as record
+    from persuasive.recordings.evaluate import evaluate_pairs, view_geometries
+    from persuasive.scenarios import build_scenario
+
+    pairs = evaluation.pairs
+    views = [(i, h) for i in range(len(pairs)) for h in (1, 2)]
+    entries = dict(view_geometries(pairs, "corrected", views, vehicle_limits(pairs, 0.01),
+                                   12.0))
+    assert set(entries) == {record.geometry_key(ViewBuilder("corrected", vehicle_limits(
+        pairs, 0.01), 12.0).config(pairs[i], h)) for i, h in views}
+    other = ViewBuilder("corrected", vehicle_limits(pairs[:2], 0.05), 15.0)
+    for i, h in views:
+        config = other.config(pairs[i], h)
+        kept = record.with_geometry(entries[record.geometry_key(config)], config)
+        assert kept == build_scenario(config)
+    monkeypatch.setattr(record, "scenario_of", lambda config, cache=None: build_scenario(
+        config))
+    record.static_setup.cache_clear()
+    try:
+        anew = evaluate_pairs(pairs, Split("folds", k=3), params=EvalParams(n_boot=200))
+    finally:
+        record.static_setup.cache_clear()
+    assert anew.to_dict() == evaluation.to_dict()

@@ -380,14 +380,116 @@ class Setup:
     yield_line_m: float | None = None
 
 
+def geometry_key(config: Config) -> tuple:
+    """What the geometry of ``config``'s scenario depends on: the ``[scenario]`` section, both
+    vehicles' lengths and widths, the lane width, the safety factor and the shield's clearance
+    in force (every scenario's ``build`` reads no more of the configuration, and its checks of
+    the starts, which read the limits too, are made again on every use). Not the vehicles'
+    speed and acceleration limits, the run's length, the policies or the noise: a recorded
+    pair's views have one geometry in every fold of a held-out evaluation, whose vehicle
+    limits differ (``tests/test_record.py`` builds every kind with those changed and compares
+    the result with a build from scratch)."""
+    av, hv = config.vehicle_of("av"), config.vehicle_of("hv")
+    return (config.scenario, av.length_m, av.width_m, hv.length_m, hv.width_m,
+            config.vehicle.lane_width_m, config.vehicle.safety_factor, config.shield_margin_m)
+
+
+class GeometryCache:
+    """The scenarios' geometries by :func:`geometry_key`, the ``maxsize`` last used kept:
+    each a :class:`Scenario` with ``config = None`` (the paths' vehicles are replaced on use).
+    A merge's geometry takes 0.4 s to build (its occupancy intervals, sampled every 5 cm), and
+    a held-out evaluation asks for each recorded view's in every fold."""
+
+    def __init__(self, maxsize: int):
+        from collections import OrderedDict
+        from threading import Lock
+
+        self.maxsize = maxsize
+        self._store: OrderedDict = OrderedDict()
+        self._lock = Lock()  # a Dask worker's tasks run on threads
+
+    def __len__(self) -> int:
+        return len(self._store)
+
+    def get(self, key: tuple) -> Scenario | None:
+        with self._lock:
+            geometry = self._store.get(key)
+            if geometry is not None:
+                self._store.move_to_end(key)
+            return geometry
+
+    def put(self, key: tuple, geometry: Scenario) -> None:
+        with self._lock:
+            self._store[key] = geometry
+            self._store.move_to_end(key)
+            while len(self._store) > self.maxsize:
+                self._store.popitem(last=False)
+
+    def items(self) -> list[tuple[tuple, Scenario]]:
+        with self._lock:
+            return list(self._store.items())
+
+    def clear(self) -> None:
+        with self._lock:
+            self._store.clear()
+
+
+#: The geometries kept (:func:`scenario_of`): a site's recorded views (6,831 distinct of
+#: 7,208 on the site-size recording's 3,604 pairs of docs/guide/recordings.md) fit.
+GEOMETRIES = GeometryCache(maxsize=2 ** 15)
+
+
+def geometry_of(scenario: Scenario) -> Scenario:
+    """What :data:`GEOMETRIES` keeps of a built scenario: it without its configuration."""
+    from dataclasses import replace
+
+    return replace(scenario, config=None)
+
+
+def with_geometry(geometry: Scenario, config: Config) -> Scenario:
+    """The scenario of ``config`` from its geometry (:func:`geometry_of` of a scenario of
+    the same :func:`geometry_key`): the configuration and the paths' vehicles (their
+    limits) ``config``'s, the starts checked as a build checks them. Equal to
+    ``build_scenario(config)`` field for field; where the starts fail, the build itself
+    raises (its message names the kind it checked: a crossing at 90 deg is checked as the
+    intersection)."""
+    from dataclasses import replace
+
+    from .scenarios.base import shape
+
+    scenario = replace(geometry, config=config,
+                       av=replace(geometry.av, vehicle=shape(config, "av")),
+                       hv=replace(geometry.hv, vehicle=shape(config, "hv")))
+    try:
+        scenario.check_starts()
+    except ConfigError:
+        return build_scenario(config)
+    return scenario
+
+
+def scenario_of(config: Config, cache: GeometryCache | None = GEOMETRIES) -> Scenario:
+    """``build_scenario(config)``, its geometry built once per :func:`geometry_key` and kept
+    in ``cache`` (None: built anew). Errors as the build's: a geometry is kept only once a
+    build has passed its checks."""
+    if cache is None:
+        return build_scenario(config)
+    key = geometry_key(config)
+    geometry = cache.get(key)
+    if geometry is not None:
+        return with_geometry(geometry, config)
+    scenario = build_scenario(config)
+    cache.put(key, geometry_of(scenario))
+    return scenario
+
+
 @functools.lru_cache(maxsize=32)
 def static_setup(config: Config) -> tuple[Scenario, np.ndarray, np.ndarray, np.ndarray]:
     """The scenario, both parameter vectors and the discounts of ``config`` (they depend on
     the configuration only; kept for the last few configurations, since building a scenario
-    can take milliseconds). The arrays are shared by every run of the configuration: do not
-    change them (they are not marked read-only, which would give the kernels another type
-    to compile for)."""
-    scenario = build_scenario(config)
+    can take milliseconds, and the scenario's geometry for many more, :func:`scenario_of`).
+    The arrays are shared by every run of the configuration: do not change them (they are
+    not marked read-only, which would give the kernels another type to compile for)."""
+    scenario = scenario_of(config)
     P_av, P_hv = pack(config, scenario)
     return scenario, P_av, P_hv, discounts(config)
 
@@ -601,6 +703,7 @@ def _noisy(config) -> bool:
                                                     or sim.noise_v_mps > 0.0)
 
 
-__all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "OUTCOME_FIELDS", "RECORD_METADATA",
-           "WORLD_LOG", "RunOutcome", "RunRecord", "Setup", "check_seed", "load_record",
-           "make_record", "outcome", "record_from_frame", "setup", "static_setup"]
+__all__ = ["ARRIVAL_LABELS", "DISTANCE_MEASURED", "GEOMETRIES", "GeometryCache",
+           "OUTCOME_FIELDS", "RECORD_METADATA", "WORLD_LOG", "RunOutcome", "RunRecord", "Setup",
+           "check_seed", "geometry_key", "geometry_of", "load_record", "make_record", "outcome",
+           "record_from_frame", "scenario_of", "setup", "static_setup", "with_geometry"]

@@ -239,18 +239,22 @@ def _evaluate_pairs(paths, model, sigma_min, out, as_json, holdout, folds, test_
     clock = StudyClock()
     n_folds = 1 if split.kind != "folds" else (folds or 5)
     workers = check_workers(workers, n_folds)
-    bar = None
+    bar = prep = None
     try:
         pairs = read_pair_data(paths)
         _notice_compile()
+        # the views' geometry, built once before the folds, then the folds
+        prep = progress_bar(quiet, unit="view")
         bar = progress_bar(quiet, unit="fold")
-        result = evaluate_pairs(pairs, split, models, params, workers=workers, progress=bar)
+        result = evaluate_pairs(pairs, split, models, params, workers=workers, progress=bar,
+                                prepare=prep)
         del pairs
     except RecordingError as exc:
         raise _BadInput(str(exc)) from None
     finally:
-        if bar is not None:
-            bar.close()  # type: ignore[attr-defined]
+        for b in (prep, bar):
+            if b is not None:
+                b.close()  # type: ignore[attr-defined]
     elapsed = clock.seconds
     payload = result.to_dict()
     payload["seconds"] = round(elapsed, 3)

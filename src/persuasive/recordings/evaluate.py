@@ -444,19 +444,72 @@ class ViewBuilder:
             self._bases[key] = self.root.with_overrides(over)
         return self._bases[key]
 
-    def view(self, p: PairData, human: int):
-        """The :class:`persuasive.fitting.RunLog` of vehicle ``human`` (1 or 2) as the human."""
-        from ..fitting.evidence import RunLog
+    def config(self, p: PairData, human: int):
+        """The configuration of vehicle ``human``'s (1 or 2) view."""
         from .logs import pair_config, scenario_angle
 
         h, o = human - 1, 2 - human
-        n = p.n - 1
         sizes = {"hv": (p.lengths_m[h], p.widths_m[h]), "av": (p.lengths_m[o], p.widths_m[o])}
-        config = pair_config(self.base(p.classes[h], p.classes[o]), p.kind,
-                             scenario_angle(p.kind, p.angle_deg), sizes, 0.0, n)
+        return pair_config(self.base(p.classes[h], p.classes[o]), p.kind,
+                           scenario_angle(p.kind, p.angle_deg), sizes, 0.0, p.n - 1)
+
+    def view(self, p: PairData, human: int):
+        """The :class:`persuasive.fitting.RunLog` of vehicle ``human`` (1 or 2) as the human."""
+        from ..fitting.evidence import RunLog
+
+        h, o = human - 1, 2 - human
+        n = p.n - 1
         states = np.stack([p.s[o, :n], p.v[o, :n], p.s[h, :n], p.v[h, :n]], axis=1)
-        return RunLog(f"{p.file} pair {p.pair} hv{human}", config, p.pair, None,
-                      np.ascontiguousarray(states), np.ascontiguousarray(p.a[h, :n]), {})
+        return RunLog(f"{p.file} pair {p.pair} hv{human}", self.config(p, human), p.pair,
+                      None, np.ascontiguousarray(states), np.ascontiguousarray(p.a[h, :n]), {})
+
+
+#: Views per task of :func:`view_geometries` (a merge's geometry takes 0.4 s).
+GEOMETRY_CHUNK = 64
+
+
+def view_geometries(pairs: Sequence[PairData], mode: str, views: Sequence[tuple[int, int]],
+                    limits: dict, v_max: float) -> list[tuple[tuple, object]]:
+    """The scenario geometries of the views ``(pair index, human)`` of ``pairs``
+    (``persuasive.record.scenario_of``; kept in this process's
+    ``persuasive.record.GEOMETRIES`` too) as ``(geometry_key, geometry)``, one per key. They
+    do not depend on a fold's vehicle limits: ``limits`` and ``v_max`` are any (a view whose
+    starts these limits fail is left to its folds, which build it and report it as before)."""
+    from ..config import ConfigError
+    from ..record import GEOMETRIES, geometry_key, scenario_of
+
+    builder = ViewBuilder(mode, limits, v_max)
+    out, seen = [], set()
+    for i, human in views:
+        config = builder.config(pairs[i], human)
+        key = geometry_key(config)
+        if key in seen:
+            continue
+        try:
+            scenario_of(config)
+        except ConfigError:
+            continue
+        geometry = GEOMETRIES.get(key)
+        if geometry is not None:
+            seen.add(key)
+            out.append((key, geometry))
+    return out
+
+
+def _geometry_task(args) -> list[tuple[tuple, object]]:
+    (pairs, _status), mode, views, limits, v_max = args
+    return view_geometries(pairs, mode, views, limits, v_max)
+
+
+def remember_geometries(entries: Sequence[tuple[tuple, object]], more: int = 0) -> None:
+    """Keep the geometries ``entries`` (of :func:`view_geometries`) in this process's
+    ``persuasive.record.GEOMETRIES``, made large enough to hold them and ``more``: every fold
+    reads every view's."""
+    from ..record import GEOMETRIES
+
+    GEOMETRIES.maxsize = max(GEOMETRIES.maxsize, len(entries) + more + 1024)
+    for key, geometry in entries:
+        GEOMETRIES.put(key, geometry)
 
 
 # -- the models on held-out runs --------------------------------------------------------------
@@ -756,22 +809,27 @@ def select_pairs(pairs: Sequence[PairData], pet_max_s: float
 def evaluate(sites: Sequence[tuple[str, object]], split: Split,
              models: Sequence[str] | None = None, params: EvalParams | None = None,
              mode: str = "corrected", workers: int = 1,
-             progress: Callable[[int, int], None] | None = None) -> Evaluation:
+             progress: Callable[[int, int], None] | None = None,
+             prepare: Callable[[int, int], None] | None = None) -> Evaluation:
     """The held-out evaluation of ``models`` on the pairs frames ``sites`` (``(name,
     frame)`` each, :func:`persuasive.recordings.pairs.read_pairs`); module docstring.
     :class:`RecordingError` for a split the files do not allow or no pair to predict. With
     ``workers > 1`` the folds run on the worker processes of a local Dask cluster
     (``persuasive.sweep.runner.local_client``), the same evaluation bit for bit (a fold
     depends on the pairs, the split and the parameters only); ``progress(done, total)`` after
-    each fold."""
+    each fold. Before the folds, every view's scenario geometry is built once, on the
+    workers, and handed to each (:func:`view_geometries`; it does not depend on a fold's
+    vehicle limits): ``prepare(done, total)`` in views after each part (without it,
+    ``progress(0, folds)`` then)."""
     pairs = [p for name, frame in sites for p in pairs_of(frame, name, len(sites) > 1)]
-    return evaluate_pairs(pairs, split, models, params, mode, workers, progress)
+    return evaluate_pairs(pairs, split, models, params, mode, workers, progress, prepare)
 
 
 def evaluate_pairs(pairs: Sequence[PairData], split: Split,
                    models: Sequence[str] | None = None, params: EvalParams | None = None,
                    mode: str = "corrected", workers: int = 1,
-                   progress: Callable[[int, int], None] | None = None) -> Evaluation:
+                   progress: Callable[[int, int], None] | None = None,
+                   prepare: Callable[[int, int], None] | None = None) -> Evaluation:
     """:func:`evaluate` of pairs already read (:func:`read_pair_data`)."""
     from ..fitting.estimate import MODELS
 
@@ -798,9 +856,26 @@ def evaluate_pairs(pairs: Sequence[PairData], split: Split,
         raise RecordingError(f"no pair left to predict among the {len(pairs)} pairs of the test "
                              "files: " + ", ".join(f"{s} {c}" for s, c in counts.items()))
     done: dict[int, FoldResult] = {}
-    if progress is not None:
-        progress(0, len(tests))
+    # every fold reads every view (its training or its test pairs): their geometries first,
+    # once, in parts of GEOMETRY_CHUNK views
+    views = [(i, h) for i in range(len(pairs)) for h in (1, 2)]
+    parts = [views[j:j + GEOMETRY_CHUNK] for j in range(0, len(views), GEOMETRY_CHUNK)]
+    limits, v_max = vehicle_limits(pairs, params.accel_quantile), speed_cap(pairs, 10.0)
+
+    def built(j: int) -> None:
+        if prepare is not None:
+            prepare(min(j * GEOMETRY_CHUNK, len(views)), len(views))
+        elif progress is not None:
+            progress(0, len(tests))
+
+    built(0)
     if workers <= 1 or len(tests) <= 1:
+        remember_geometries([], len(views))
+        for j, part in enumerate(parts):
+            view_geometries(pairs, mode, part, limits, v_max)
+            built(j + 1)
+        if progress is not None:
+            progress(0, len(tests))
         for i, t in enumerate(tests):
             done[i] = evaluate_fold(pairs, status, set(t), models, params, mode)
             if progress is not None:
@@ -811,7 +886,17 @@ def evaluate_pairs(pairs: Sequence[PairData], split: Split,
         with local_client(min(workers, len(tests))) as client:
             # the pairs go to each worker once, not with every fold
             shared = client.scatter((pairs, status), broadcast=True)
-            args = [(shared, set(t), models, params, mode) for t in tests]
+            entries: dict = {}
+            tasks = [(shared, mode, part, limits, v_max) for part in parts]
+            for j, (_, got) in enumerate(map_bounded(client, _geometry_task, tasks,
+                                                     in_flight=2 * workers)):
+                entries.update(got)
+                built(j + 1)
+            geometries = client.scatter(list(entries.items()), broadcast=True)
+            del entries
+            if progress is not None:
+                progress(0, len(tests))
+            args = [(shared, geometries, set(t), models, params, mode) for t in tests]
             for i, fold in map_bounded(client, _fold_task, args, in_flight=workers):
                 done[i] = fold
                 if progress is not None:
@@ -821,7 +906,8 @@ def evaluate_pairs(pairs: Sequence[PairData], split: Split,
 
 
 def _fold_task(args) -> FoldResult:
-    (pairs, status), test, models, params, mode = args
+    (pairs, status), geometries, test, models, params, mode = args
+    remember_geometries(geometries)
     return evaluate_fold(pairs, status, test, models, params, mode)
 
 
@@ -926,5 +1012,6 @@ __all__ = ["DECIDED", "ENDS", "EvalParams", "Evaluation", "FoldResult", "KEPT", 
            "Split", "ViewBuilder", "combine", "evaluate", "evaluate_fold", "evaluate_pairs",
            "features_of", "fold_tests", "heldout_loglik", "idm_rollout", "is_pairs_file",
            "motion_sigma", "pairs_of", "prediction_moment", "read_pair_data",
-           "read_pairs_columns", "read_sites", "recording_file", "role_posteriors", "score",
-           "select_pairs", "stop_arrival", "vehicle_limits"]
+           "read_pairs_columns", "read_sites", "recording_file", "remember_geometries",
+           "role_posteriors", "score", "select_pairs", "stop_arrival", "vehicle_limits",
+           "view_geometries"]
