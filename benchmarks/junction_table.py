@@ -1,7 +1,8 @@
 """The table of a junction sweep, one row per cell of its axes (docs/results.md §16.1, §16.3,
-§16.4).
+§16.4, §16.5).
 
-    python benchmarks/junction_table.py SWEEP_FOLDER [--liveness]
+    python benchmarks/junction_table.py SWEEP_FOLDER [--liveness | --study |
+                                                     --paired AXIS=VALUE]
 
 Reads the sweep's rows (``persuasive.sweep.load``; each is ``persuasive.many.world
 .run_summary``'s row) and prints per combination of the axes: runs, AV through, AV first
@@ -11,7 +12,9 @@ mean wait [s]. ``--liveness`` prints the liveness table instead (§16.4): AV thr
 through the conflicts both passed (the count, and the share of them), AV-caused collisions,
 uncertified steps, deadlocks (with the AV in them; AV-caused: none of their humans deadlocked
 without the AV), runs in which the AV stood inside the junction (while a human waited for
-it), the AV's longest and 95th-percentile wait [s] and the mean delay caused [s].
+it), the AV's longest and 95th-percentile wait [s] and the mean delay caused [s]. ``--study``
+prints the study's table (§16.5, :func:`study_table`), ``--paired av.kind=persuasive`` each
+AV kind against the persuasive one, paired by seed (:func:`paired_table`).
 """
 
 from __future__ import annotations
@@ -73,13 +76,87 @@ def liveness_table(folder: str) -> str:
     return "\n".join(lines)
 
 
+def study_table(folder: str) -> str:
+    """The study's table (docs/results.md §16.5): per cell, AV through within the run, AV
+    first through the conflicts both passed, AV-caused collisions, uncertified steps, runs
+    with a deadlock (the AV's own), the AV's mean delay, the mean delay it causes, the mean
+    throughput, the AV's lowest PET (5th percentile over the runs with one) and the shield's
+    overrides per run."""
+    lines, cells = _cells(folder, "runs | AV through | AV first (of conflicts) | AV-caused "
+                          "collisions | uncertified steps | deadlocks (AV-caused) | AV delay "
+                          "[s] | delay caused [s] | throughput [veh/h] | AV min PET p5 [s] | "
+                          "overrides / run")
+    for key, g, first, both in cells:
+        share = f"{100 * first / both:.1f} % ({both})" if both else "- (0)"
+        pet = g["min_pet_av_s"].to_numpy(float)
+        pet = pet[np.isfinite(pet)]
+        delay = g.loc[g["av_through"], "av_delay_s"]
+        lines.append(
+            f"| {key} | {len(g)} | {100 * g['av_through'].mean():.1f} % | {share} | "
+            f"{int(g['av_caused_collisions'].sum())} | {int(g['uncertified_steps'].sum())} | "
+            f"{int(g['deadlock'].sum())} ({int(g['av_caused_deadlock'].sum())}) | "
+            f"{delay.mean():.2f} | {g['caused_delay_s'].mean():.2f} | "
+            f"{g['throughput_veh_h'].mean():.0f} | "
+            f"{np.percentile(pet, 5) if pet.size else float('nan'):.2f} | "
+            f"{g['shield_overrides'].mean():.1f} |")
+    return "\n".join(lines)
+
+
+def paired_table(folder: str, against: str) -> str:
+    """Each value of one axis against one of them, paired by seed within every combination
+    of the other axes (``against``: ``AXIS=VALUE``, e.g. ``av.kind=persuasive``): the
+    difference (other minus it) in AV through [points] and in the delay caused [s], mean and
+    95 % interval (normal approximation over the seeds' paired differences)."""
+    axis, base = against.split("=", 1)
+    frame = load(folder)
+    axes = list(read_manifest(folder)["axes"])
+    if axis not in axes:
+        raise SystemExit(f"error: --paired {axis!r} is not an axis of the sweep; allowed: "
+                         f"{', '.join(axes)}")
+    others = [a for a in axes if a != axis]
+    lines = [f"| {' | '.join(others)} | {axis} | runs | AV through [points] | delay caused "
+             "[s] |", "|" + "---|" * (len(others) + 4)]
+
+    def interval(d: np.ndarray, scale: float) -> str:
+        half = 1.959963984540054 * d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else np.nan
+        return f"{scale * d.mean():+.{1 if scale == 100 else 2}f} " \
+               f"[{scale * (d.mean() - half):+.{1 if scale == 100 else 2}f}, " \
+               f"{scale * (d.mean() + half):+.{1 if scale == 100 else 2}f}]"
+
+    for key, g in frame.groupby(others, sort=True) if others else [((), frame)]:
+        key = key if isinstance(key, tuple) else (key,)
+        ref = g[g[axis].astype(str) == base].set_index("seed")
+        if ref.empty:
+            raise SystemExit(f"error: --paired {axis}={base!r} has no runs; allowed: "
+                             f"{', '.join(map(str, g[axis].unique()))}")
+        for value, h in g.groupby(axis, sort=False):
+            if str(value) == base:
+                continue
+            h = h.set_index("seed")
+            seeds = ref.index.intersection(h.index)  # the seeds both ran
+            h, r = h.loc[seeds], ref.loc[seeds]
+            through = h["av_through"].to_numpy(float) - r["av_through"].to_numpy(float)
+            delay = h["caused_delay_s"].to_numpy(float) - r["caused_delay_s"].to_numpy(float)
+            lines.append(f"| {' | '.join(str(k) for k in key)} | {value} | {len(h)} | "
+                         f"{interval(through, 100)} | {interval(delay, 1)} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder")
-    parser.add_argument("--liveness", action="store_true",
-                        help="the liveness table (docs/results.md §16.4)")
+    kind = parser.add_mutually_exclusive_group()
+    kind.add_argument("--liveness", action="store_true",
+                      help="the liveness table (docs/results.md §16.4)")
+    kind.add_argument("--study", action="store_true",
+                      help="the study's table (docs/results.md §16.5)")
+    kind.add_argument("--paired", metavar="AXIS=VALUE",
+                      help="every value of AXIS against VALUE, paired by seed (e.g. "
+                           "av.kind=persuasive)")
     args = parser.parse_args()
-    print(liveness_table(args.folder) if args.liveness else table(args.folder))
+    print(liveness_table(args.folder) if args.liveness else
+          study_table(args.folder) if args.study else
+          paired_table(args.folder, args.paired) if args.paired else table(args.folder))
 
 
 if __name__ == "__main__":

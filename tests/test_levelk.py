@@ -266,7 +266,7 @@ def test_an_unknown_level_is_refused_in_one_line():
     message = str(err.value)
     assert "\n" not in message
     assert message.startswith("av.kind = 'level3' is out of range; allowed: ")
-    assert message.endswith("level1 | level2")
+    assert "| level1 | level2" in message
 
 
 def test_the_cli_runs_a_level_k_av(capsys):

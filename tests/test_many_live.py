@@ -293,3 +293,21 @@ def test_foresight_needs_the_vehicles_on_the_road():
                                           r"from the vehicles on the road at the start; "
                                           r"allowed with junction\.arrival = placed"):
         JunctionWorld(CONFIG, spec, 1)
+
+
+def test_an_av_creeping_to_its_line_is_not_rounded_onto_it():
+    """Seed 295 with eight vehicles at the stop line: the AV creeps to a stop at its line for
+    40 s (its speed halving towards 0), and its absolute position once rounded onto the line,
+    which counts as past it: 146 uncertified steps from 45.4 s on before the rows kept each
+    line a nanometre back (``persuasive.envs.external.LINE_TOL_M``)."""
+    from persuasive.envs.external import LINE_TOL_M
+
+    config = Config(mode="corrected").with_overrides({
+        "scenario.kind": "junction", "junction.n_vehicles": 8, "junction.duration_s": 60.0,
+        "junction.av_line": "stop"})
+    world = JunctionWorld.of(config, 295).run()
+    row = next(r for r in world.table.rows if (r.i, r.j) == (0, 1))
+    line = row.ij.ego_at_m + row.ij.ego_line_m
+    gap = line - world.S[:, 0]
+    assert LINE_TOL_M <= gap.min() < 0.02  # it yields at the line, and stays short of it
+    assert not any(v == "uncertified" for v in world.verdicts)

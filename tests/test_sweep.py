@@ -614,7 +614,8 @@ def test_metric_grid_matches_the_runs(reference):
     ("--x", "roles.p_a", "--metric", "av_first_pct"),
     ("--x", "mode", "--metric", "min_distance_m", "--where", "roles.p_a=0.3"),
     ("--x", "roles.p_a", "--y", "mode", "--metric", "infeasible_pct"),
-], ids=["line", "line-where", "heatmap"])
+    ("--x", "roles.p_a", "--series", "mode", "--metric", "av_first_pct"),
+], ids=["line", "line-where", "heatmap", "series"])
 def test_plot_sweep_writes_a_png(reference, capsys, tmp_path, args):
     out = tmp_path / "fig.png"
     code, stdout, err = cli(capsys, "plot", "sweep", "--from", reference, *args, "--out", out)
@@ -629,12 +630,28 @@ def test_plot_sweep_writes_a_png(reference, capsys, tmp_path, args):
     (("--x", "mode", "--y", "mode", "--metric", "av_first_pct"), "--y 'mode' is the same"),
     (("--x", "mode", "--metric", "av_first_pct", "--where", "roles.p_a=0.7"),
      "--where roles.p_a = 0.7 is not a value of the axis"),
-], ids=["metric", "axis", "same-axis", "where"])
+    (("--x", "mode", "--y", "roles.p_a", "--series", "roles.p_a", "--metric",
+      "av_first_pct"), "--series and --y are two ways to draw a second axis; allowed: one"),
+], ids=["metric", "axis", "same-axis", "where", "series-and-y"])
 def test_plot_sweep_bad_input_exits_2(reference, capsys, tmp_path, args, message):
     out = tmp_path / "fig.png"
     code, _, err = cli(capsys, "plot", "sweep", "--from", reference, *args, "--out", out)
     assert code == 2 and err.count("\n") == 1 and message in err
     assert not out.exists()
+
+
+def test_a_series_figure_draws_one_line_per_value_of_the_second_axis(reference):
+    from persuasive.plots.sweep import sweep_figure
+
+    data = metric_grid(reference, "av_first_pct", "roles.p_a", "mode")
+    ax = sweep_figure(data, series=True).axes[0]
+    series = {c.get_label(): c.lines[0] for c in ax.containers}  # errorbar: the data line
+    assert sorted(series) == sorted(data.y_values)
+    for i, mode in enumerate(data.y_values):  # each line is its row of the grid, x in order
+        line = series[mode]
+        assert list(line.get_xdata()) == [0.3, 1.0]
+        assert list(line.get_ydata()) == list(data.estimate[i])
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == list(data.y_values)
 
 
 def test_plot_sweep_needs_a_sweep_folder(capsys, tmp_path):

@@ -23,7 +23,8 @@ from typing import Any, Literal, get_args
 
 Role = Literal["leader", "follower"]
 Mode = Literal["paper", "corrected"]
-AVKind = Literal["persuasive", "passive", "cv", "lfg", "yield", "level1", "level2"]
+AVKind = Literal["persuasive", "passive", "cv", "lfg", "yield", "level1", "level2",
+                 "lfg-rule"]
 HVKind = Literal["lfg", "stubborn", "noisy", "idm", "aggressive", "replay", "adversary",
                  "deceptive", "random", "person"]
 ShieldKind = Literal["off", "worst-case", "responsive", "responsibility"]
@@ -413,10 +414,13 @@ class AVParams:
     constant-velocity human; ``lfg``: an adaptive-role LFG player (the 2-LFG case); ``yield``:
     yields until the human has cleared the conflict, then goes; ``level1``, ``level2``: a
     level-k player (``persuasive.policies.levelk``), the best response to the human's
-    level-(k-1) trajectory.
+    level-(k-1) trajectory; ``lfg-rule``: Li et al.'s LFG player whose role comes from the
+    traffic rule (``persuasive.policies.lfg_rule``; ``responsibility.right_of_way``, first
+    come when unset), pairwise over many vehicles.
     """
 
-    kind: AVKind = "persuasive"  #: persuasive | passive | cv | lfg | yield | level1 | level2
+    #: persuasive | passive | cv | lfg | yield | level1 | level2 | lfg-rule
+    kind: AVKind = "persuasive"
     role: Role | None = None  #: initial role of an LFG AV; unset: the other of hv.role
     #: the safety shield around the planner (docs/method.md §12): off | worst-case |
     #: responsive | responsibility (§12.13, the ``[responsibility]`` rule); unset: off in

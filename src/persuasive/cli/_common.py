@@ -363,16 +363,19 @@ class KindOption:
 #:   used: the estimate's option is ``--pa-hat``, and a human with no ``p_a`` has none to give.
 #: - ``--hv-role`` (``hv.role``): the initial role of the humans that hold one (``has_role`` in
 #:   ``policies.kinds``) and, for an LFG AV without ``av.role``, the other role is the AV's
-#:   own. Paper mode's quirk Q3 also reads it as the persuasive planner's fallback tie role
+#:   own. The ``lfg-rule`` AV holds a role too, but the traffic rule gives it (neither
+#:   option is used by it: its ``p_a`` is 0). Paper mode's quirk Q3 also reads it as the persuasive planner's fallback tie role
 #:   against a human without roles; that quirk is no reason to offer the option there.
 KIND_OPTIONS: dict[str, KindOption] = {
     "pa_hat": KindOption("--pa-hat", "mpc.p_a_hat", ("persuasive",), (),
                          "its estimate of the human's p_a"),
     "pa": KindOption("--pa", "roles.p_a", tuple(k for k in kinds_with(AV, True)
-                                                if k != "stubborn"),
+                                                if k != "lfg-rule"),
                      tuple(k for k in kinds_with(HV, True) if k != "stubborn"),
                      "their own p_a; the persuasive AV's estimate is --pa-hat"),
-    "hv_role": KindOption("--hv-role", "hv.role", kinds_with(AV, True), kinds_with(HV, True),
+    "hv_role": KindOption("--hv-role", "hv.role", tuple(k for k in kinds_with(AV, True)
+                                                      if k != "lfg-rule"),
+                          kinds_with(HV, True),
                           "the lfg AV starts in the other role"),
 }
 

@@ -176,8 +176,9 @@ def _junction(config, seed: int, out: str | None, vehicles_out: str | None,
         return f"{x:.1f} s" if math.isfinite(x) else "-"
 
     kinds = ",".join(f"{k}:{w:g}" if len(spec.hv_kinds) > 1 else k for k, w in spec.hv_kinds)
-    plan = "one plan against all, " + spec.joint_bound if spec.av_plan == "joint" else \
-        "one planner per human"
+    plan = ("the rule's role per human, the worst pair decides" if config.av.kind == "lfg-rule"
+            else "one plan against all, " + spec.joint_bound if spec.av_plan == "joint"
+            else "one planner per human")
     plan += ", yielding " + ("outside the junction" if row["av_line"] == "outside" else
                              "at the stop line") + (" (picked by foresight)" if
                                                     spec.av_line == "foresight" else "")

@@ -139,6 +139,9 @@ def _parse_where(values: tuple[str, ...]) -> dict[str, Any]:
 @click.option("--x", "x", required=True, metavar="AXIS", help="Axis along x (dotted field).")
 @click.option("--y", "y", default=None, metavar="AXIS",
               help="Axis along y: a heatmap instead of a line plot.")
+@click.option("--series", "series", default=None, metavar="AXIS",
+              help="One line per value of this axis (e.g. av.kind) instead of a heatmap; "
+                   "not with --y.")
 @click.option("--metric", required=True, metavar="NAME",
               help="av_first_pct, hv_first_pct, same_step_pct, neither_pct, collision_pct, "
                    "infeasible_pct, both_cleared_pct, av_first_through_pct, deadlock_pct "
@@ -153,8 +156,9 @@ def _parse_where(values: tuple[str, ...]) -> dict[str, Any]:
                    "axes are pooled.")
 @click.option("--out", required=True, type=click.Path(dir_okay=False),
               help="Figure file: .png, .svg or .pdf.")
-def plot_sweep(folder, x, y, metric, where, out) -> None:
-    """A metric of a sweep over one axis (line) or two (heatmap), with 95 % intervals."""
+def plot_sweep(folder, x, y, series, metric, where, out) -> None:
+    """A metric of a sweep over one axis (line) or two (heatmap, or one line per value of
+    --series), with 95 % intervals."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -162,10 +166,15 @@ def plot_sweep(folder, x, y, metric, where, out) -> None:
     from ..plots.sweep import sweep_figure
     from ..sweep.metrics import metric_grid
 
+    from ..config import ConfigError
+
+    if y is not None and series is not None:
+        raise ConfigError("--series and --y are two ways to draw a second axis; allowed: "
+                          "one of them")
     check_figure_path(out)  # before any work
     lock_output(out, "figure")
-    data = metric_grid(folder, metric, x, y, _parse_where(where))
-    click.echo(f"wrote {save_figure(sweep_figure(data), out)}")
+    data = metric_grid(folder, metric, x, y if series is None else series, _parse_where(where))
+    click.echo(f"wrote {save_figure(sweep_figure(data, series is not None), out)}")
 
 
 __all__ = ["plot_sweep", "sweep"]

@@ -134,8 +134,15 @@ ENTRY_FRONT_M = 6.0
 
 @dataclass(frozen=True)
 class Network:
-    """A network's nodes ``(id, x, y, type)``, edges ``(id, from, to, priority)`` (one lane
-    each, at :data:`SPEED_LIMIT_MPS`), the ego's route and the conflicting routes."""
+    """A network's nodes ``(id, x, y, type)``, edges ``(id, from, to, priority)`` (``lanes``
+    lanes each, at ``speed_mps``), the ego's route and the conflicting routes.
+
+    The fields after ``junction`` are for networks other than :data:`NETWORKS` (the
+    four-way junction of ``persuasive.many.sumo``); their defaults write :data:`NETWORKS`'
+    files as they always were: ``lane_width_m`` (None: SUMO's default width),
+    ``junction_radius_m`` (the ``radius`` of the ``junction`` node; None: netconvert's
+    default), ``connections`` ``(from edge, to edge, from lane, to lane)`` (SUMO's lane
+    indices, 0 the rightmost; empty: netconvert computes them)."""
 
     name: str
     nodes: tuple[tuple[str, float, float, str], ...]
@@ -144,16 +151,32 @@ class Network:
     traffic_routes: tuple[tuple[str, ...], ...]
     #: the junction the ego crosses or merges at
     junction: str
+    lanes: int = 1
+    speed_mps: float = SPEED_LIMIT_MPS
+    lane_width_m: float | None = None
+    junction_radius_m: float | None = None
+    connections: tuple[tuple[str, str, int, int], ...] = ()
 
     def nodes_xml(self) -> str:
-        rows = "".join(f'  <node id="{n}" x="{x:g}" y="{y:g}" type="{t}"/>\n'
+        def radius(n: str) -> str:
+            return (f' radius="{self.junction_radius_m:g}"' if n == self.junction
+                    and self.junction_radius_m is not None else "")
+
+        rows = "".join(f'  <node id="{n}" x="{x:g}" y="{y:g}" type="{t}"{radius(n)}/>\n'
                        for n, x, y, t in self.nodes)
         return f"<nodes>\n{rows}</nodes>\n"
 
     def edges_xml(self) -> str:
-        rows = "".join(f'  <edge id="{e}" from="{a}" to="{b}" priority="{p}" numLanes="1" '
-                       f'speed="{SPEED_LIMIT_MPS:g}"/>\n' for e, a, b, p in self.edges)
+        width = "" if self.lane_width_m is None else f' width="{self.lane_width_m:g}"'
+        rows = "".join(f'  <edge id="{e}" from="{a}" to="{b}" priority="{p}" '
+                       f'numLanes="{self.lanes}" speed="{self.speed_mps:g}"{width}/>\n'
+                       for e, a, b, p in self.edges)
         return f"<edges>\n{rows}</edges>\n"
+
+    def connections_xml(self) -> str:
+        rows = "".join(f'  <connection from="{a}" to="{b}" fromLane="{i}" toLane="{j}"/>\n'
+                       for a, b, i, j in self.connections)
+        return f"<connections>\n{rows}</connections>\n"
 
 
 def _intersection() -> Network:
@@ -219,9 +242,10 @@ def sumo_binaries() -> dict[str, str]:
 
 
 def build_network(network: Network, folder: str | Path, netconvert: str | None = None) -> Path:
-    """Write ``network``'s node and edge files into ``folder`` and build ``net.net.xml`` with
-    ``netconvert`` (a child that dies with this process); :class:`ConfigError` with
-    netconvert's first error line when it fails."""
+    """Write ``network``'s node and edge files (and its connection file, if it has
+    connections) into ``folder`` and build ``net.net.xml`` with ``netconvert`` (a child that
+    dies with this process); :class:`ConfigError` with netconvert's first error line when it
+    fails."""
     folder = Path(folder)
     netconvert = netconvert or sumo_binaries()["netconvert"]
     (folder / "net.nod.xml").write_text(network.nodes_xml(), encoding="utf-8")
@@ -230,6 +254,9 @@ def build_network(network: Network, folder: str | Path, netconvert: str | None =
     args = [netconvert, "--node-files", str(folder / "net.nod.xml"), "--edge-files",
             str(folder / "net.edg.xml"), "--output-file", str(out), "--no-turnarounds", "true",
             "--offset.disable-normalization", "true", "--no-warnings", "true"]
+    if network.connections:  # only these: netconvert adds none from these edges
+        (folder / "net.con.xml").write_text(network.connections_xml(), encoding="utf-8")
+        args += ["--connection-files", str(folder / "net.con.xml")]
     try:
         proc = spawn_tied(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     except OSError as exc:
@@ -411,30 +438,38 @@ class Route:
 class Projector:
     """SUMO's vehicles as :class:`~persuasive.envs.external.Conflict` of the ego's route
     (module docstring). ``links(lane)`` and ``shape(lane)``, ``length(lane)``: libsumo's
-    ``lane.getLinks``, ``lane.getShape``, ``lane.getLength`` (or equivalents, for tests)."""
+    ``lane.getLinks``, ``lane.getShape``, ``lane.getLength`` (or equivalents, for tests).
+
+    A route is its edges and the lane it starts on (``first_lane``; None: the first edge's
+    lane 0, the only lane of :data:`NETWORKS`' roads); from there it follows the one link of
+    each lane into the next edge (networks whose lanes keep their lane through a junction,
+    vehicles that do not change lanes)."""
 
     def __init__(self, ego_edges: Sequence[str], ego_size: tuple[float, float], links, shape,
-                 length):
+                 length, ego_lane: str | None = None):
         self._links, self._shape, self._length = links, shape, length
-        self._routes: dict[tuple[str, ...], Route] = {}
+        self._routes: dict[tuple, Route] = {}
         self._conflicts: dict[tuple, Any] = {}
         self._seen: dict[tuple, Any] = {}
         self.ego_size = ego_size
-        self.ego = self.route(tuple(ego_edges))
+        self.ego = self.route(tuple(ego_edges), ego_lane)
 
-    def route(self, edges: tuple[str, ...]) -> Route:
-        """The route over ``edges`` (first lanes only: every road has one lane), made once."""
-        route = self._routes.get(edges)
+    def route(self, edges: tuple[str, ...], first_lane: str | None = None) -> Route:
+        """The route over ``edges`` from ``first_lane`` (class docstring), made once."""
+        first = first_lane or f"{edges[0]}_0"
+        route = self._routes.get((edges, first))
         if route is not None:
             return route
-        lanes = [f"{edges[0]}_0"]
+        lanes = [first]
         has_priority = None
         for nxt in edges[1:]:
             lane = lanes[-1]
             while True:  # through the junction's internal lanes to the next edge
                 if lane.startswith(":"):
+                    # its one link, through the next internal lane if it has one (a left
+                    # turn that SUMO splits at its waiting position inside the junction)
                     links = list(self._links(lane))
-                    step = links[0][0] if links else None
+                    step = (links[0][4] or links[0][0]) if links else None
                 else:
                     link = next((ln for ln in self._links(lane)
                                  if ln[0].rsplit("_", 1)[0] == nxt), None)
@@ -460,16 +495,17 @@ class Projector:
                           else pts)
         route = Route(edges, tuple(lanes), Polyline.of(np.concatenate(points)), offsets,
                       has_priority)
-        self._routes[edges] = route
+        self._routes[(edges, first)] = route
         return route
 
-    def geometry(self, edges: tuple[str, ...], other_size: tuple[float, float]):
+    def geometry(self, edges: tuple[str, ...], other_size: tuple[float, float],
+                 first_lane: str | None = None):
         """The :class:`~persuasive.envs.external.RouteConflict` of a route with the ego's
         (``None``: no conflict), made once per route and size."""
-        key = (edges, other_size)
+        key = (edges, first_lane, other_size)
         if key in self._conflicts:
             return self._conflicts[key]
-        other = self.route(edges)
+        other = self.route(edges, first_lane)
         ego = self.ego
         shared = [ln for ln in ego.lanes if ln in other.offsets and not ln.startswith(":")]
         geo = None
@@ -495,21 +531,22 @@ class Projector:
         return geo
 
     def of(self, edges: tuple[str, ...], other_size: tuple[float, float],
-           slack: tuple[float, float] = (0.0, 0.0)):
+           slack: tuple[float, float] = (0.0, 0.0), first_lane: str | None = None):
         """``(route, geometry, the ego's interval ended sum(slack) later)`` of a vehicle on
-        ``edges`` (``None``: no conflict with the ego's route), made once per route, size
-        and slack: what :func:`conflicts_of` needs of a vehicle besides its state."""
-        key = (edges, other_size, slack)
+        ``edges`` from ``first_lane`` (``None``: no conflict with the ego's route), made once
+        per route, size and slack: what :func:`conflicts_of` needs of a vehicle besides its
+        state."""
+        key = (edges, first_lane, other_size, slack)
         try:
             return self._seen[key]
         except KeyError:
             pass
-        geo = self.geometry(edges, other_size)
+        geo = self.geometry(edges, other_size, first_lane)
         entry = None
         if geo is not None:
             lo, hi = geo.ego_occupancy
             widened = (lo, hi + slack[0] + slack[1]) if any(slack) else geo.ego_occupancy
-            entry = (self.route(edges), geo, widened)
+            entry = (self.route(edges, first_lane), geo, widened)
         self._seen[key] = entry
         return entry
 
@@ -558,6 +595,8 @@ class VehicleState:
     length_m: float
     width_m: float
     limits: Limits
+    #: the lane its route starts on (None: the first edge's lane 0; :class:`Projector`)
+    first_lane: str | None = None
 
 
 def ballistic_slack(limits: Limits, dt_s: float = DT_S) -> tuple[float, float]:
@@ -585,7 +624,7 @@ def conflicts_of(projector: Projector, ego: VehicleState, others: Sequence[Vehic
     slack = (float(slack[0]), float(slack[1]))
     out = []
     for o in others:
-        found = projector.of(o.edges, (o.length_m, o.width_m), slack)
+        found = projector.of(o.edges, (o.length_m, o.width_m), slack, o.first_lane)
         if found is None:
             continue
         route, geo, widened = found

@@ -169,7 +169,12 @@ def combine(expected: np.ndarray, p_each: np.ndarray, allowed: np.ndarray, thres
 def av_planner(config: Config, spec, seed: int) -> ExternalPlanner:
     """The junction AV's planner of ``spec.av_plan`` (``persuasive.config.JunctionSpec``):
     ``pairwise``, the part-1 adapter-style AV; ``joint``, :class:`JointPlanner` with
-    ``spec.joint_bound``."""
+    ``spec.joint_bound``. The ``lfg-rule`` AV plans by its own rule whatever the plan
+    (``persuasive.many.rule.RulePlanner``: Li et al.'s worst pair)."""
+    if config.av.kind == "lfg-rule":
+        from .rule import RulePlanner
+
+        return RulePlanner(config, seed)
     if spec.av_plan == "joint":
         return JointPlanner(config, seed, bound=spec.joint_bound)
     return ExternalPlanner(config, seed)

@@ -82,7 +82,7 @@ def _has_role(run: RunRecord, who: str) -> bool:
 #: How figures name each AV planner and human model.
 PLANNER_NAMES = {"lfg": "LFG", "persuasive": "branch MPC", "passive": "passive MPC",
                  "cv": "constant-velocity MPC", "yield": "always yields", "level1": "level-1",
-                 "level2": "level-2"}
+                 "level2": "level-2", "lfg-rule": "LFG, rule's roles"}
 HUMAN_NAMES = {"lfg": "LFG", "stubborn": "stubborn LFG", "noisy": "noisy LFG", "idm": "IDM",
                "aggressive": "aggressive", "replay": "replay", "person": "a person"}
 

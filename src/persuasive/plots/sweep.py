@@ -1,4 +1,5 @@
-"""A metric of a parameter sweep over one axis (a line) or two (a heatmap), with 95 % intervals.
+"""A metric of a parameter sweep over one axis (a line) or two (a heatmap, or one line per
+value of the second axis), with 95 % intervals.
 
 :func:`sweep_figure` draws a :class:`persuasive.sweep.metrics.MetricGrid` (computed by
 :func:`persuasive.sweep.metrics.metric_grid` from a sweep folder): with one axis, the metric
@@ -88,6 +89,49 @@ def _line(data: MetricGrid) -> Figure:
     return fig
 
 
+#: The colours of :func:`_series` (one line per value of the second axis).
+_SERIES_COLORS = ("#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2",
+                  "#7f7f7f", "#bcbd22", "#17becf")
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">", "*")
+
+
+def _series(data: MetricGrid) -> Figure:
+    """Two axes drawn as lines: one per value of ``data.y`` against ``data.x``, each with its
+    95 % interval as error bars (no band: they would hide one another)."""
+    fig = _new_figure(5.2, 3.4)
+    ax = fig.subplots()
+    xs = list(data.x_values)
+    if _numeric(xs):
+        pos = np.asarray(xs, dtype=float)
+        order = np.argsort(pos, kind="stable")
+    else:
+        pos = np.arange(len(xs), dtype=float)
+        order = np.arange(len(xs))
+        ax.set_xticks(pos, [_fmt(v) for v in xs])
+    p = pos[order]
+    for i, value in enumerate(data.y_values):
+        est, lo, hi = data.estimate[i, order], data.lo[i, order], data.hi[i, order]
+        yerr = np.vstack([est - lo, hi - est])
+        ax.errorbar(p, est, yerr=np.where(np.isnan(yerr), 0.0, yerr),
+                    color=_SERIES_COLORS[i % len(_SERIES_COLORS)],
+                    marker=_MARKERS[i % len(_MARKERS)], ms=3.5, lw=1.1, capsize=2.0,
+                    label=_fmt(value), gid=f"sweep-series-{i}")
+    ax.set_xlabel(data.x, fontsize=_FONT["label"])
+    ax.set_ylabel(data.label, fontsize=_FONT["label"])
+    if data.kind == "proportion":
+        top = np.nanmax(data.hi) if np.any(np.isfinite(data.hi)) else 100.0
+        ax.set_ylim(-2.0, min(102.0, max(5.0, top * 1.1 + 1.0)))
+    ax.tick_params(labelsize=_FONT["tick"])
+    ax.grid(True, linewidth=0.4, alpha=0.35)
+    ax.legend(title=data.y, fontsize=_FONT["note"], title_fontsize=_FONT["note"],
+              loc="best", frameon=False)
+    ax.set_title(data.metric, fontsize=_FONT["title"])
+    fig.text(0.5, 0.0, _note(data), ha="center", va="bottom", fontsize=_FONT["note"],
+             wrap=True)
+    fig.get_layout_engine().set(rect=(0, 0.06, 1, 0.94))
+    return fig
+
+
 def _heatmap(data: MetricGrid) -> Figure:
     nx, ny = len(data.x_values), len(data.y_values)
     fig = _new_figure(max(4.0, 1.2 + 0.75 * nx), max(3.0, 1.6 + 0.45 * ny))
@@ -120,13 +164,16 @@ def _heatmap(data: MetricGrid) -> Figure:
     return fig
 
 
-def sweep_figure(data: MetricGrid) -> Figure:
-    """The metric of ``data`` as a line plot (one axis) or a heatmap (two axes).
+def sweep_figure(data: MetricGrid, series: bool = False) -> Figure:
+    """The metric of ``data`` as a line plot (one axis) or a heatmap (two axes), or with two
+    axes and ``series``, one line per value of the second (``data.y``).
 
     Parameters
     ----------
     data : persuasive.sweep.metrics.MetricGrid
         From :func:`persuasive.sweep.metrics.metric_grid`.
+    series : bool
+        Draw the second axis as lines (e.g. one per AV kind) instead of a heatmap.
 
     Returns
     -------
@@ -136,7 +183,9 @@ def sweep_figure(data: MetricGrid) -> Figure:
     """
     if not isinstance(data, MetricGrid):
         raise TypeError(f"expected a MetricGrid, got {type(data).__name__}")
-    return _line(data) if data.y is None else _heatmap(data)
+    if data.y is None:
+        return _line(data)
+    return _series(data) if series else _heatmap(data)
 
 
 __all__ = ["sweep_figure"]

@@ -13,7 +13,8 @@ both loops:
   wraps any compiled kind in that protocol; the two loops give the same runs bit for bit.
 
 AV kinds: ``persuasive`` (the paper's branch MPC; alias ``mpc``), ``passive``, ``cv``,
-``lfg``, ``yield``, and the level-k players ``level1``, ``level2`` (:mod:`.levelk`). Human
+``lfg``, ``yield``, the level-k players ``level1``, ``level2`` (:mod:`.levelk`) and Li et
+al.'s rule-role LFG ``lfg-rule`` (:mod:`.lfg_rule`). Human
 kinds: ``lfg``, ``stubborn``, ``noisy``, ``idm``, ``aggressive``, ``replay``, and the humans
 that test the safety shield, ``adversary``, ``deceptive``, ``random`` (:mod:`.adversarial`).
 Each module's docstring states the kind's definition and parameters.
@@ -104,6 +105,12 @@ def policy_params(config: Config, side: int, p_a_prior: np.ndarray | None = None
         return np.concatenate([[float(accel.size)], accel])
     if spec.kind == kd.RANDOM:
         return np.array([config.hv.random.hold_min_s, config.hv.random.hold_max_s])
+    if spec.kind == kd.LFG_RULE:  # the stubborn LFG; its role is the rule's (lfg_rule)
+        from .lfg import PRM_ROLE
+
+        prm = np.zeros(4)
+        prm[PRM_ROLE] = float(FOLLOWER)  # until its first decision takes the rule's
+        return prm
     if spec.kind in (kd.LEVEL1, kd.LEVEL2):
         from .levelk import PRM_LEVEL
 

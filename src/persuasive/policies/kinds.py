@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 # Kind ids (compile-time constants in the dispatcher).
 (LFG, STUBBORN, NOISY, IDM, AGGRESSIVE, REPLAY, PERSUASIVE, PASSIVE, CV, YIELD, ADVERSARY,
- DECEPTIVE, RANDOM, LEVEL1, LEVEL2) = range(15)
+ DECEPTIVE, RANDOM, LEVEL1, LEVEL2, LFG_RULE) = range(16)
 
 #: The vehicle a policy drives.
 AV, HV = 0, 1
@@ -72,6 +72,8 @@ KINDS: dict[str, KindSpec] = {s.name: s for s in (
     # the level-k AV reads the game cache's two libraries (not its solve)
     KindSpec("level1", LEVEL1, (AV,), 0, True, True, LEVELK_LOG),
     KindSpec("level2", LEVEL2, (AV,), 0, True, True, LEVELK_LOG),
+    # Li et al.'s pairwise LFG AV: the LFG player whose role the traffic rule fixes (no draw)
+    KindSpec("lfg-rule", LFG_RULE, (AV,), 0, True, False, LFG_LOG, True),
 )}
 
 #: Specs by kind id.

@@ -20,7 +20,8 @@ from . import kinds as kd
 from .adversarial import adversary_step, deceptive_step, random_step
 from .idm import idm_step
 from .levelk import levelk_step
-from .lfg import PRM_ROLE, ROLE, lfg_init, lfg_step
+from .lfg import PRM_ROLE, READY, ROLE, lfg_init, lfg_step
+from .lfg_rule import first_role
 from .planners import cv_step, mpc_init, mpc_step
 from .scripted import aggressive_step, replay_step
 from .yielding import yield_step
@@ -34,7 +35,7 @@ def policy_init(kind: int, prm: np.ndarray, st: np.ndarray, prior_l: float) -> N
     """A fresh state of a policy of ``kind`` in ``st`` (``STATE_SIZE`` slots, more for a
     planner with an online posterior over ``p_a``: :func:`persuasive.policies.state_size`)."""
     st[:] = 0.0
-    if kind == kd.LFG or kind == kd.STUBBORN or kind == kd.NOISY:
+    if kind == kd.LFG or kind == kd.STUBBORN or kind == kd.NOISY or kind == kd.LFG_RULE:
         lfg_init(st, int(prm[PRM_ROLE]), prior_l)
     elif kind == kd.PERSUASIVE or kind == kd.PASSIVE:
         mpc_init(st, prm, prior_l)
@@ -43,7 +44,7 @@ def policy_init(kind: int, prm: np.ndarray, st: np.ndarray, prior_l: float) -> N
 @njit(cache=True)
 def policy_role(kind: int, st: np.ndarray) -> int:
     """The current role of a role-holding policy (0 = L, 1 = F), else -1."""
-    if kind == kd.LFG or kind == kd.STUBBORN or kind == kd.NOISY:
+    if kind == kd.LFG or kind == kd.STUBBORN or kind == kd.NOISY or kind == kd.LFG_RULE:
         return int(st[ROLE])
     return -1
 
@@ -67,13 +68,8 @@ def policy_step(kind: int, me: int, prm: np.ndarray, st: np.ndarray, k: int, s_a
         if me == kd.HV:
             return lfg_step(st, prm, kind == kd.NOISY, s_av, v_av, draws[0], r_choice, lib_h,
                             lib_r, idx, q_values, P_hv[slot.W_S], P_hv[slot.W_V], log)
-        idx_av = np.empty(4, np.int64)
-        q_av = np.empty_like(q_values)
-        for j in range(4):
-            idx_av[j] = idx[SWAP[j]]
-            q_av[j, :] = q_values[SWAP[j], :]
-        return lfg_step(st, prm, kind == kd.NOISY, s_hv, v_hv, draws[0], r_choice, lib_r,
-                        lib_h, idx_av, q_av, P_av[slot.W_S], P_av[slot.W_V], log)
+        return lfg_as_av(st, prm, kind == kd.NOISY, s_hv, v_hv, draws[0], r_choice, lib_h,
+                         lib_r, idx, q_values, P_av, log)
     if kind == kd.PERSUASIVE or kind == kd.PASSIVE:
         return mpc_step(st, prm, kind == kd.PERSUASIVE, s_av, v_av, s_hv, v_hv, human_role,
                         lib_h, lib_r, idx, P_av, P_hv, disc, diag, log, lib_h1a, lib_h1b,
@@ -99,7 +95,27 @@ def policy_step(kind: int, me: int, prm: np.ndarray, st: np.ndarray, k: int, s_a
     # last, so that no other kind's dispatch gets a test longer
     if kind == kd.LEVEL1 or kind == kd.LEVEL2:
         return levelk_step(prm, s_av, v_av, s_hv, v_hv, lib_h, lib_r, P_av, P_hv, log, work)
+    if kind == kd.LFG_RULE:  # the rule's role, taken at the encounter's first decision
+        if st[READY] == 0.0:
+            st[ROLE] = first_role(P_av, s_av, v_av, s_hv, v_hv)
+        return lfg_as_av(st, prm, False, s_hv, v_hv, 0.0, 0.0, lib_h, lib_r, idx, q_values,
+                         P_av, log)
     raise ValueError("unknown policy kind")
+
+
+@njit(cache=True)
+def lfg_as_av(st: np.ndarray, prm: np.ndarray, noisy: bool, s_hv: float, v_hv: float,
+              r: float, r_choice: float, lib_h: Lib, lib_r: Lib, idx: np.ndarray,
+              q_values: np.ndarray, P_av: np.ndarray, log: np.ndarray) -> float:
+    """An LFG player on the AV's side: :func:`persuasive.policies.lfg.lfg_step` on the
+    human's full prediction with ego and other swapped (:data:`SWAP`)."""
+    idx_av = np.empty(4, np.int64)
+    q_av = np.empty_like(q_values)
+    for j in range(4):
+        idx_av[j] = idx[SWAP[j]]
+        q_av[j, :] = q_values[SWAP[j], :]
+    return lfg_step(st, prm, noisy, s_hv, v_hv, r, r_choice, lib_r, lib_h, idx_av, q_av,
+                    P_av[slot.W_S], P_av[slot.W_V], log)
 
 
 @njit(cache=True)
