@@ -53,13 +53,16 @@ from ..safety.responsibility import POS_TOL_M, DutyWatch
 from ..tables import CROSSING, FOLLOW, MERGE, Conflict, Limits, RouteConflict
 
 
-#: How far before each yield line the shield's rows put it [m]: an outside world's positions
-#: are absolute (a junction's route some 200 m long, a SUMO lane), the rows' relative to
-#: each conflict, so the world's next position and the shield's prediction of it may round
-#: to different floats. An AV creeping to a stop at its line (its speed halving towards 0, the
-#: brake fallback's stop always just before the line) could so be put exactly on the line,
-#: which counts as past it, with no certified fallback left (seen at the junction, 60-s runs
-#: at the stop line: results §16.5). A nanometre is a million of those roundings.
+#: How far before a yield line the world gives (``Conflict.ego_line_m``) the shield's rows
+#: put it [m]: an outside world's positions are absolute (a junction's route some 200 m long,
+#: a SUMO lane), the rows' relative to each conflict, so the world's next position and the
+#: shield's prediction of it may round to different floats. An AV creeping to a stop at its
+#: line (its speed halving towards 0, the brake fallback's stop always just before the line)
+#: could so be put exactly on the line, which counts as past it, with no certified fallback
+#: left (seen at the junction, 60-s runs at the stop line: results §16.5). A nanometre is a
+#: million of those roundings. A line given at the interval's start so becomes one that binds
+#: (the shield stops the AV at it); the default line (``av.yield_line_m`` before the
+#: interval) is left as it was.
 LINE_TOL_M = 1e-9
 
 
@@ -93,8 +96,8 @@ def conflict_arrays(conflicts: Sequence[Conflict], config: Config, ego: Limits
             row[sh.C_R_LO], row[sh.C_R_HI] = c.ego_occupancy
             row[sh.C_H_LO], row[sh.C_H_HI] = c.other_occupancy
         lo = row[sh.C_R_LO]
-        line = lo - before if c.ego_line_m is None else float(c.ego_line_m)
-        row[sh.C_R_LINE] = min(line, lo) - LINE_TOL_M if math.isfinite(lo) else lo
+        line = lo - before if c.ego_line_m is None else float(c.ego_line_m) - LINE_TOL_M
+        row[sh.C_R_LINE] = min(line, lo) if math.isfinite(lo) else lo
         row[sh.C_SHARED] = 0.0 if c.kind == CROSSING else 1.0
         row[sh.C_GAP] = 0.5 * (ego.length_m + o.length_m) + margin
         row[sh.C_H_UMIN], row[sh.C_H_UMAX] = o.u_min_mps2, o.u_max_mps2

@@ -1210,16 +1210,10 @@ def run_study(scenario: str = "intersection", episodes: int = 10, seed: int = 1,
         seeds = tuple(range(seed, seed + episodes))
         tasks = [(scenario, s, drivers, float(flow_veh_h), float(ignore_foes), str(net), logs)
                  for s in seeds]
-        n = min(workers or os.cpu_count() or 1, len(tasks))
-        by_seed: dict[int, list[EpisodeOutput]] = {}
-        from ..sweep.runner import local_client, map_bounded
+        from ..sweep.runner import run_all
 
-        with local_client(n) as client:  # workers from the fork server, tied to this process
-            for i, outs in map_bounded(client, _run_seed_task, tasks):
-                by_seed[i] = outs
-                if progress is not None:
-                    progress(len(by_seed), len(tasks))
-        outputs = [o for i in range(len(tasks)) for o in by_seed[i]]
+        n = min(workers or os.cpu_count() or 1, len(tasks))  # as run_all starts them
+        outputs = [o for outs in run_all(_run_seed_task, tasks, n, progress) for o in outs]
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise

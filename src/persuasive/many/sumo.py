@@ -674,18 +674,13 @@ def run_study(vehicles: Sequence[int] = (2, 4), seeds: int = 10, seed: int = 1,
         _warm_up(drivers, config)
         tasks = [(specs[n], s, drivers, str(nets[n]), config) for n in vehicles
                  for s in range(seed, seed + seeds)]
-        k = min(workers or os.cpu_count() or 1, len(tasks))
-        done: dict[int, list[EpisodeResult]] = {}
-        from ..sweep.runner import local_client, map_bounded
+        from ..sweep.runner import run_all
 
-        with local_client(k) as client:  # workers from the fork server, tied to this one
-            for i, out in map_bounded(client, _run_seed_task, tasks):
-                done[i] = out
-                if progress is not None:
-                    progress(len(done), len(tasks))
+        k = min(workers or os.cpu_count() or 1, len(tasks))  # as run_all starts them
+        done = run_all(_run_seed_task, tasks, k, progress)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    episodes = tuple(e for i in range(len(tasks)) for e in done[i])
+    episodes = tuple(e for out in done for e in out)
     return Study(tuple(vehicles), tuple(range(seed, seed + seeds)), drivers, variant, lanes,
                  episodes, time.perf_counter() - t0, k)
 

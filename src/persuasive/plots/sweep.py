@@ -58,9 +58,9 @@ def _new_figure(width_in: float, height_in: float) -> Figure:
     return fig
 
 
-def _line(data: MetricGrid) -> Figure:
-    fig = _new_figure(4.5, 3.2)
-    ax = fig.subplots()
+def _x_axis(ax, data: MetricGrid) -> tuple[np.ndarray, np.ndarray]:
+    """The x positions in drawing order and that order: a numeric axis to scale, sorted;
+    another as evenly spaced categories in the grid's order (ticks named)."""
     xs = list(data.x_values)
     if _numeric(xs):
         pos = np.asarray(xs, dtype=float)
@@ -69,8 +69,14 @@ def _line(data: MetricGrid) -> Figure:
         pos = np.arange(len(xs), dtype=float)
         order = np.arange(len(xs))
         ax.set_xticks(pos, [_fmt(v) for v in xs])
+    return pos[order], order
+
+
+def _line(data: MetricGrid) -> Figure:
+    fig = _new_figure(4.5, 3.2)
+    ax = fig.subplots()
+    p, order = _x_axis(ax, data)
     est, lo, hi = data.estimate[order], data.lo[order], data.hi[order]
-    p = pos[order]
     ax.fill_between(p, lo, hi, color=_COLOR, alpha=0.15, linewidth=0, gid="sweep-interval")
     yerr = np.vstack([est - lo, hi - est])
     ax.errorbar(p, est, yerr=np.where(np.isnan(yerr), 0.0, yerr), color=_COLOR, marker="o",
@@ -100,15 +106,7 @@ def _series(data: MetricGrid) -> Figure:
     95 % interval as error bars (no band: they would hide one another)."""
     fig = _new_figure(5.2, 3.4)
     ax = fig.subplots()
-    xs = list(data.x_values)
-    if _numeric(xs):
-        pos = np.asarray(xs, dtype=float)
-        order = np.argsort(pos, kind="stable")
-    else:
-        pos = np.arange(len(xs), dtype=float)
-        order = np.arange(len(xs))
-        ax.set_xticks(pos, [_fmt(v) for v in xs])
-    p = pos[order]
+    p, order = _x_axis(ax, data)
     for i, value in enumerate(data.y_values):
         est, lo, hi = data.estimate[i, order], data.lo[i, order], data.hi[i, order]
         yerr = np.vstack([est - lo, hi - est])

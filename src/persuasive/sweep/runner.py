@@ -228,6 +228,23 @@ def map_bounded(client: Any, fn: Callable[[Any], Any], tasks: Sequence[Any],
         submit_more()
 
 
+def run_all(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int | None = None,
+            progress: Callable[[int, int], None] | None = None) -> list[Any]:
+    """``[fn(task) for task in tasks]``, in the tasks' order, on a new local cluster of
+    ``workers`` processes (default: every core; at most one per task), through
+    :func:`map_bounded`; ``progress(done, total)`` after each task."""
+    import os
+
+    k = min(workers or os.cpu_count() or 1, len(tasks))
+    done: dict[int, Any] = {}
+    with local_client(k) as client:  # workers from the fork server, tied to this process
+        for i, out in map_bounded(client, fn, tasks):
+            done[i] = out
+            if progress is not None:
+                progress(len(done), len(tasks))
+    return [done[i] for i in range(len(tasks))]
+
+
 def _threads(client: Any) -> int:
     return sum(client.nthreads().values())
 
@@ -382,4 +399,5 @@ def run(grid: Grid | str | Path, out: str | Path, workers: int | None = None,
 
 
 __all__ = ["SweepSummary", "local_client", "local_cluster", "map_bounded", "pending_chunks",
+           "run_all",
            "remote_client", "run", "start_method"]
