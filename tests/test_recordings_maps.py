@@ -21,6 +21,11 @@ from persuasive.recordings.lanelet_map import (lanelets_at, pair_rule, read_map,
                                                write_map)
 from persuasive.recordings.pairs import read_pairs
 
+#: Pairs of two small recordings in this process: starting worker processes took 13 of the
+#: 19 s of each call; the other pairs tests (tests/test_recordings_cli.py) run them with the
+#: default workers.
+ONE_PROCESS = ("--workers", "1")
+
 try:
     import lanelet2  # noqa: F401 - the maps' reader and writer need it
 except ImportError:  # no wheel for this Python (3.14): skipped, but never in CI
@@ -72,7 +77,8 @@ def test_export_then_pairs_with_the_map_label_every_pair(capsys, runs, tmp_path,
     assert sorted(p.name for p in tracks.iterdir()) == ["map.osm", "vehicle_tracks_000.csv",
                                                         "vehicle_tracks_001.csv"]
     code, out, err = run(capsys, "recordings", "pairs", str(tracks), "--map",
-                         str(tracks / "map.osm"), "--out", str(pairs), "--quiet")
+                         str(tracks / "map.osm"), "--out", str(pairs), "--quiet",
+                         *ONE_PROCESS)
     assert code == 0 and err == "", err
     assert f"the map's rule: {control.replace('_', ' ')} 2" in out
     frame, meta = read_pairs(pairs)
@@ -99,7 +105,8 @@ def test_export_then_pairs_with_the_map_label_every_pair(capsys, runs, tmp_path,
 def test_pairs_without_a_map_are_unknown_and_keep_the_approach_rule(capsys, runs, tmp_path):
     tracks, pairs = tmp_path / "tracks", tmp_path / "pairs.parquet"
     assert run(capsys, "recordings", "export", *runs, "--out", str(tracks))[0] == 0
-    code, out, err = run(capsys, "recordings", "pairs", str(tracks), "--out", str(pairs))
+    code, out, err = run(capsys, "recordings", "pairs", str(tracks), "--out", str(pairs),
+                         *ONE_PROCESS)
     assert code == 0 and "the map's rule" not in out
     frame, meta = read_pairs(pairs)
     assert meta["map"] is None and (frame["control"] == "unknown").all()
@@ -123,7 +130,7 @@ def test_replay_takes_the_right_of_way_from_the_map(capsys, runs, tmp_path, monk
     assert run(capsys, "recordings", "export", *runs, "--out", str(tracks), "--map-rule",
                rule)[0] == 0
     assert run(capsys, "recordings", "pairs", str(tracks), "--map", str(tracks / "map.osm"),
-               "--out", str(pairs))[0] == 0
+               "--out", str(pairs), *ONE_PROCESS)[0] == 0
     frame, _ = read_pairs(pairs)
     seen = []
 
