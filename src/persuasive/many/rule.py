@@ -39,10 +39,9 @@ from ..game import Q_EGO_FOLLOWS_FOLLOWER, Q_EGO_LEADS_LEADER, build_buffers, sh
     solve_buffers
 from ..library import lib_buffers
 from .. import packing as slot
-from ..packing import RIGHT_OF_WAY_IDS, discounts, pack
+from ..packing import RIGHT_OF_WAY_IDS
 from ..policies.lfg_rule import maximin_choice, rule_role
 from ..roles import LEADER
-from ..scenarios import build_scenario
 from ..tables import Conflict
 
 
@@ -52,8 +51,9 @@ class RulePlanner(ExternalPlanner):
 
     def __init__(self, config: Config, seed: int = 0, plan_horizon_s: float | None = None):
         super().__init__(config, seed, plan_horizon_s)
-        self._P_av, self._P_hv = pack(self.config, build_scenario(self.config))
-        self._disc = discounts(self.config)
+        from ..record import static_setup
+
+        _, self._P_av, self._P_hv, self._disc = static_setup(self.config)  # cached per config
         n, n_traj = self.config.library.n_samples, self.config.library.n_traj
         self._ref, self._cand, self._hv = (lib_buffers(n, n_traj), lib_buffers(n, n_traj),
                                            lib_buffers(n, n_traj))
