@@ -19,12 +19,29 @@ import subprocess
 import sys
 
 FIGURES = ("game_solve_us_median", "mpc_decision_ms_median", "mpc_decision_ms_p99",
-           "mpc_run_ms_median", "shield_us_median", "shielded_decision_ms_median")
+           "mpc_run_ms_median", "shield_us_median", "shielded_decision_ms_median",
+           "merge_geometry_ms_median")
 
 SNIPPET = """
-import json, sys
+import json, statistics, sys, time
 from persuasive.bench import bench
 r = bench(n_runs={runs}, repeats=3)
+# the merge's geometry, uncached (a recording's merge view builds one per view): both
+# occupancy intervals and the AV's zone, as persuasive.scenarios.merge.build calls them
+from persuasive import geometry as G
+from persuasive.config import Config
+from persuasive.scenarios import build_scenario
+from persuasive.scenarios.base import pair_min_dist
+config = Config().with_overrides({{"scenario.kind": "merge"}})
+sc = build_scenario(config)
+times = []
+for _ in range(5):
+    t = time.perf_counter()
+    lo = G.occupancy_interval.__wrapped__(sc.av, sc.hv)[0]
+    G.occupancy_interval.__wrapped__(sc.hv, sc.av, (lo, 0.0))
+    G.zone_interval.__wrapped__(sc.av, sc.hv, pair_min_dist(config))
+    times.append(1e3 * (time.perf_counter() - t))
+r["merge_geometry_ms_median"] = statistics.median(times)
 print(json.dumps({{k: r[k] for k in {figures!r} if k in r}}))
 """
 

@@ -3,10 +3,10 @@
 
     python benchmarks/junction_sumo.py [--vehicles 2,3,4,6,8,10] [--seeds 100] [--seed 1]
         [--workers K] [--av persuasive[,passive,...]] [--shield worst-case]
-        [--variant major] [--lanes 1] [--out DIR]
+        [--variant major] [--lanes 1] [--av-start stoppable|drawn] [--out DIR]
 
 For every number of vehicles N (the AV included) and every seed, builds our junction
-(``JunctionSpec.of(variant, n_vehicles=N, lanes=...)``) in SUMO with the seed's arrivals and
+(``JunctionSpec.of(variant, n_vehicles=N, lanes=..., av_start=...)``) in SUMO with the seed's arrivals and
 runs it three ways among the same SUMO-driven humans: without the AV (the reference of the
 time the others lose), with the AV driven by SUMO's own driver, and with the AV driven by each
 planner of ``--av`` behind ``--shield``. Prints one row per N and planner:
@@ -89,6 +89,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--shield", default="worst-case")
     parser.add_argument("--variant", default="major")
     parser.add_argument("--lanes", type=int, default=1)
+    parser.add_argument("--av-start", default="stoppable", choices=["stoppable", "drawn"],
+                        help="junction.av_start: the AV's initial speed capped so that it can "
+                             "stop before its first line (default), or as drawn")
     parser.add_argument("--out", default=None)
     args = parser.parse_args(argv)
     try:
@@ -103,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"\r{done}/{total} seeds", end="", file=sys.stderr, flush=True)
 
         study = run_study(vehicles, args.seeds, args.seed, avs, args.shield, args.workers,
-                          args.variant, args.lanes, progress=progress)
+                          args.variant, args.lanes, progress=progress,
+                          av_start=args.av_start)
         print(file=sys.stderr)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)

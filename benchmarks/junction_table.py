@@ -2,7 +2,8 @@
 §16.4, §16.5).
 
     python benchmarks/junction_table.py SWEEP_FOLDER [--liveness | --study |
-                                                     --paired AXIS=VALUE]
+                                                     --paired AXIS=VALUE |
+                                                     --versus OTHER [--where AXIS=VALUE]]
 
 Reads the sweep's rows (``persuasive.sweep.load``; each is ``persuasive.many.world
 .run_summary``'s row) and prints per combination of the axes: runs, AV through, AV first
@@ -14,7 +15,9 @@ uncertified steps, deadlocks (with the AV in them; AV-caused: none of their huma
 without the AV), runs in which the AV stood inside the junction (while a human waited for
 it), the AV's longest and 95th-percentile wait [s] and the mean delay caused [s]. ``--study``
 prints the study's table (§16.5, :func:`study_table`), ``--paired av.kind=persuasive`` each
-AV kind against the persuasive one, paired by seed (:func:`paired_table`).
+AV kind against the persuasive one, paired by seed (:func:`paired_table`); ``--versus OTHER
+--where av.kind=persuasive`` the persuasive runs against another sweep's, paired by seed
+(:func:`versus_table`).
 """
 
 from __future__ import annotations
@@ -102,6 +105,53 @@ def study_table(folder: str) -> str:
     return "\n".join(lines)
 
 
+def interval(d: np.ndarray, scale: float) -> str:
+    """Mean and normal 95 % interval of paired differences ``d``, times ``scale`` (100:
+    points, one decimal; 1: seconds, two)."""
+    half = 1.959963984540054 * d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else np.nan
+    digits = 1 if scale == 100 else 2
+    return f"{scale * d.mean():+.{digits}f} [{scale * (d.mean() - half):+.{digits}f}, " \
+           f"{scale * (d.mean() + half):+.{digits}f}]"
+
+
+def _paired(runs, ref) -> str:
+    """``runs | AV through | delay caused`` cells of ``runs`` against ``ref`` (both indexed by
+    seed), over the seeds both ran: how many, and the paired differences' :func:`interval`."""
+    seeds = ref.index.intersection(runs.index)
+    runs, ref = runs.loc[seeds], ref.loc[seeds]
+    through = runs["av_through"].to_numpy(float) - ref["av_through"].to_numpy(float)
+    delay = runs["caused_delay_s"].to_numpy(float) - ref["caused_delay_s"].to_numpy(float)
+    return f"{len(seeds)} | {interval(through, 100)} | {interval(delay, 1)}"
+
+
+def versus_table(folder: str, other: str, where: str | None) -> str:
+    """The runs of ``folder`` (those with ``where``, ``AXIS=VALUE``, if given) against those of
+    another sweep ``other``, paired by seed within every combination of ``other``'s axes
+    (which ``folder`` must have too): the difference (``folder`` minus ``other``) in AV
+    through [points] and in the delay caused [s], as :func:`paired_table`'s."""
+    frame, base = load(folder), load(other)
+    if where:
+        axis, value = where.split("=", 1)
+        if axis not in frame:
+            raise SystemExit(f"error: --where {axis!r} is not a column of {folder!r}")
+        frame = frame[frame[axis].astype(str) == value]
+    axes = list(read_manifest(other)["axes"])
+    missing = [a for a in axes if a not in frame]
+    if missing:
+        raise SystemExit(f"error: --versus {other!r} has axes {folder!r} lacks: "
+                         f"{', '.join(missing)}")
+    lines = [f"| {' | '.join(axes)} | runs | AV through [points] | delay caused [s] |",
+             "|" + "---|" * (len(axes) + 3)]
+    for key, g in frame.groupby(axes, sort=True):
+        key = key if isinstance(key, tuple) else (key,)
+        ref = base
+        for a, k in zip(axes, key):
+            ref = ref[ref[a] == k]
+        lines.append(f"| {' | '.join(str(k) for k in key)} | "
+                     f"{_paired(g.set_index('seed'), ref.set_index('seed'))} |")
+    return "\n".join(lines)
+
+
 def paired_table(folder: str, against: str) -> str:
     """Each value of one axis against one of them, paired by seed within every combination
     of the other axes (``against``: ``AXIS=VALUE``, e.g. ``av.kind=persuasive``): the
@@ -116,13 +166,6 @@ def paired_table(folder: str, against: str) -> str:
     others = [a for a in axes if a != axis]
     lines = [f"| {' | '.join(others)} | {axis} | runs | AV through [points] | delay caused "
              "[s] |", "|" + "---|" * (len(others) + 4)]
-
-    def interval(d: np.ndarray, scale: float) -> str:
-        half = 1.959963984540054 * d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else np.nan
-        return f"{scale * d.mean():+.{1 if scale == 100 else 2}f} " \
-               f"[{scale * (d.mean() - half):+.{1 if scale == 100 else 2}f}, " \
-               f"{scale * (d.mean() + half):+.{1 if scale == 100 else 2}f}]"
-
     for key, g in frame.groupby(others, sort=True) if others else [((), frame)]:
         key = key if isinstance(key, tuple) else (key,)
         ref = g[g[axis].astype(str) == base].set_index("seed")
@@ -132,13 +175,8 @@ def paired_table(folder: str, against: str) -> str:
         for value, h in g.groupby(axis, sort=False):
             if str(value) == base:
                 continue
-            h = h.set_index("seed")
-            seeds = ref.index.intersection(h.index)  # the seeds both ran
-            h, r = h.loc[seeds], ref.loc[seeds]
-            through = h["av_through"].to_numpy(float) - r["av_through"].to_numpy(float)
-            delay = h["caused_delay_s"].to_numpy(float) - r["caused_delay_s"].to_numpy(float)
-            lines.append(f"| {' | '.join(str(k) for k in key)} | {value} | {len(h)} | "
-                         f"{interval(through, 100)} | {interval(delay, 1)} |")
+            lines.append(f"| {' | '.join(str(k) for k in key)} | {value} | "
+                         f"{_paired(h.set_index('seed'), ref)} |")
     return "\n".join(lines)
 
 
@@ -153,10 +191,16 @@ def main() -> None:
     kind.add_argument("--paired", metavar="AXIS=VALUE",
                       help="every value of AXIS against VALUE, paired by seed (e.g. "
                            "av.kind=persuasive)")
+    kind.add_argument("--versus", metavar="OTHER_SWEEP",
+                      help="the runs against another sweep's, paired by seed within its axes "
+                           "(with --where AXIS=VALUE to keep some runs)")
+    parser.add_argument("--where", metavar="AXIS=VALUE", default=None)
     args = parser.parse_args()
     print(liveness_table(args.folder) if args.liveness else
           study_table(args.folder) if args.study else
-          paired_table(args.folder, args.paired) if args.paired else table(args.folder))
+          paired_table(args.folder, args.paired) if args.paired else
+          versus_table(args.folder, args.versus, args.where) if args.versus else
+          table(args.folder))
 
 
 if __name__ == "__main__":

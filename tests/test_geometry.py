@@ -3,7 +3,8 @@
 Hand-computed path positions; distance invariants; the distance of every scenario equal to an
 independent computation from the logged positions; the crossing at 90 degrees equal to the
 paper's intersection per step, bit for bit, also through the euclidean kernels; footprint
-collisions; known games in the merge; each scenario's closed loop equal to the plain NumPy
+collisions; occupancy intervals and zones equal to the plain all-pairs computation, bit for
+bit; known games in the merge; each scenario's closed loop equal to the plain NumPy
 reference, bit for bit.
 
 Tolerances: path positions 1e-12 m (trigonometry); everything else exact.
@@ -21,7 +22,9 @@ from hypothesis import strategies as st
 from persuasive import Config, ConfigError, reference, simulate
 from persuasive import packing as slot
 from persuasive.game import full_prediction
-from persuasive.geometry import Path, VehicleShape, footprints_overlap, unit, zone_interval
+from persuasive.geometry import (Path, VehicleShape, _first_hit, _radius, _samples,
+                                 _straight_occupancy, footprints_overlap, occupancy_interval,
+                                 unit, zone_interval)
 from persuasive.packing import discounts, pack
 from persuasive.scenarios import SCENARIOS, build_scenario, crossing
 
@@ -189,6 +192,194 @@ def test_oriented_rectangles_by_hand():
     # side by side in parallel lanes 2.5 m apart touch; 2.6 m apart do not
     assert footprints_overlap(0.0, 0.0, one, 5.0, 2.5, 0.0, 2.5, one, 5.0, 2.5)
     assert not footprints_overlap(0.0, 0.0, one, 5.0, 2.5, 0.0, 2.6, one, 5.0, 2.5)
+
+
+# -- occupancy intervals ------------------------------------------------------------------------
+
+
+def _occupancy_reference(path, other, other_range=(-math.inf, math.inf), step_m=0.05,
+                         reach_m=150.0):
+    """:func:`occupancy_interval` the straightforward way (its code at db4acd3): every pair
+    of samples within reach tested, the hull of the own positions found."""
+    from scipy.spatial import cKDTree
+
+    if path.is_straight and other.is_straight and other_range == (-math.inf, math.inf):
+        return _straight_occupancy(path, other)
+    s_own = _samples(path, -reach_m, reach_m, step_m)
+    lo_o, hi_o = max(other_range[0], -reach_m), min(other_range[1], reach_m)
+    s_oth = _samples(other, lo_o, hi_o, step_m)
+    m_own = step_m / 2 * (1.0 + path.half_diagonal_m / _radius(path))
+    m_oth = step_m / 2 * (1.0 + other.half_diagonal_m / _radius(other))
+    reach = path.half_diagonal_m + other.half_diagonal_m + m_own + m_oth
+    xo, yo = path.xy(s_own)
+    xt, yt = other.xy(s_oth)
+    own_pts, oth_pts = np.stack([xo, yo], axis=1), np.stack([xt, yt], axis=1)
+    keep_o = cKDTree(oth_pts).query(own_pts, distance_upper_bound=reach)[0] <= reach
+    keep_t = cKDTree(own_pts).query(oth_pts, distance_upper_bound=reach)[0] <= reach
+    if not keep_o.any() or not keep_t.any():
+        return (math.inf, math.inf)
+    edge_lo, edge_hi = bool(keep_o[0]), bool(keep_o[-1])
+    s_own, xo, yo = s_own[keep_o], xo[keep_o], yo[keep_o]
+    s_oth, xt, yt = s_oth[keep_t], xt[keep_t], yt[keep_t]
+    near = cKDTree(np.stack([xt, yt], axis=1)).query_ball_point(np.stack([xo, yo], axis=1),
+                                                                reach)
+    counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=len(near))
+    if counts.sum() == 0:
+        return (math.inf, math.inf)
+    i = np.repeat(np.arange(s_own.size), counts)
+    j = np.concatenate([np.asarray(n, dtype=np.int64) for n in near if n])
+    va, vb = path.vehicle, other.vehicle
+    hit = footprints_overlap(xo[i], yo[i], path.direction(s_own[i]), va.length_m + 2 * m_own,
+                             va.width_m + 2 * m_own, xt[j], yt[j], other.direction(s_oth[j]),
+                             vb.length_m + 2 * m_oth, vb.width_m + 2 * m_oth)
+    if not hit.any():
+        return (math.inf, math.inf)
+    found = s_own[i[hit]]
+    lo = float(found.min()) - step_m / 2
+    hi = float(found.max()) + step_m / 2
+    return (-math.inf if edge_lo and found.min() == s_own[0] else lo,
+            math.inf if edge_hi and found.max() == s_own[-1] else hi)
+
+
+_coord = st.floats(-8.0, 8.0)
+_angle = st.floats(-math.pi, math.pi)
+
+
+@st.composite
+def _paths(draw):
+    """A straight path, a bend (a kink) or a turn (an arc), near the origin, of a vehicle of
+    any size from a motorbike's to a truck's."""
+    car = VehicleShape(draw(st.floats(2.0, 12.0)), draw(st.floats(0.8, 3.0)), 0.0, 10.0, -2.0,
+                       1.0)
+    point = (draw(_coord), draw(_coord))
+    kind = draw(st.sampled_from(["straight", "bend", "turn"]))
+    before = draw(_angle)
+    if kind == "straight":
+        return Path.straight(car, point, (math.cos(before), math.sin(before)))
+    if kind == "bend":
+        after = draw(_angle)
+        return Path.bend(car, point, (math.cos(before), math.sin(before)),
+                         (math.cos(after), math.sin(after)))
+    turn = draw(st.floats(0.1, 3.0)) * draw(st.sampled_from([-1.0, 1.0]))
+    return Path.turn(car, point, before, draw(st.floats(2.0, 40.0)), turn,
+                     draw(st.floats(-15.0, 5.0)))
+
+
+@st.composite
+def _ranges(draw):
+    kind = draw(st.sampled_from(["all", "all", "below", "above", "window"]))
+    a, b = sorted((draw(st.floats(-45.0, 45.0)), draw(st.floats(-45.0, 45.0))))
+    return {"all": (-math.inf, math.inf), "below": (-math.inf, b), "above": (a, math.inf),
+            "window": (a, b + 0.01)}[kind]
+
+
+@settings(max_examples=150)
+@given(_paths(), _paths(), _ranges(), st.sampled_from([0.05, 0.1, 0.25]))
+def test_occupancy_interval_equals_the_all_pairs_reference(path, other, other_range, step_m):
+    """The occupancy interval scans from both ends for the first sample with a hit; the
+    result is the reference's, every bit, whichever paths (straight, kinked, arcs), sizes,
+    ranges of the other and sample spacings (exact)."""
+    reach_m = 40.0
+    got = occupancy_interval.__wrapped__(path, other, other_range, step_m, reach_m)
+    assert got == _occupancy_reference(path, other, other_range, step_m, reach_m)
+
+
+@settings(max_examples=300)
+@given(st.sets(st.integers(0, 299), max_size=6), st.integers(0, 300), st.integers(0, 300),
+       st.booleans(), st.sampled_from([None, 1.0, 0.5]))
+def test_the_scan_from_an_end_finds_the_first_row_with_a_hit(rows_hit, a, b, upward, clear):
+    """:func:`persuasive.geometry._first_hit` against ``min`` / ``max``: any rows with a hit
+    (a single one at a block's edge too), any range, with or without rows passed over (all or
+    half the rows up to the next hit, as ``zone_interval``'s distances tell); every row asked
+    once at most, none outside the range (exact)."""
+    lo, hi = min(a, b), max(a, b)
+    asked = []
+
+    def hits(rows):
+        asked.extend(rows.tolist())
+        return rows[np.isin(rows, list(rows_hit))]
+
+    def clear_rows(row, up):
+        ahead = [abs(r - row) for r in rows_hit if (r >= row if up else r <= row)]
+        return int(clear * min(ahead, default=1000))
+
+    inside = [r for r in rows_hit if lo <= r < hi]
+    expected = (min(inside) if upward else max(inside)) if inside else None
+    assert _first_hit(hits, lo, hi, upward, clear_rows if clear else None) == expected
+    assert len(asked) == len(set(asked)) and all(lo <= r < hi for r in asked)
+    if expected is None and clear is None:
+        assert sorted(asked) == list(range(lo, hi))
+
+
+@pytest.mark.parametrize("x0, lo", [(-6.2, -math.inf), (-6.1, -9.95), (-6.0, -9.85)])
+def test_occupancy_is_unbounded_only_where_the_scan_ends_inside_an_overlap(x0, lo):
+    """A car along x scanned from -10 m every 0.1 m; a crossing car at ``x = x0`` (a window of
+    1 cm of its path): the footprints, enlarged by 5 cm, overlap while
+    ``|x - x0| <= 3.85 m``. Whether the first sample, -10 m, overlaps (x0 = -6.2) or only the
+    next (-6.1) or the one after (-6.0), both within reach: by hand, 1e-12 m, and equal to
+    the reference (exact)."""
+    own = Path.straight(CAR, (0.0, 0.0), (1.0, 0.0))
+    other = Path.straight(CAR, (x0, 0.0), (0.0, 1.0))
+    got = occupancy_interval.__wrapped__(own, other, (0.0, 0.01), 0.1, 10.0)
+    assert got == _occupancy_reference(own, other, (0.0, 0.01), 0.1, 10.0)
+    assert got[0] == pytest.approx(lo, abs=1e-12)
+    assert got[1] == pytest.approx(x0 + 3.8 + 0.05, abs=1e-12)  # the last sample in, + 5 cm
+
+
+def _zone_reference(path, other, min_dist_m, reach_m=150.0, step_m=0.01):
+    """:func:`zone_interval` the straightforward way (its code at db4acd3): every sample's
+    nearest distance."""
+    from scipy.spatial import cKDTree
+
+    pts_other = other.polyline(-reach_m, reach_m, step_m)
+    s = np.arange(-reach_m, reach_m + step_m / 2, step_m)
+    x, y = path.xy(s)
+    margin = 2.0 * step_m
+    d, _ = cKDTree(pts_other, compact_nodes=False).query(
+        np.stack([x, y], axis=1), distance_upper_bound=2.0 * (min_dist_m + margin))
+    inside = np.flatnonzero(d < min_dist_m + margin)
+    if inside.size == 0:
+        return (math.inf, math.inf)
+    lo = -math.inf if inside[0] == 0 else float(s[inside[0]] - margin)
+    hi = math.inf if inside[-1] == s.size - 1 else float(s[inside[-1]] + margin)
+    return lo, hi
+
+
+@settings(max_examples=100)
+@given(_paths(), _paths(), st.floats(0.5, 12.0), st.sampled_from([0.01, 0.05]))
+def test_zone_interval_equals_the_every_sample_reference(path, other, min_dist_m, step_m):
+    """The zone scans from both ends, passing over samples known to be far; the result is the
+    reference's, every bit (exact)."""
+    got = zone_interval.__wrapped__(path, other, min_dist_m, 40.0, step_m)
+    assert got == _zone_reference(path, other, min_dist_m, 40.0, step_m)
+
+
+@pytest.mark.parametrize("x0, lo", [(-4.985, -math.inf), (-4.975, -10.01)])
+def test_zone_is_unbounded_only_where_the_scan_ends_inside(x0, lo):
+    """A path along x scanned from -10 m every 1 cm; a crossing path at ``x = x0``: the samples
+    within 5 m + 2 cm (the margin) are inside. Whether the first sample is (x0 = -4.985) or
+    only the next (-4.975): by hand, 1e-12 m, and equal to the reference (exact)."""
+    own = Path.straight(CAR, (0.0, 0.0), (1.0, 0.0))
+    other = Path.straight(CAR, (x0, 0.0), (0.0, 1.0))
+    got = zone_interval.__wrapped__(own, other, 5.0, 10.0)
+    assert got == _zone_reference(own, other, 5.0, 10.0)
+    assert got[0] == pytest.approx(lo, abs=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["crossing", "left-turn", "merge"])
+def test_scenario_occupancies_equal_the_all_pairs_reference(kind):
+    """At each scenario's own paths and full range (merge: the HV's against the AV's side
+    zone), also with the shield's enlarged footprints, and the zones at the scenario's
+    distance (exact)."""
+    scene = build_scenario(SCENARIO_CONFIGS[kind])
+    side = (scene.av.occupancy[0], 0.0) if kind == "merge" else (-math.inf, math.inf)
+    for av, hv in ((scene.av, scene.hv), (scene.av.inflated(0.25), scene.hv.inflated(0.25))):
+        for path, other, other_range in ((av, hv, (-math.inf, math.inf)), (hv, av, side)):
+            got = occupancy_interval.__wrapped__(path, other, other_range)
+            assert got == _occupancy_reference(path, other, other_range)
+    for path, other in ((scene.av, scene.hv), (scene.hv, scene.av)):
+        got = zone_interval.__wrapped__(path, other, scene.min_dist_m)
+        assert got == _zone_reference(path, other, scene.min_dist_m)
 
 
 # -- scenario templates -------------------------------------------------------------------------

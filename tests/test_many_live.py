@@ -20,10 +20,14 @@ from persuasive import Config
 from persuasive.config import ConfigError, JunctionSpec
 from persuasive.kinematics import saturated_step
 from persuasive.many import measures as M
-from persuasive.many.junction import Arrivals, geometry_of, possible_routes, route
-from persuasive.many.world import (ACTIVE, CROSSING, FOLLOW, MERGE, JunctionWorld,
-                                   conflict_table, junction_start)
+from persuasive.envs.external import Limits
+from persuasive.many.junction import (Arrivals, arrivals, geometry_of, pair_config,
+                                      possible_routes, route)
+from persuasive.many.world import (ACTIVE, CROSSING, FOLLOW, MERGE, START_MARGIN_M,
+                                   JunctionWorld, conflict_table, drawn_arrivals, first_line,
+                                   junction_start)
 from persuasive.safety import shield as sh
+from persuasive.scenarios.base import pair_min_dist
 
 CONFIG = Config(mode="corrected")
 
@@ -311,3 +315,54 @@ def test_an_av_creeping_to_its_line_is_not_rounded_onto_it():
     gap = line - world.S[:, 0]
     assert LINE_TOL_M <= gap.min() < 0.02  # it yields at the line, and stays short of it
     assert not any(v == "uncertified" for v in world.verdicts)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(1, 10**6), n=st.integers(2, 8), lanes=st.sampled_from([1, 2]),
+       line=st.sampled_from(["outside", "stop", "foresight"]),
+       movement=st.sampled_from(["left", "straight", "right"]),
+       first_lo=st.floats(0.0, 20.0), v_hi=st.floats(3.0, 15.0))
+def test_the_av_starts_able_to_stop_before_every_line_it_may_get(seed, n, lanes, line, movement,
+                                                                 first_lo, v_hi):
+    spec = JunctionSpec(n_vehicles=n, lanes=lanes, av_line=line, av_movement=movement,
+                        first_m=(first_lo, first_lo + 10.0), v0_mps=(0.5 * v_hi, v_hi))
+    cfg = pair_config(CONFIG)
+    raw = arrivals(spec, seed, Limits.of(cfg, "hv").length_m)
+    arr = drawn_arrivals(cfg, spec, seed)
+    as_drawn = drawn_arrivals(cfg, spec.with_(av_start="drawn"), seed)
+    assert np.array_equal(as_drawn.v0_mps, raw.v0_mps) and as_drawn.routes == raw.routes
+    # only the AV's speed may change, and only down
+    assert arr.routes == raw.routes and arr.kinds == raw.kinds
+    assert np.array_equal(arr.s0_m, raw.s0_m) and np.array_equal(arr.t0_s, raw.t0_s)
+    assert np.array_equal(arr.v0_mps[1:], raw.v0_mps[1:]) and arr.v0_mps[0] <= raw.v0_mps[0]
+    if arr.v0_mps[0] < raw.v0_mps[0]:  # capped: exactly the speed that stops at the margin
+        av, hv = Limits.of(cfg, "av"), Limits.of(cfg, "hv")
+        room = max(first_line(spec, arr.routes[0], (av.length_m, av.width_m),
+                              (hv.length_m, hv.width_m), pair_min_dist(cfg))
+                   - arr.s0_m[0] - START_MARGIN_M, 0.0)
+        assert math.isclose(arr.v0_mps[0] ** 2, -2.0 * av.u_min_mps2 * room, rel_tol=1e-12,
+                            abs_tol=1e-12)
+    w = JunctionWorld(CONFIG, spec, seed)
+    av = w.limits[0]
+    # braking at once from the drawn state stops START_MARGIN_M or more before every AV line
+    # (an AV drawn nearer than that starts at rest)
+    stop_at = arr.s0_m[0] + arr.v0_mps[0] ** 2 / (-2.0 * av.u_min_mps2)
+    for _, at_line, _, _ in _lines(w):
+        assert stop_at <= max(at_line - START_MARGIN_M, arr.s0_m[0]) + 1e-9
+        if arr.s0_m[0] > at_line - START_MARGIN_M:
+            assert arr.v0_mps[0] == 0.0
+
+
+@pytest.mark.parametrize("n,seed", [(2, 112), (8, 171)])
+def test_an_av_drawn_inside_its_braking_distance_no_longer_deadlocks(n, seed):
+    """Two of the study's four AV-caused deadlocks (docs/results.md §16.5): drawn 4.7-5.1 m
+    before its first line at 4.7-4.9 m/s, the AV stopped inside the human's keep-out circle."""
+    spec = JunctionSpec(n_vehicles=n, duration_s=60.0)
+    cfg = pair_config(CONFIG)
+    raw = arrivals(spec, seed, Limits.of(cfg, "hv").length_m)
+    capped = drawn_arrivals(cfg, spec, seed)
+    assert capped.v0_mps[0] < raw.v0_mps[0]
+    before = M.summary(JunctionWorld(CONFIG, spec.with_(av_start="drawn"), seed).run())
+    after = M.summary(JunctionWorld(CONFIG, spec, seed).run())
+    assert before["av_caused_deadlock"] and not before["av_through"]
+    assert after["av_through"] and not after["av_caused_deadlock"]

@@ -64,11 +64,17 @@ def test_a_written_map_reads_back_with_its_rule(runs, tmp_path, rule):
         assert road.all_way_stop == {}
 
 
-@pytest.mark.parametrize("rule,control,priority", [("av", "right_of_way", 1),
-                                                   ("hv", "right_of_way", 2),
-                                                   ("all-way-stop", "all_way_stop", 0)])
-def test_export_then_pairs_with_the_map_label_every_pair(capsys, runs, tmp_path, rule, control,
-                                                        priority):
+@pytest.mark.parametrize("rule,control,priority,expected", [
+    ("av", "right_of_way", 1, ["av", "hv"]), ("hv", "right_of_way", 2, ["hv", "av"]),
+    ("all-way-stop", "all_way_stop", 0, ["", ""])])
+def test_export_pairs_and_replay_carry_the_maps_rule(capsys, runs, tmp_path, monkeypatch, rule,
+                                                     control, priority, expected):
+    """Exported with a map, every pair is labelled with the map's rule, the evaluation's
+    baselines read it, and the replay gives it to the responsibility shield of each seat: the
+    replaced vehicle's priority is the AV's (vehicle 1, the exported AV, has it under rule
+    "av"). One export and one pairs file per rule for all three (each costs seconds)."""
+    from persuasive.recordings import replay as rp
+
     tracks, pairs = tmp_path / "tracks", tmp_path / "pairs.parquet"
     code, out, err = run(capsys, "recordings", "export", *runs, "--out", str(tracks),
                          "--noise-m", "0.05", "--map-rule", rule)
@@ -101,37 +107,7 @@ def test_export_then_pairs_with_the_map_label_every_pair(capsys, runs, tmp_path,
     if control == "right_of_way":
         np.testing.assert_array_equal(right_of_way(f), [1 if priority == 1 else 0] * len(data))
 
-
-def test_pairs_without_a_map_are_unknown_and_keep_the_approach_rule(capsys, runs, tmp_path):
-    tracks, pairs = tmp_path / "tracks", tmp_path / "pairs.parquet"
-    assert run(capsys, "recordings", "export", *runs, "--out", str(tracks))[0] == 0
-    code, out, err = run(capsys, "recordings", "pairs", str(tracks), "--out", str(pairs),
-                         *ONE_PROCESS)
-    assert code == 0 and "the map's rule" not in out
-    frame, meta = read_pairs(pairs)
-    assert meta["map"] is None and (frame["control"] == "unknown").all()
-    # a pairs file written before the map columns existed reads as unknown too
-    old = frame.drop(columns=["control", "priority", "stop_1_m", "stop_2_m"])
-    data = pairs_of(old, "site", False)
-    assert {p.control for p in data} == {"unknown"}
-    f = features_of(data, [10] * len(data))
-    assert f.priority is None and f.all_way is None
-
-
-@pytest.mark.parametrize("rule,expected", [("av", ["av", "hv"]), ("hv", ["hv", "av"]),
-                                           ("all-way-stop", ["", ""])])
-def test_replay_takes_the_right_of_way_from_the_map(capsys, runs, tmp_path, monkeypatch, rule,
-                                                    expected):
-    """The map's right of way reaches the responsibility shield of each seat: the replaced
-    vehicle's priority is the AV's (vehicle 1, the exported AV, has it under rule "av")."""
-    from persuasive.recordings import replay as rp
-
-    tracks, pairs = tmp_path / "tracks", tmp_path / "pairs.parquet"
-    assert run(capsys, "recordings", "export", *runs, "--out", str(tracks), "--map-rule",
-               rule)[0] == 0
-    assert run(capsys, "recordings", "pairs", str(tracks), "--map", str(tracks / "map.osm"),
-               "--out", str(pairs), *ONE_PROCESS)[0] == 0
-    frame, _ = read_pairs(pairs)
+    # the replay: each seat's responsibility shield gets the map's right of way
     seen = []
 
     def spy(config, x0, hv_prm=None, seed=0):
@@ -154,6 +130,22 @@ def test_replay_takes_the_right_of_way_from_the_map(capsys, runs, tmp_path, monk
     assert code == 0 and err == "", err
     line = f"the map's right of way: the AV's in {n} runs, the other's in {n}, neither in 0"
     assert (line in out) == (rule != "all-way-stop")
+
+
+def test_pairs_without_a_map_are_unknown_and_keep_the_approach_rule(capsys, runs, tmp_path):
+    tracks, pairs = tmp_path / "tracks", tmp_path / "pairs.parquet"
+    assert run(capsys, "recordings", "export", *runs, "--out", str(tracks))[0] == 0
+    code, out, err = run(capsys, "recordings", "pairs", str(tracks), "--out", str(pairs),
+                         *ONE_PROCESS)
+    assert code == 0 and "the map's rule" not in out
+    frame, meta = read_pairs(pairs)
+    assert meta["map"] is None and (frame["control"] == "unknown").all()
+    # a pairs file written before the map columns existed reads as unknown too
+    old = frame.drop(columns=["control", "priority", "stop_1_m", "stop_2_m"])
+    data = pairs_of(old, "site", False)
+    assert {p.control for p in data} == {"unknown"}
+    f = features_of(data, [10] * len(data))
+    assert f.priority is None and f.all_way is None
 
 
 def test_seat_right_of_way_reads_only_a_right_of_way_rule():

@@ -696,6 +696,8 @@ AV_PLANS = ("pairwise", "joint")
 JOINT_BOUNDS = ("product", "union")
 #: Where the junction's AV yields (:attr:`JunctionSpec.av_line`).
 AV_LINES = ("stop", "outside", "foresight")
+#: How the junction's AV starts (:attr:`JunctionSpec.av_start`).
+AV_STARTS = ("stoppable", "drawn")
 #: Named variants: the fields of :class:`JunctionSpec` each sets.
 VARIANTS: dict[str, dict[str, Any]] = {
     "major": {"priority": "major", "mix": (0.25, 0.5, 0.25)},
@@ -759,6 +761,10 @@ class JunctionSpec:
     #: distance, 7.5 m, before the conflict point); ``foresight``, the one of the two the
     #: AV's predictions of the run favour (placed arrivals only) (docs/method.md §15.9)
     av_line: str = "outside"
+    #: the AV's initial speed: ``stoppable``, capped so that it can stop 1 m before the first
+    #: line it may yield at (``persuasive.many.world.drawn_arrivals``); ``drawn``, as drawn
+    #: from ``v0_mps`` (before the cap: the tables of docs/results.md §16-§16.4)
+    av_start: str = "stoppable"
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ConfigError:
@@ -824,6 +830,8 @@ class JunctionSpec:
             raise bad("joint_bound", " | ".join(JOINT_BOUNDS))
         if self.av_line not in AV_LINES:
             raise bad("av_line", " | ".join(AV_LINES))
+        if self.av_start not in AV_STARTS:
+            raise bad("av_start", " | ".join(AV_STARTS))
         if not 1.0 <= self.duration_s <= 3600.0:
             raise bad("duration_s", "[1, 3600] s")
 
@@ -918,6 +926,7 @@ class JunctionParams:
     av_plan: str | None = None  #: pairwise | joint: how the AV plans; unset: pairwise
     joint_bound: str | None = None  #: product | union: the joint chance constraint; unset: product
     av_line: str | None = None  #: stop | outside | foresight (where it yields); unset: outside
+    av_start: str | None = None  #: stoppable | drawn (the AV's initial speed); unset: stoppable
 
     def __post_init__(self) -> None:
         for name in ("mix", "first_m", "gap_m", "v0_mps"):

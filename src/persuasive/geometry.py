@@ -34,7 +34,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from numba import njit
@@ -261,9 +261,11 @@ def zone_interval(path: Path, other: Path, min_dist_m: float, reach_m: float = 1
     (within ``reach_m`` of its reference point) is at least ``min_dist_m`` away.
 
     Computed numerically: ``path`` every ``step_m`` against ``other`` every ``step_m`` (a
-    k-d tree query), widened by a margin that covers both spacings. An end of the interval
-    that reaches the end of the scanned range is unbounded (e.g. two vehicles sharing a lane
-    after a merge).
+    k-d tree query), widened by a margin that covers both spacings. Only the first and the last
+    sample that close are needed: each is searched from its end, passing over the samples that
+    the distance of one already found shows to be far (the path moves no farther than its arc
+    length). An end of the interval that reaches the end of the scanned range is
+    unbounded (e.g. two vehicles sharing a lane after a merge).
     """
     from scipy.spatial import cKDTree
 
@@ -275,14 +277,37 @@ def zone_interval(path: Path, other: Path, min_dist_m: float, reach_m: float = 1
     # of a shared lane are collinear with the query points, which made compacted nodes slow
     # to search: 0.66 s against 0.1 s at the merge), and no search beyond twice the distance
     # that counts (farther points read inf, and are outside either way)
-    d, _ = cKDTree(pts_other, compact_nodes=False).query(
-        np.stack([x, y], axis=1), distance_upper_bound=2.0 * (min_dist_m + margin))
-    inside = np.flatnonzero(d < min_dist_m + margin)
-    if inside.size == 0:
+    tree = cKDTree(pts_other, compact_nodes=False)
+    pts = np.stack([x, y], axis=1)
+    near = min_dist_m + margin
+
+    def inside(rows: np.ndarray) -> np.ndarray:
+        return rows[tree.query(pts[rows], distance_upper_bound=2.0 * near)[0] < near]
+
+    def clear(k: int, upward: bool) -> int:
+        # the path moves at most |s_j - s_k| between samples j and k, so every sample within
+        # the nearest distance's excess over ``near`` (less a slack for rounding) is outside
+        room = float(tree.query(pts[k])[0]) - near - _LIPSCHITZ_SLACK_M
+        if not room > 0.0:
+            return 0
+        if upward:
+            return int(np.searchsorted(s, s[k] + room, side="left")) - k
+        return k - int(np.searchsorted(s, s[k] - room, side="right")) + 1
+
+    # only the first and the last sample inside count: each found from its end, far stretches
+    # passed over (the same queries as every sample's where it matters, far fewer of them)
+    first = _first_hit(inside, 0, s.size, upward=True, clear=clear)
+    if first is None:
         return (math.inf, math.inf)  # never in conflict: an empty window
-    lo = -math.inf if inside[0] == 0 else float(s[inside[0]] - margin)
-    hi = math.inf if inside[-1] == s.size - 1 else float(s[inside[-1]] + margin)
+    last = _first_hit(inside, first, s.size, upward=False, clear=clear)
+    lo = -math.inf if first == 0 else float(s[first] - margin)
+    hi = math.inf if last == s.size - 1 else float(s[last] + margin)
     return lo, hi
+
+
+#: Slack [m] for rounding in :func:`zone_interval`'s skips of far samples (the path's points
+#: and the tree's distances are exact to about 1e-12 m).
+_LIPSCHITZ_SLACK_M = 1e-6
 
 
 @functools.lru_cache(maxsize=64)
@@ -301,11 +326,14 @@ def occupancy_interval(path: Path, other: Path,
 
     Otherwise numerical: both paths are sampled every ``step_m`` within ``reach_m`` of their
     reference points (each straight piece and the arc on its own, ends included, so a kink is
-    never straddled), the footprints are tested pairwise with the separating-axis test, each
-    enlarged on every side by the farthest a footprint point moves between a position and its
-    nearest sample (``step/2 (1 + r/R)``: ``r`` the half-diagonal, ``R`` the arc radius), and
-    the hull of the positions found is widened by ``step/2``. Every true overlap therefore lies
-    inside the result. ``(inf, inf)``: never; an end at the scanned range is unbounded.
+    never straddled), the footprints are tested pairwise with the separating-axis test (the
+    pairs of samples within reach of each other, a k-d tree's), each enlarged on every side by
+    the farthest a footprint point moves between a position and its nearest sample
+    (``step/2 (1 + r/R)``: ``r`` the half-diagonal, ``R`` the arc radius), and the hull of the
+    positions found is widened by ``step/2``. Every true overlap therefore lies inside the
+    result. Only the hull's ends are needed: the own samples are tested from each end up to
+    the first with an overlap. ``(inf, inf)``: never; an end at the scanned range is
+    unbounded.
     Results are kept per pair of paths (a study builds the same geometry many times).
     """
     if path.is_straight and other.is_straight and other_range == (-math.inf, math.inf):
@@ -327,27 +355,84 @@ def occupancy_interval(path: Path, other: Path,
     if not keep_o.any() or not keep_t.any():
         return (math.inf, math.inf)
     edge_lo, edge_hi = bool(keep_o[0]), bool(keep_o[-1])
-    s_own, xo, yo = s_own[keep_o], xo[keep_o], yo[keep_o]
-    s_oth, xt, yt = s_oth[keep_t], xt[keep_t], yt[keep_t]
-    near = cKDTree(np.stack([xt, yt], axis=1)).query_ball_point(np.stack([xo, yo], axis=1),
-                                                                reach)
-    counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=len(near))
-    if counts.sum() == 0:
-        return (math.inf, math.inf)
-    i = np.repeat(np.arange(s_own.size), counts)
-    j = np.concatenate([np.asarray(n, dtype=np.int64) for n in near if n])
+    s_own, s_oth = s_own[keep_o], s_oth[keep_t]
     va, vb = path.vehicle, other.vehicle
-    hit = footprints_overlap(xo[i], yo[i], path.direction(s_own[i]), va.length_m + 2 * m_own,
-                             va.width_m + 2 * m_own, xt[j], yt[j], other.direction(s_oth[j]),
-                             vb.length_m + 2 * m_oth, vb.width_m + 2 * m_oth)
-    if not hit.any():
+    pairs = _SamplePairs(own_pts[keep_o], path.direction(s_own),
+                         va.length_m + 2 * m_own, va.width_m + 2 * m_own,
+                         cKDTree(oth_pts[keep_t]), oth_pts[keep_t], other.direction(s_oth),
+                         vb.length_m + 2 * m_oth, vb.width_m + 2 * m_oth, reach)
+    # only the hull counts: the lowest and the highest own sample with a hit, each found by
+    # scanning from its end (the same pairs and tests as all of them, far fewer of them)
+    first = _first_hit(pairs.hits, 0, s_own.size, upward=True)
+    if first is None:
         return (math.inf, math.inf)
-    found = s_own[i[hit]]
-    lo = float(found.min()) - step_m / 2
-    hi = float(found.max()) + step_m / 2
+    last = _first_hit(pairs.hits, first, s_own.size, upward=False)
+    lo = float(s_own[first]) - step_m / 2
+    hi = float(s_own[last]) + step_m / 2
     # an end of the scanned range that still overlaps is unbounded (e.g. a shared lane)
-    return (-math.inf if edge_lo and found.min() == s_own[0] else lo,
-            math.inf if edge_hi and found.max() == s_own[-1] else hi)
+    return (-math.inf if edge_lo and first == 0 else lo,
+            math.inf if edge_hi and last == s_own.size - 1 else hi)
+
+
+@dataclass(frozen=True)
+class _SamplePairs:
+    """The own samples of :func:`occupancy_interval` against the other's: which own sample's
+    (enlarged) footprint overlaps the footprint of some other sample within ``reach`` of it
+    (a k-d tree's ball, then :func:`footprints_overlap`).
+
+    ``own_xy: (n_own, 2)``, ``oth_xy: (n_oth, 2)`` [m]; ``own_u``, ``oth_u`` the unit
+    directions ``(ux, uy)`` at them; ``tree`` the k-d tree of ``oth_xy``; lengths and widths
+    [m] the enlarged footprints'.
+    """
+
+    own_xy: np.ndarray
+    own_u: tuple[np.ndarray, np.ndarray]
+    own_l: float
+    own_w: float
+    tree: Any
+    oth_xy: np.ndarray
+    oth_u: tuple[np.ndarray, np.ndarray]
+    oth_l: float
+    oth_w: float
+    reach: float
+
+    def hits(self, rows: np.ndarray) -> np.ndarray:
+        """The own samples among ``rows`` that overlap some other sample."""
+        near = self.tree.query_ball_point(self.own_xy[rows], self.reach)
+        counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=len(near))
+        if counts.sum() == 0:
+            return rows[:0]
+        i = np.repeat(rows, counts)
+        j = np.concatenate([np.asarray(n, dtype=np.int64) for n in near if n])
+        hit = footprints_overlap(self.own_xy[i, 0], self.own_xy[i, 1],
+                                 (self.own_u[0][i], self.own_u[1][i]), self.own_l, self.own_w,
+                                 self.oth_xy[j, 0], self.oth_xy[j, 1],
+                                 (self.oth_u[0][j], self.oth_u[1][j]), self.oth_l, self.oth_w)
+        return i[hit]
+
+
+def _first_hit(hits: Callable[[np.ndarray], np.ndarray], lo: int, hi: int, upward: bool,
+               clear: Callable[[int, bool], int] | None = None, chunk: int = 16) -> int | None:
+    """The lowest (``upward``) or highest row in ``[lo, hi)`` with a hit, None if none:
+    ``hits(rows)`` the rows among ``rows`` that have one, asked in blocks from that end, each
+    block twice the last. ``clear(row, upward)``, if given: how many rows from ``row`` on, in
+    the scan's direction, surely have none; as many are passed over unasked when they are at
+    least a block."""
+    done = 0
+    while done < hi - lo:
+        if clear is not None:
+            skip = clear(lo + done if upward else hi - 1 - done, upward)
+            if skip >= chunk:
+                done += skip
+                continue
+        size = min(chunk, hi - lo - done)
+        a = lo + done if upward else hi - done - size
+        found = hits(np.arange(a, a + size))
+        if found.size:
+            return int(found.min() if upward else found.max())
+        done += size
+        chunk *= 2
+    return None
 
 
 def _radius(path: Path) -> float:

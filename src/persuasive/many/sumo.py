@@ -2,7 +2,7 @@
 the same arrivals (issue 41 item 3; docs/method.md §14.7, docs/guide/junction.md).
 
 For a :class:`~persuasive.config.JunctionSpec` and a seed, the junction of
-:mod:`persuasive.many.junction` and the arrivals of :func:`~persuasive.many.junction.arrivals`
+:mod:`persuasive.many.junction` and the arrivals of :func:`~persuasive.many.world.drawn_arrivals`
 are rebuilt in SUMO, and the AV (vehicle 0) is driven three ways among the same SUMO-driven
 humans, paired by seed: not at all (``none``, the reference of the time the others lose),
 by SUMO's own driver (``sumo``) and by our planner (``"kind/shield"``, SUMO's adapter,
@@ -122,8 +122,8 @@ from ..config import (AV_KIND_ALIASES, AV_KINDS, MOVEMENTS, SHIELD_KINDS, Config
 from ..envs import sumo as S
 from ..envs.external import ExternalPlanner, Limits
 from ..safety.measures import WAIT_SPEED_MPS, restricted_mean
-from .junction import (EXIT_OFFSET, Arrivals, Route, arrivals, lane_of, pair_config,
-                       possible_routes)
+from .junction import EXIT_OFFSET, Arrivals, Route, lane_of, pair_config, possible_routes
+from .world import drawn_arrivals
 
 #: The SUMO junction type of each of our priorities (module docstring).
 JUNCTION_TYPES = {"major": "priority", "right-before-left": "right_before_left",
@@ -402,7 +402,7 @@ def run_episode(spec: JunctionSpec, seed: int, driver: str, net_file: str | Path
     planner = _planner_of(driver, base, seed) if driver not in (NO_AV, SUMO_DRIVER) else None
     cfg = pair_config(base)
     av_lim, hv_lim = Limits.of(cfg, "av"), Limits.of(cfg, "hv")
-    arr = arrivals(spec, seed, hv_lim.length_m)
+    arr = drawn_arrivals(cfg, spec, seed)
     limits = [av_lim] + [hv_lim] * (arr.n - 1)
     lengths = _approach_lengths(net_file)
     deps = departures(spec, arr, limits, lengths)

@@ -122,6 +122,56 @@ def junction_start(spec: JunctionSpec, mine: Route, size: tuple[float, float],
     return start
 
 
+#: The AV starts able to stop this far before its first yield line at its hardest braking [m]
+#: (:func:`drawn_arrivals`).
+START_MARGIN_M = 1.0
+
+
+def first_line(spec: JunctionSpec, mine: Route, size: tuple[float, float],
+               other: tuple[float, float], keep_out_m: float) -> float:
+    """The earliest yield line the AV may get on route ``mine`` [m of arc]: the lowest, over
+    every crossing and merge with a route a human of ``spec`` may take, of where
+    :func:`av_line` places the AV's line (``spec.av_line = "stop"``: the rows' own lines;
+    otherwise the lines ``outside`` places, at or before ``stop``'s, so before any line
+    ``foresight`` may pick)."""
+    placing = spec if spec.av_line == "stop" else spec.with_(av_line="outside")
+    start = junction_start(spec, mine, size, other)
+    line = math.inf
+    for route_ in possible_routes(spec):
+        pair = _route_pair(mine, route_, size, other)
+        if pair is not None and pair[0] != FOLLOW:
+            rc = av_line(pair[1], placing, keep_out_m, start)
+            line = min(line, rc.ego_at_m + rc.ego_line_m)
+    return line
+
+
+def drawn_arrivals(config: Config, spec: JunctionSpec, seed: int) -> Arrivals:
+    """The arrivals of run ``seed`` (``persuasive.many.junction.arrivals``) with the AV's
+    initial speed capped so that it can stop :data:`START_MARGIN_M` before its earliest yield
+    line (:func:`first_line`) at its hardest braking: ``v0 <= sqrt(2 |u_min| (d - margin))``,
+    ``d`` its distance to that line (0 where ``d`` is at most the margin). §15.9's bound on the
+    AV's wait assumes it can stand at its line; an AV drawn inside its braking distance stops
+    inside the human's keep-out circle, and a human that waits for it there waits for ever.
+    Only the AV's speed changes; every draw, the humans' and the AV's place, stays as drawn.
+    ``spec.av_start = "drawn"``: no cap (the arrivals as drawn). ``config``: the pair
+    configuration (:func:`~persuasive.many.junction.pair_config`)."""
+    from ..scenarios.base import pair_min_dist
+
+    av_lim, hv_lim = Limits.of(config, "av"), Limits.of(config, "hv")
+    arr = arrivals(spec, seed, hv_lim.length_m)
+    if spec.av_start == "drawn":
+        return arr
+    line = first_line(spec, arr.routes[0], (av_lim.length_m, av_lim.width_m),
+                      (hv_lim.length_m, hv_lim.width_m), pair_min_dist(config))
+    room = max(line - float(arr.s0_m[0]) - START_MARGIN_M, 0.0)
+    cap = math.sqrt(-2.0 * av_lim.u_min_mps2 * room)
+    if not arr.v0_mps[0] > cap:
+        return arr
+    v0 = arr.v0_mps.copy()
+    v0[0] = cap
+    return replace(arr, v0_mps=v0)
+
+
 def conflict_table(spec: JunctionSpec, arr: Arrivals, limits: list[Limits],
                    keep_out_m: float) -> ConflictTable:
     """The one builder of the conflict table of a run (module docstring); ``keep_out_m``: the
@@ -254,7 +304,7 @@ class JunctionWorld:
         self.n_steps = int(round(spec.duration_s / self.dt))
         av_lim, hv_lim = Limits.of(config, "av"), Limits.of(config, "hv")
         #: ``arrived``: the arrivals to use instead of the seed's (foresight's predictions)
-        self.arrivals = arr = arrivals(spec, seed, hv_lim.length_m) if arrived is None \
+        self.arrivals = arr = drawn_arrivals(config, spec, seed) if arrived is None \
             else arrived
         self.n = arr.n
         self.limits = [av_lim] + [hv_lim] * (arr.n - 1)
@@ -731,5 +781,6 @@ def run_summary(config: Config, seed: int) -> dict:
 
 
 __all__ = ["ACTIVE", "CRASHED", "ConflictTable", "DONE", "Human", "JunctionWorld", "KIND_IDS",
-           "PENDING", "Row", "StepInfo", "WAIT_V_MPS", "av_line", "conflict_table",
-           "junction_start", "run_summary", "warm_up"]
+           "PENDING", "Row", "START_MARGIN_M", "StepInfo", "WAIT_V_MPS", "av_line",
+           "conflict_table", "drawn_arrivals", "first_line", "junction_start", "run_summary",
+           "warm_up"]
